@@ -1,0 +1,1 @@
+"""Gear models, one module per seed system."""

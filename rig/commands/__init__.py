@@ -1,0 +1,1 @@
+"""CLI sub-commands. Each module here defines ``register(app: typer.Typer) -> None``."""

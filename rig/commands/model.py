@@ -1,0 +1,116 @@
+"""``rig model UNIT.json``: the seed 000 design chain and the reference nominal model of a unit."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from analysis.errors import AnalysisError
+from analysis.models.seed000 import Seed000Design, design_chain, format_arcmin
+from rig.errors import RigError, RunFormatError
+
+console = Console()
+
+
+def load_unit_mapping(path: Path) -> dict[str, Any]:
+    """The ``unit`` object from a unit file or a whole run.json (errors name file, line, col)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise RigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise RunFormatError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise RunFormatError(path, f"invalid JSON: {exc.msg}", exc.lineno, exc.colno) from None
+    if isinstance(data, dict) and isinstance(data.get("unit"), dict):
+        data = data["unit"]
+    if not isinstance(data, dict):
+        raise RunFormatError(path, "expected a JSON object (a unit or a run.json)")
+    return data
+
+
+def _mm(value: float | None, digits: int = 4) -> str:
+    return "—" if value is None else f"{value:.{digits}f}"
+
+
+def _angle(value: float | None) -> str:
+    return "—" if value is None else f"{value:.3f}  ({format_arcmin(value)})"
+
+
+def _table(design: Seed000Design, path: Path) -> Table:
+    d = design.to_dict()
+    table = Table(title=f"Seed 000 model of {path.name}")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    table.add_column("paper form of eq. (15)", justify="right")
+    shift = d["equivalent_shift_mm"]
+    table.add_row("equivalent shift, ring / pinion (mm)",
+                  f"{shift['internal']:+.4f} / {shift['external']:+.4f}", "")
+    table.add_row("working pressure angle (deg)",
+                  _mm(d["working_pressure_angle_deg"]["standard"], 3),
+                  _mm(d["working_pressure_angle_deg"]["paper"], 3))
+    table.add_row("zero-backlash center distance a' (mm)",
+                  _mm(d["zero_backlash_center_distance_mm"]["standard"]),
+                  _mm(d["zero_backlash_center_distance_mm"]["paper"]))
+    table.add_row("eccentric distance to set a'' (eq. 9, mm)",
+                  _mm(d["recommended_eccentric_distance_mm"]["standard"]),
+                  _mm(d["recommended_eccentric_distance_mm"]["paper"]))
+    fit = d["fit_check"]
+    if fit:
+        here = fit["at_center_distance"]
+        table.add_row(f"at a = {design.unit.center_distance_mm:g} mm: margin (um)",
+                      f"{here['standard']['margin_um']:+.1f} {here['standard']['verdict']}",
+                      f"{here['paper']['margin_um']:+.1f} {here['paper']['verdict']}")
+        other = fit.get("standard_form_at_paper_eccentric_distance")
+        if other:
+            table.add_row(
+                f"standard form at the paper's a'' = {other['eccentric_distance_mm']:.4f} mm",
+                f"{other['margin_um']:+.1f} um {other['verdict']}", "")
+    for key, label in (("tooth_thickness", "eq. 2 tooth thickness"),
+                       ("center_distance", "eq. 3 center distance"),
+                       ("runout_worst_case", "eq. 7 runout, worst case"),
+                       ("bearing_clearance_worst_case", "eq. 7 bearing clearance, worst case")):
+        um = d["backlash_budget_um"][key]
+        table.add_row(f"backlash: {label} (um / arcmin)",
+                      "—" if um is None else
+                      f"{um:.2f} / {d['backlash_budget_arcmin'][key]:.3f}", "")
+    table.add_row("design lost motion, Table 3 (arcmin)",
+                  _angle(d["design_lost_motion_arcmin"]), "")
+    table.add_row("after eq. (9) compensation (arcmin)",
+                  _angle(d["compensated_lost_motion_arcmin"]), "")
+    table.add_row("nominal play, reference model (arcmin)", _angle(d["nominal_play_arcmin"]), "")
+    stiffness = d["torsional_stiffness_Nm_per_arcmin"]
+    table.add_row("torsional stiffness (N·m/arcmin)", _mm(stiffness, 2), "")
+    table.add_row("eq. (4) period (crank revolutions)", str(d["center_distance_period_rev"]), "")
+    return table
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def model(
+        unit_file: Annotated[Path, typer.Argument(help="unit JSON (or a whole run.json)")],
+        json_out: Annotated[
+            Path | None, typer.Option("--json", help="write the model as JSON to this file")
+        ] = None,
+    ) -> None:
+        """Seed 000 design chain (eqs. 1-16) and the reference nominal model of a gear unit."""
+        mapping = load_unit_mapping(unit_file)
+        try:
+            design = design_chain(mapping)
+        except AnalysisError as exc:
+            raise AnalysisError(f"{unit_file}: {exc}") from None
+        console.print(_table(design, unit_file))
+        for note in design.assumptions:
+            console.print(f"[yellow]assumed:[/yellow] {note}")
+        if json_out is not None:
+            try:
+                json_out.write_text(json.dumps(design.to_dict(), indent=2) + "\n", "utf-8")
+            except OSError as exc:
+                raise RigError(f"{json_out}: cannot write: {exc.strerror or exc}") from None

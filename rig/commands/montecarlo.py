@@ -1,0 +1,188 @@
+"""``rig montecarlo``: seed 003's Monte Carlo of a 3-stage planetary train's transmission error.
+
+Runs the three methods of the paper for its example (random errors, the maximum deviation
+method, maximum deviation with random phases), ranks the error sources and names the
+dominant spectral line, prints the comparison with the paper and optionally writes JSON.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from analysis.models.seed003_montecarlo import (
+    PAPER_FIGURES_ARCSEC,
+    check_sample_count,
+    max_deviation,
+    max_deviation_random_phase,
+    monte_carlo,
+    sensitivity_ranking,
+    spectrum,
+)
+from analysis.models.seed003_planetary import PaperReading, paper_train
+from rig.errors import RigError
+
+FORMAT = "rig-montecarlo/1"
+SIGNS = ("printed", "consistent")
+PLANET_ROWS = ("E_A_f10", "E_f", "E_A")
+SPEEDS = ("kinematic", "printed")
+
+
+def _choice(value: str, allowed: tuple[str, ...], option: str) -> str:
+    if value not in allowed:
+        raise typer.BadParameter(
+            f"must be one of {', '.join(allowed)}, got {value!r}", param_hint=option
+        )
+    return value
+
+
+def run_montecarlo(
+    samples: int,
+    seed: int,
+    reading: PaperReading,
+    progress: Progress | None = None,
+) -> dict[str, Any]:
+    """Compute the report (the JSON document) for the paper's example."""
+    train = paper_train(reading)
+
+    def tracker(label: str, total: int):
+        if progress is None:
+            return None
+        task = progress.add_task(label, total=total)
+        return lambda done: progress.update(task, completed=done)
+
+    mc = monte_carlo(train, samples, seed, tracker("Monte Carlo", samples))
+    random_phase = max_deviation_random_phase(
+        train, samples, seed + 1, tracker("max deviation, random phases", samples)
+    )
+    step = tracker("max deviation, common phase", 1)
+    common = max_deviation(train)
+    if step:
+        step(1)
+    step = tracker("sensitivity ranking", 1)
+    ranking = sensitivity_ranking(train, seed=seed + 2)
+    if step:
+        step(1)
+    step = tracker("spectrum", 1)
+    lines = spectrum(train, seed=seed + 3)
+    if step:
+        step(1)
+    top = sorted(
+        range(lines.amplitude_arcsec.size), key=lambda k: -lines.amplitude_arcsec[k]
+    )[:10]
+    return {
+        "format": FORMAT,
+        "model": "seed 003: three 2K-H stages in series (Table 2), max |dtheta| over one "
+        "output revolution, arcsec",
+        "reading": {
+            "table1_signs": reading.table1_signs,
+            "planet_speed": reading.planet_speed,
+            "stage3_planet_row": reading.stage3_planet_row,
+        },
+        "samples": samples,
+        "seed": seed,
+        "monte_carlo": mc.as_dict(),
+        "max_deviation": common.as_dict(),
+        "max_deviation_random_phase": random_phase.as_dict(),
+        "paper": PAPER_FIGURES_ARCSEC,
+        "sensitivity_ranking": [item.as_dict() for item in ranking],
+        "spectrum": {
+            "dominant_frequency_per_rev": lines.dominant_frequency_per_rev,
+            "dominant_amplitude_arcsec": lines.dominant_amplitude_arcsec,
+            "dominant_sources": list(lines.dominant_sources),
+            "lines": [
+                {
+                    "frequency_per_rev": float(lines.frequency_per_rev[k]),
+                    "amplitude_arcsec": float(lines.amplitude_arcsec[k]),
+                }
+                for k in top
+            ],
+        },
+    }
+
+
+def _print_report(console: Console, report: dict[str, Any]) -> None:
+    table = Table(title="max |dtheta| over one output revolution (arcsec)")
+    for column in ("method", "statistic", "paper", "ours", "difference"):
+        table.add_column(column, justify="right" if column != "method" else "left")
+    for method, figures in PAPER_FIGURES_ARCSEC.items():
+        ours = report[method]
+        for key, paper in figures.items():
+            diff = 100.0 * (ours[key] - paper) / paper
+            table.add_row(method, key, f"{paper:.0f}", f"{ours[key]:.1f}", f"{diff:+.1f} %")
+    console.print(table)
+    lines = report["spectrum"]
+    console.print(
+        f"dominant line: {lines['dominant_frequency_per_rev']:g} cycle/output rev, "
+        f"{lines['dominant_amplitude_arcsec']:.1f} arcsec, "
+        f"from {', '.join(lines['dominant_sources'])}"
+    )
+    ranking = Table(title="sensitivity: drop of the mean max |dtheta| without the source")
+    for column in ("source", "description", "drop (arcsec)", "mean amplitude (arcsec)"):
+        ranking.add_column(column)
+    for item in report["sensitivity_ranking"][:8]:
+        ranking.add_row(
+            item["source"],
+            item["description"],
+            f"{item['mean_reduction_arcsec']:.1f}",
+            f"{item['mean_amplitude_arcsec']:.1f}",
+        )
+    console.print(ranking)
+
+
+def _write_json(path: Path, report: dict[str, Any]) -> None:
+    try:
+        path.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise RigError(f"{path}: cannot write the report: {exc.strerror or exc}") from exc
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def montecarlo(
+        samples: Annotated[int, typer.Option("--samples", "-n", help="Samples.")] = 50_000,
+        seed: Annotated[int, typer.Option("--seed", help="Random seed.")] = 0,
+        json_path: Annotated[
+            Path | None, typer.Option("--json", help="Write the report (JSON) here.")
+        ] = None,
+        signs: Annotated[
+            str, typer.Option("--signs", help="Table 1 signs: " + "|".join(SIGNS))
+        ] = "printed",
+        planet_row: Annotated[
+            str, typer.Option("--planet-row", help="Table 2 row III p: " + "|".join(PLANET_ROWS))
+        ] = "E_A_f10",
+        planet_speed: Annotated[
+            str, typer.Option("--planet-speed", help="Planet speed: " + "|".join(SPEEDS))
+        ] = "kinematic",
+        quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress/tables.")] = False,
+    ) -> None:
+        """Seed 003: Monte Carlo transmission error of the paper's 3-stage planetary train."""
+        reading = PaperReading(
+            table1_signs=_choice(signs, SIGNS, "--signs"),  # type: ignore[arg-type]
+            planet_speed=_choice(planet_speed, SPEEDS, "--planet-speed"),  # type: ignore[arg-type]
+            stage3_planet_row=_choice(planet_row, PLANET_ROWS, "--planet-row"),  # type: ignore
+        )
+        check_sample_count(samples)
+        if json_path is not None and not json_path.parent.is_dir():
+            raise RigError(f"{json_path}: cannot write the report: no directory {json_path.parent}")
+        console = Console(stderr=True)
+        if quiet:
+            report = run_montecarlo(samples, seed, reading)
+        else:
+            columns = (
+                TextColumn("{task.description}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TimeElapsedColumn(),
+            )
+            with Progress(*columns, console=console, transient=False) as progress:
+                report = run_montecarlo(samples, seed, reading, progress)
+            _print_report(Console(), report)
+        if json_path is not None:
+            _write_json(json_path, report)

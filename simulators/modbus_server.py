@@ -273,11 +273,12 @@ def _running_loop() -> asyncio.AbstractEventLoop | None:
         return None
 
 
-def _make_plant(kind: str) -> Plant:
+def _make_plant(kind: str, config_path: str | None = None) -> Plant:
     if kind == "gear":
-        from simulators.plant import GearPlant  # the rig's plant, when available
+        from simulators.plant import GearPlant  # the rig's plant (imported only when asked)
+        from simulators.plant_config import load_plant_config
 
-        return GearPlant()
+        return GearPlant(load_plant_config(config_path))
     from simulators.modbus_test_plant import SineTestPlant
 
     return SineTestPlant()
@@ -295,8 +296,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--watchdog", type=float, default=0.5, help="drive watchdog, s")
     parser.add_argument("--plant", choices=["sine", "gear"], default="sine",
                         help="sine: closed-form test plant; gear: simulators.plant.GearPlant")
+    parser.add_argument("--plant-config", help="plant TOML for --plant gear (default: built-in)")
     args = parser.parse_args(argv)
-    server = ModbusRigServer(_make_plant(args.plant), args.torque_limit,
+    server = ModbusRigServer(_make_plant(args.plant, args.plant_config), args.torque_limit,
                              transport=args.transport, port=args.port,
                              serial_port=args.serial_port, full_scale_Nm=args.full_scale,
                              watchdog_s=args.watchdog)

@@ -428,7 +428,10 @@ class CanopenEncoder:
         self._callbacks.append(callback)
 
     def zero(self) -> float:
-        """Make the current position read 0 deg (software zero); returns the old angle, deg."""
+        """Make the current position read 0 deg from the next sample on (software zero).
+
+        Returns the angle (deg) of the newest sample before the zero.
+        """
         latest = self.read()
         self._zero_counts = self._unwrapped
         return latest.angle_deg

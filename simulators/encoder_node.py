@@ -143,6 +143,7 @@ class EncoderNode:
     def start(self) -> str:
         """Boot the node (boot-up message, PRE-OPERATIONAL) and return the bus description."""
         network = canopen.Network()
+        network.NOTIFIER_CYCLE = 0.1  # stop() joins the receive thread within 0.1 s
         local = network.create_node(self.node_id, self._od)
         for index, value in self._overrides.items():
             if value is not None:
@@ -194,7 +195,7 @@ class EncoderNode:
         if stuck is not None:
             return stuck
         self._refresh_config()
-        raw = math.floor(self.angle_deg(self.plant.snapshot()) / 360.0 * self._cpr)
+        raw = math.floor(self.angle_deg(self.plant.snapshot()) * self._cpr / 360.0)
         return (raw + self._preset_offset) % self._range
 
     @property

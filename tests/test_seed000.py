@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
@@ -60,14 +60,24 @@ def test_standard_m_values_match_the_paper():
 
 
 @settings(max_examples=60, deadline=None)
+@example(z=20, x=-0.25, internal=True)  # pin does not fit: error
+@example(z=45, x=0.0, internal=True)
 @given(
     z=st.integers(min_value=20, max_value=120),
     x=st.floats(min_value=-0.3, max_value=0.3),
     internal=st.booleans(),
 )
 def test_eq14_shift_round_trips_through_the_m_value(z, x, internal):
-    """M(x) by eqs. (12)-(14), then alpha_M and x back from M: the same x."""
+    """M(x) by eqs. (12)-(14), then alpha_M and x back from M: the same x. Where eq. (14) has
+    no pin-centre angle (the pin does not fit the space: inv(alpha_M) <= 0) it is an error."""
     pin = 1.728
+    sign = -1.0 if internal else 1.0
+    inv_m = (geo.involute(ALPHA) + sign * pin / (z * math.cos(ALPHA)) - sign * math.pi / (2 * z)
+             + 2 * x * math.tan(ALPHA) / z)
+    if inv_m <= 0:
+        with pytest.raises(AnalysisError, match="no pressure angle"):
+            geo.m_value_mm(z, 1.0, ALPHA, pin, x, internal=internal)
+        return
     m = geo.m_value_mm(z, 1.0, ALPHA, pin, x, internal=internal)
     alpha_m = geo.pin_pressure_angle_rad(m, z, 1.0, ALPHA, pin, internal=internal)
     assert geo.shift_coeff_from_pin_angle(

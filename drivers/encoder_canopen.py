@@ -185,7 +185,15 @@ class _BusErrorListener(can.Listener):
 
     def on_error(self, exc: Exception) -> None:
         notifier = self._network.canopen.notifier
-        if isinstance(exc, can.CanOperationError | OSError | serial.SerialException):
+        cause = exc.__cause__ if isinstance(exc, can.CanOperationError) else exc
+        if isinstance(cause, UnicodeError):  # slcan: a non-ASCII byte on the line
+            exc = cause
+            # python-can 4.6.1 slcan keeps the undecodable bytes in its line buffer, so every
+            # later line would fail too: drop that partial line (the only state it holds)
+            buffer = getattr(self._network.canopen.bus, "_buffer", None)
+            if isinstance(buffer, bytearray):
+                buffer.clear()
+        elif isinstance(exc, can.CanOperationError | OSError | serial.SerialException):
             self._network.link_error = exc
             time.sleep(0.05)  # the receive thread retries at once: back off while it is down
             return

@@ -10,7 +10,9 @@ Faults, per Modbus unit id (``None`` = every unit on the server):
 - ``exception(unit, code)``: every request to ``unit`` is answered with that exception code;
 - ``garble(unit)``: reply frames are corrupted on the wire (RTU: bad CRC; TCP: bad header);
 - ``stick_sensor()``: the torque sensor's input registers freeze (value and counter);
-- ``disconnect()``: every open connection is dropped (the master sees a closed socket).
+- ``disconnect()``: every open connection is dropped (the master sees a closed socket); on
+  a serial line (``rtu-serial``) there is no connection, so it silences the line instead,
+  as a pulled RS-485 cable would, until ``clear()``.
 """
 
 from __future__ import annotations

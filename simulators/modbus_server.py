@@ -198,10 +198,13 @@ class ModbusRigServer:
         server = self._server
         if server is None:
             return
+        if self.transport == "rtu-serial":
+            # On a serial line a pulled cable looks like silence to the master: there is no
+            # connection to drop. The line stays silent until backdoor.clear().
+            self.backdoor.silence(None)
+            return
         for conn in list(server.active_connections.values()):
             conn.close()
-        if self.transport == "rtu-serial" and server.transport is not None:
-            server.transport.close()  # a serial "connection" is the port itself
 
     def _disconnect_threadsafe(self) -> None:
         loop = self._loop

@@ -80,12 +80,13 @@ def test_undefined_status_bits_are_protocol_errors():
 
 
 @given(st.floats(width=32, allow_nan=False, allow_infinity=False))
+@settings(deadline=None)
 def test_float32_round_trip(value):
     assert decode_float32(encode_float32(value), DEV, "x") == value
 
 
 @given(st.lists(any_ints, max_size=4))
-@settings(max_examples=300)
+@settings(max_examples=300, deadline=None)
 def test_scalar_decoders_only_raise_device_errors(words):
     for decode in (decode_float32, decode_uint32):
         try:
@@ -95,7 +96,7 @@ def test_scalar_decoders_only_raise_device_errors(words):
 
 
 @given(st.lists(words16, min_size=7, max_size=7))
-@settings(max_examples=500)
+@settings(max_examples=500, deadline=None)
 def test_torque_block_decoder_never_crashes(words):
     try:
         torque, status, counter, full_scale = decode_torque_block(words, DEV)
@@ -107,7 +108,7 @@ def test_torque_block_decoder_never_crashes(words):
 
 
 @given(st.lists(any_ints, max_size=9))
-@settings(max_examples=300)
+@settings(max_examples=300, deadline=None)
 def test_block_decoders_reject_wrong_shapes_with_device_errors(words):
     for decode, count in ((decode_torque_block, 7), (decode_drive_block, 6)):
         try:
@@ -119,7 +120,7 @@ def test_block_decoders_reject_wrong_shapes_with_device_errors(words):
 
 
 @given(st.lists(words16, min_size=6, max_size=6))
-@settings(max_examples=500)
+@settings(max_examples=500, deadline=None)
 def test_drive_block_decoder_never_crashes(words):
     try:
         status = decode_drive_block(words, DEV)

@@ -7,6 +7,7 @@ form, so the values that come over the wire are checked against numbers.
 
 from __future__ import annotations
 
+import asyncio
 import math
 import re
 import shutil
@@ -273,3 +274,66 @@ def test_sensor_and_drive_share_one_rtu_line(pty_pair):
         sensor.close()
         link.close()
         server.stop()
+
+
+def test_serial_line_faults(pty_pair):
+    """RTU on a pty: a "disconnect" is silence on a serial line; a vanished port is not."""
+    server, where = serve(SineTestPlant(amplitude_Nm=0.0, offset_Nm=1.0), "rtu-serial",
+                          pty_pair)
+    sensor = ModbusTorqueSensor(ModbusTorqueSensorConfig(**where, timeout_s=TIMEOUT_S))
+    try:
+        assert sensor.read().torque_Nm == 1.0
+        server.backdoor.garble(1)
+        exc, elapsed = timed(sensor.read)
+        assert isinstance(exc, DeviceTimeout) and elapsed < BOUND_S  # bad CRC: no valid reply
+        server.backdoor.clear()
+        server.backdoor.disconnect()
+        exc, elapsed = timed(sensor.read)
+        assert isinstance(exc, DeviceTimeout) and elapsed < BOUND_S
+        server.backdoor.clear()
+        assert sensor.read().torque_Nm == 1.0
+    finally:
+        sensor.close()
+        server.stop()
+
+
+def test_vanished_serial_port_is_disconnected(tmp_path):
+    a, b = tmp_path / "ptyA", tmp_path / "ptyB"
+    proc = subprocess.Popen(["socat", f"pty,raw,echo=0,link={a}", f"pty,raw,echo=0,link={b}"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + BOUND_S
+    while not (a.exists() and b.exists()) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    server, where = serve(SineTestPlant(amplitude_Nm=0.0, offset_Nm=1.0), "rtu-serial",
+                          (str(a), str(b)))
+    sensor = ModbusTorqueSensor(ModbusTorqueSensorConfig(**where, timeout_s=TIMEOUT_S))
+    try:
+        assert sensor.read().torque_Nm == 1.0
+        proc.kill()  # the USB adapter is unplugged: both pty ends disappear
+        proc.wait(timeout=BOUND_S)
+        errors = [timed(sensor.read)[0] for _ in range(2)]
+        assert all(isinstance(e, DeviceDisconnected) for e in errors), errors
+        assert str(b) in str(errors[-1])
+    finally:
+        sensor.close()
+        server.stop()
+
+
+def test_server_runs_inside_an_asyncio_loop():
+    """start_async/stop_async for a caller that owns the event loop (e.g. ``rig sim``)."""
+
+    async def scenario() -> float:
+        server = ModbusRigServer(SineTestPlant(amplitude_Nm=0.0, offset_Nm=2.0), 20.0)
+        address = await server.start_async()
+        host, port = address.rsplit(":", 1)
+        sensor = ModbusTorqueSensor(ModbusTorqueSensorConfig(host=host, port=int(port),
+                                                             timeout_s=TIMEOUT_S))
+        try:
+            reading = await asyncio.to_thread(sensor.read)  # sync driver off the loop
+        finally:
+            sensor.close()
+            await server.stop_async()
+            await server.stop_async()  # idempotent
+        return reading.torque_Nm
+
+    assert asyncio.run(scenario()) == 2.0

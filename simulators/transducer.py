@@ -49,8 +49,8 @@ Transport = Literal["pty", "tcp"]
 
 DEFAULT_IDENTITY = "RIGSIM,TT-20,SN000001,FW1.0"
 TARE_LIMIT_FRACTION = 0.10  # TARE is refused when |torque| exceeds 10 % of the range
-OUTPUT_BUFFER_BYTES = 8192  # the device's UART buffer; stream lines beyond it are dropped
-MAX_CATCH_UP_SAMPLES = 50  # samples sent in one burst when the device falls behind
+OUTPUT_BUFFER_BYTES = 32768  # the device's UART buffer; stream lines beyond it are dropped
+CATCH_UP_S = 0.5  # the device sends what it owes for up to 0.5 s of stall in one burst
 DEFAULT_RATE_HZ = 100.0
 
 
@@ -350,14 +350,16 @@ class TransducerDevice:
     def due_samples(self, now_s: float) -> list[str]:
         """Bodies of the stream samples due by ``now_s`` (monotonic s).
 
-        When the device is more than a burst behind, the samples it could not take are
-        skipped but counted (sequence gap and ``overruns``), as a real device would.
+        A stalled serving thread owes samples: up to ``CATCH_UP_S`` worth (at least 50) go
+        out in one burst; beyond that they are skipped but counted (sequence gap and
+        ``overruns``), as a real device would.
         """
         bodies: list[str] = []
         if not self.streaming:
             return bodies
         period = 1.0 / self.rate_Hz
-        while self.next_due_s <= now_s and len(bodies) < MAX_CATCH_UP_SAMPLES:
+        burst = max(50, int(CATCH_UP_S * self.rate_Hz))
+        while self.next_due_s <= now_s and len(bodies) < burst:
             bodies.append(self._measure("ST", self.stream_seq))
             self.stream_seq = (self.stream_seq + 1) % SEQ_MODULO
             self.next_due_s += period

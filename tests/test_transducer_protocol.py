@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -135,3 +137,11 @@ def test_the_device_refuses_what_it_cannot_do() -> None:
     assert device.handle("STREAM 100", 0.0) == ["ERR 4 not allowed while streaming"]
     assert device.handle("RATE?", 0.0) == ["RATE 200"]
     assert device.handle("STOP", 0.0) == ["OK"]
+
+
+def test_every_device_line_in_the_documentation_parses(repo_root) -> None:
+    text = (repo_root / "docs" / "transducer-protocol.md").read_text(encoding="utf-8")
+    lines = re.findall(r"^([A-Z][ -~]*?\*[0-9A-F]{2})\b", text, flags=re.MULTILINE)
+    assert len(lines) >= 20
+    for line in lines:
+        parse_line(line.encode("ascii") + b"\r\n")

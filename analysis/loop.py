@@ -188,12 +188,10 @@ class _Cycle:
         # segment it ends only, so that the two branches of a cycle share no sample.
         self.passes = {
             name: BranchPass(
-                torque, twist,
-                [slice(s.start + 1 if s.start > 0 else 0, s.stop) for s in sl],
-                1 if name == "loading" else -1,
+                torque, twist, sl, 1 if name == "loading" else -1, [s.start > 0 for s in sl]
             )
             for name, sl in self.slices.items()
-        }  # fmt: skip
+        }
         self.tol, self.res = tol, res
         self._cache: dict[tuple, PointEstimate | MetricUnavailable] = {}
 

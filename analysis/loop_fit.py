@@ -58,21 +58,34 @@ class BranchPass:
     costs its own size, not the pass's.
     """
 
-    def __init__(self, torque: np.ndarray, twist: np.ndarray, slices: list[slice], sign: int):
+    def __init__(
+        self,
+        torque: np.ndarray,
+        twist: np.ndarray,
+        slices: list[slice],
+        sign: int,
+        shared_first: list[bool] | None = None,
+    ):
+        """``shared_first[k]``: slice k starts on a turning sample that the previous branch
+        also holds; it counts for reaching a torque but is left out of the fits, so that
+        the two branches of a cycle never share a sample (their errors stay independent)."""
         self.parts = []
-        for s in slices:
+        shared = shared_first or [False] * len(slices)
+        for s, skip in zip(slices, shared, strict=True):
             x, y = torque[s], twist[s]
             z = x if sign > 0 else -x
             head_max = np.maximum.accumulate(z)
             tail_min = np.ascontiguousarray(np.minimum.accumulate(z[::-1])[::-1])
-            self.parts.append((x, y, head_max, tail_min))
+            self.parts.append((x, y, head_max, tail_min, bool(skip)))
         self.sign = sign
 
-    def window(self, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
-        """Torque and twist of the samples with torque in ``[lo, hi]`` N·m."""
+    def window(self, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """Torque and twist of the samples to fit with torque in ``[lo, hi]`` N·m, and the
+        lowest and highest torque the pass has in ``[lo, hi]`` (shared samples included)."""
         zlo, zhi = (lo, hi) if self.sign > 0 else (-hi, -lo)
         xs, ys = [], []
-        for x, y, head_max, tail_min in self.parts:
+        low, high = np.inf, -np.inf
+        for x, y, head_max, tail_min, skip in self.parts:
             i0 = int(np.searchsorted(head_max, zlo, side="left"))
             i1 = int(np.searchsorted(tail_min, zhi, side="right"))
             if i1 <= i0:
@@ -80,12 +93,17 @@ class BranchPass:
             xw = x[i0:i1]
             m = xw >= lo
             m &= xw <= hi
+            if skip and i0 == 0 and m[0]:
+                low, high = min(low, float(xw[0])), max(high, float(xw[0]))
+                m[0] = False
             if m.any():
-                xs.append(xw[m])
+                xm = xw[m]
+                low, high = min(low, float(xm.min())), max(high, float(xm.max()))
+                xs.append(xm)
                 ys.append(y[i0:i1][m])
         if not xs:
-            return np.empty(0), np.empty(0)
-        return np.concatenate(xs), np.concatenate(ys)
+            return np.empty(0), np.empty(0), low, high
+        return np.concatenate(xs), np.concatenate(ys), low, high
 
 
 def branch_value(
@@ -108,14 +126,14 @@ def branch_value(
     it may belong to the other side. They are kept when the rest spans less than half the
     window (a dwell at ``at_Nm`` measured the value there).
     """
-    x, y = branch.window(lo_Nm, hi_Nm)
+    x, y, low, high = branch.window(lo_Nm, hi_Nm)
     where = f"{lo_Nm:+.4g}..{hi_Nm:+.4g} N·m"
-    if x.size == 0:
+    if not low <= high:
         raise MetricUnavailable(f"the {label} branch has no samples in {where}")
-    if x.min() > at_Nm + tol_Nm or x.max() < at_Nm - tol_Nm:
+    if low > at_Nm + tol_Nm or high < at_Nm - tol_Nm:
         raise MetricUnavailable(
             f"the {label} branch does not reach {at_Nm:+.4g} N·m "
-            f"(its samples in {where} span {x.min():+.4g}..{x.max():+.4g} N·m)"
+            f"(its samples in {where} span {low:+.4g}..{high:+.4g} N·m)"
         )
     if exclude_Nm > 0:
         keep = np.abs(x - at_Nm) >= exclude_Nm

@@ -382,3 +382,20 @@ def test_loop_curves_follow_the_branches():
     expect = np.sign(tm[away]) * PLAY / 2 + tm[away] / K
     assert ym[away] == pytest.approx(expect, abs=0.01)
     assert np.array_equal(r.branches.loading_mask(), ~r.branches.unloading_mask())
+
+
+def test_run_starting_downward_with_a_leading_dwell():
+    """0 (dwell) -> -T -> +T -> 0: the two unloading halves close one pass."""
+    rng = np.random.default_rng(13)
+    T = -triangle_profile(RATED, 1000, phase=0.5)
+    T = np.concatenate((np.zeros(300), T))
+    th = dead_zone_twist(T, PLAY, K, start=+1) + rng.normal(0, 0.01, T.size)
+    r = run(T + rng.normal(0, 0.003, T.size), th)
+    assert r.n_cycles == 1
+    (load, unload), = r.branches.passes
+    assert len(unload) == 2 and len(load) == 1
+    assert r.branches.starts[0] == 0  # the dwell joins the first branch
+    for name, v in (("lost_motion_arcmin", lost_motion_truth(3.0)), ("backlash_arcmin", PLAY),
+                    ("stiffness_Nm_per_arcmin", K)):  # fmt: skip
+        m = r.metrics[name]
+        assert abs(m.value - v) <= 4 * m.uncertainty + 1e-3 * v, (name, m)

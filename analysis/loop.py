@@ -23,7 +23,8 @@ Conventions and definitions (all per cycle, then averaged over the cycles):
   +rated, return to zero from -rated, difference of the twists), and it gives the full
   free play for a dead zone whose flank changes exactly at zero torque; readings within
   4 torque-noise standard deviations of zero are left out of these two fits (they may be
-  on the other flank), the fitted lines are read at zero. Aliases: Nabtesco
+  on the other flank; kept when the rest has no torque spread, i.e. a dwell at zero), the
+  fitted lines are read at zero. Aliases: Nabtesco
   "backlash" and its FAQ's "hysteresis loss", Harmonic Drive "hysteresis loss", GB/T
   齿隙; one canonical name here, ``backlash_arcmin``.
 * **Torsional stiffness** (N·m/arcmin), secant of the midline between 50 % and 100 % of
@@ -53,7 +54,9 @@ Conventions and definitions (all per cycle, then averaged over the cycles):
 Uncertainties are standard uncertainties: the residual scatter of the twist about each
 local fit, the encoder resolution ``q/sqrt(12)`` and the torque resolution through the
 local slope, propagated to each metric to first order; over several cycles the mean's
-uncertainty ``sqrt(Σu_i²/n² + s²/n)`` also includes the cycle-to-cycle spread ``s``.
+uncertainty ``sqrt(Σu_i²/n² + s²/n)`` also includes the cycle-to-cycle spread ``s``
+(conservative: the spread holds the noise once more). A cycle that lacks a metric is
+left out of that metric's mean (``LoopResult.cycle_values`` shows NaN for it).
 A metric the run cannot give (torque not reached, no samples near a point) is left out
 of ``metrics`` and explained in ``errors``; the other metrics are still computed.
 """

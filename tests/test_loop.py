@@ -399,3 +399,15 @@ def test_run_starting_downward_with_a_leading_dwell():
                     ("stiffness_Nm_per_arcmin", K)):  # fmt: skip
         m = r.metrics[name]
         assert abs(m.value - v) <= 4 * m.uncertainty + 1e-3 * v, (name, m)
+
+
+def test_twist_zero_is_arbitrary():
+    """An absolute encoder offset (20.5 output turns) changes no metric."""
+    rng = np.random.default_rng(17)
+    T = triangle_profile(RATED, 1000, phase=0.5)
+    th = dead_zone_twist(T, PLAY, K) + rng.normal(0, 0.02, T.size)
+    a = run(T, th).metrics
+    b = run(T, th + 20.5 * 21600.0).metrics
+    for name, m in a.items():
+        assert b[name].value == pytest.approx(m.value, rel=1e-6, abs=1e-6 * m.uncertainty)
+        assert b[name].uncertainty == pytest.approx(m.uncertainty, rel=1e-3)

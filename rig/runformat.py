@@ -330,8 +330,9 @@ def read_run_or_campaign(path: str | Path, *, allow_truncated_tail: bool = False
 def write_run(run: Run, folder: str | Path) -> Path:
     """Write ``run`` as ``folder/run.json`` + ``folder/samples.csv`` (folder created).
 
-    Each file is written to a temporary name and renamed into place. Raises ValueError if the
-    run is not valid (it would not read back). Returns the folder.
+    Existing files of those names are replaced; each is written to a temporary name, synced
+    and renamed into place. Raises ValueError if the run is not valid (it would not read
+    back). Returns the folder.
     """
     _check_run(run)
     out = Path(folder)
@@ -397,6 +398,8 @@ class SamplesAppender:
     ) -> None:
         self.path = Path(csv_path)
         self.columns = list(columns)
+        if not flush_interval_s > 0:
+            raise ValueError(f"flush_interval_s must be > 0 s, got {flush_interval_s!r}")
         _check_header(self.path, self.columns)
         self._required = [self.columns.index(c) for c in REQUIRED_COLUMNS]
         self._t_index = self.columns.index("t_s")
@@ -408,7 +411,10 @@ class SamplesAppender:
         existing = self.path.exists() and self.path.stat().st_size > 0
         if existing:
             self._last_t = self._check_existing(header, repair_truncated_tail)
-        self._file = open(self.path, "a", encoding="utf-8", newline="")  # noqa: SIM115
+        try:
+            self._file = open(self.path, "a", encoding="utf-8", newline="")  # noqa: SIM115
+        except OSError as e:
+            raise RunFormatError(self.path, f"cannot open to append: {e.strerror or e}") from None
         if not existing:
             self._file.write(header)
             self._sync()
@@ -424,7 +430,9 @@ class SamplesAppender:
         raw = _read_bytes(self.path)
         if not raw.endswith(b"\n"):
             cut = raw.rfind(b"\n") + 1
-            if cut == 0 or not repair:
+            if cut == 0:
+                raise RunFormatError(self.path, "the header line is incomplete (no newline)", 1)
+            if not repair:
                 raise RunFormatError(
                     self.path,
                     "last line has no newline (cut off mid-write?); "
@@ -481,6 +489,8 @@ class SamplesAppender:
             )
         line = ",".join(_format_cell(v) for v in row) + "\n"
         with self._lock:
+            if self._closed:
+                raise ValueError(f"{self.path}: appender is closed")
             self._file.write(line)
             self._last_t = t
             self._dirty = True
@@ -803,7 +813,7 @@ def _read_bare_csv(path: Path, allow_truncated_tail: bool) -> Run:
 
 
 class _Table:
-    """The header and rows of a samples file, with the file line of each row (1-based)."""
+    """The header of a samples file; words errors about its fields (line, field index)."""
 
     def __init__(self, path: Path, header: list[str], no_newline_at_end: bool) -> None:
         self.path = path
@@ -864,6 +874,10 @@ def _read_samples(
     def header_error(msg: str, col: int | None) -> RunFormatError:
         return RunFormatError(path, msg, line=1, column=col)
 
+    if len(stripped) == 1:
+        for sep, name in ((";", "semicolon"), ("\t", "tab")):
+            if sep in stripped[0]:
+                raise header_error(f"header is {name}-separated; rig-run/1 uses commas", 1)
     _check_column_names(stripped, header_error)
     if body_rows is None:
         matrix = _fast_numeric(body, len(stripped))
@@ -871,16 +885,15 @@ def _read_samples(
             data: dict[str, Column] = {name: matrix[:, j].copy() for j, name in enumerate(stripped)}
             _check_values(table, data, lambda r: r + 2, _body_field(body))
             return stripped, data, notes
-        body_rows = [line.split(",") for line in body.split("\n")] if body else []
-        row_lines = None
-    data = _columns_from_rows(table, body_rows, row_lines)
-    lines = row_lines
-    _check_values(
-        table,
-        data,
-        (lambda r: lines[r]) if lines else (lambda r: r + 2),
-        lambda r, col: body_rows[r][col - 1],
-    )
+        columns = _columns_by_split(table, body)
+
+        def line_of(r: int) -> int:
+            return r + 2
+    else:
+        columns = _columns_by_rows(table, body_rows, row_lines)
+        line_of = row_lines.__getitem__
+    data = _columns_from_texts(table, columns, line_of)
+    _check_values(table, data, line_of, lambda r, col: columns[col - 1][r])
     return stripped, data, notes
 
 
@@ -936,29 +949,66 @@ def _fill_empty_fields(body: str) -> str:
     return body
 
 
-def _columns_from_rows(
-    table: _Table, rows: list[list[str]], row_lines: list[int] | None
-) -> dict[str, Column]:
-    """Check field counts and convert each column (numeric if it can be, else text)."""
+def _field_count_error(table: _Table, line: int, fields: list[str], last: bool) -> RunFormatError:
     n_col = len(table.header)
-    n = len(rows)
+    if len(fields) <= 1 and not "".join(fields).strip():
+        return table.error(line, None, "blank line inside the data", last)
+    if len(fields) < n_col:
+        col = len(fields) + 1
+        msg = f"row has {len(fields)} fields, the header has {n_col}: field {col} missing"
+    else:
+        col = n_col + 1
+        msg = f"row has {len(fields)} fields, the header has {n_col}: unexpected field {col}"
+    return table.error(line, col, msg, last)
+
+
+def _columns_by_split(table: _Table, body: str) -> list[list[str]]:
+    """Split an unquoted body into columns of texts (row r is on line r + 2)."""
+    n_col = len(table.header)
+    if not body:
+        return [[] for _ in range(n_col)]
+    commas = _commas_per_line(body)
+    bad = np.flatnonzero(commas != n_col - 1)
+    if bad.size:
+        r = int(bad[0])
+        line = body.split("\n", r + 1)[r]
+        raise _field_count_error(table, r + 2, line.split(","), r == len(commas) - 1)
+    flat = body.replace("\n", ",").split(",")
+    return [flat[j::n_col] for j in range(n_col)]
+
+
+def _commas_per_line(text: str) -> np.ndarray:
+    """Number of commas on each line of ``text`` (vectorised over its UTF-8 bytes)."""
+    buf = np.frombuffer(text.encode("utf-8"), dtype=np.uint8)
+    newlines = np.flatnonzero(buf == ord("\n"))
+    commas = np.flatnonzero(buf == ord(","))
+    ends = np.append(newlines, buf.size)
+    return np.diff(np.searchsorted(commas, ends), prepend=0)
+
+
+def _columns_by_rows(
+    table: _Table, rows: list[list[str]], row_lines: list[int]
+) -> list[list[str]]:
+    """Check the field count of csv-module rows and turn them into columns of texts."""
     for r, row in enumerate(rows):
-        if len(row) != n_col:
-            line = row_lines[r] if row_lines else r + 2
-            last = r == n - 1
-            if len(row) <= 1 and not "".join(row).strip():
-                raise table.error(line, None, "blank line inside the data", last)
-            if len(row) < n_col:
-                col = len(row) + 1
-                msg = f"row has {len(row)} fields, the header has {n_col}: field {col} missing"
-            else:
-                col = n_col + 1
-                msg = f"row has {len(row)} fields, the header has {n_col}: unexpected field {col}"
-            raise table.error(line, col, msg, last)
+        if len(row) != len(table.header):
+            raise _field_count_error(table, row_lines[r], row, r == len(rows) - 1)
+    if not rows:
+        return [[] for _ in table.header]
+    return [list(c) for c in zip(*rows, strict=True)]
+
+
+def _columns_from_texts(
+    table: _Table, columns: list[list[str]], line_of: Any
+) -> dict[str, Column]:
+    """Convert each column of texts: numeric if every field is a number or empty, else text.
+
+    The required and standard optional columns must be numeric: the first field in file
+    order that is not a number is an error.
+    """
     data: dict[str, Column] = {}
     first_bad: tuple[int, int, str] | None = None
-    for j, name in enumerate(table.header):
-        texts = [row[j] for row in rows]
+    for j, (name, texts) in enumerate(zip(table.header, columns, strict=True)):
         values, bad = _parse_floats(texts)
         if bad is None:
             data[name] = values
@@ -969,13 +1019,17 @@ def _columns_from_rows(
             data[name] = texts
     if first_bad is not None:
         r, col, txt = first_bad
-        line = row_lines[r] if row_lines else r + 2
-        raise table.error(line, col, f"cannot read {txt!r} as a number", r == n - 1)
+        last = r == len(columns[0]) - 1
+        raise table.error(line_of(r), col, f"cannot read {txt!r} as a number", last)
     return data
 
 
 def _parse_floats(texts: list[str]) -> tuple[np.ndarray, int | None]:
     """Convert texts to float64 (blank = NaN); return (values, index of first bad text)."""
+    try:
+        return np.array(texts, dtype=np.float64).reshape(len(texts)), None
+    except ValueError:
+        pass
     cleaned = [t if t.strip() else "nan" for t in texts]
     try:
         return np.array(cleaned, dtype=np.float64).reshape(len(texts)), None

@@ -215,6 +215,7 @@ CSV_ERRORS = [
     ("required column absent", "t_s,output_angle_deg\n0,1\n", 1, None,
      ["'torque_Nm' is missing", "['t_s', 'output_angle_deg']"]),
     ("empty file", "", 1, None, ["no header"]),
+    ("semicolons", "t_s;torque_Nm;output_angle_deg\n0;1,5;2\n", 1, 1, ["semicolon-separated"]),
     # quoted fields take the csv-module path: line numbers still count physical lines
     ("quoted, bad number", f'{HEADER},note\n0,1,2,"two\nlines"\n1,x,3,a\n', 4, 2,
      ["torque_Nm", "'x'"]),
@@ -222,7 +223,9 @@ CSV_ERRORS = [
      ["torque_Nm", "'nan' (NaN)"]),
     ("quoted, time back", f'{HEADER},note\n0,1,2,"a\n\nb"\n-1,1,3,c\n', 5, 1,
      ["-1.0 after 0.0", "on line 2"]),
-    # a text extra column takes the row-by-row path
+    ("quoted, too few fields", f'{HEADER},note\n0,1,2,"a,b"\n1,2,"c"\n', 3, 4,
+     ["note", "field 4 missing"]),
+    # a text extra column takes the column-by-column path
     ("text column, empty torque", f"{HEADER},note\n0,1,2,a\n1,,3,b\n", 3, 2, ["empty value"]),
     ("crlf, bad number", f"{HEADER}\r\n0,1,2\r\n1,2,?\r\n", 3, 3, ["output_angle_deg", "'?'"]),
 ]

@@ -24,6 +24,9 @@ NOISE_MULTIPLE = 8.0
 #: (half the peak-to-peak torque): reversals smaller than this are not hysteresis cycles.
 AMPLITUDE_FRACTION = 0.05
 
+#: A peak held for at least this many samples is a dwell (it joins the branch that reached it).
+MIN_DWELL_SAMPLES = 5
+
 _FIRST_BLOCK = 1024
 _MAX_BLOCK = 1 << 16
 
@@ -137,11 +140,17 @@ def _first_direction(x: np.ndarray, h: float) -> tuple[int, int]:
     return n, 0
 
 
-def _next_turn(x: np.ndarray, start: int, direction: int, h: float) -> int | None:
+def _next_turn(
+    x: np.ndarray, start: int, direction: int, h: float, plateau_tol: float = 0.0
+) -> int | None:
     """Index of the extremum that ends the branch running from ``start`` in ``direction``.
 
-    The branch ends when the torque comes back by more than ``h`` from its running extremum;
-    the turning point is the (first) sample at that extremum. None if the run ends first.
+    The branch ends when the torque comes back by more than ``h`` from its running extremum.
+    The turning point is the (first) sample at that extremum, except after a dwell at the
+    peak (at least ``MIN_DWELL_SAMPLES`` contiguous samples within ``plateau_tol`` of it): then
+    it is the dwell's last sample, because the dwell belongs to the branch that reached it
+    (the unit is still in its loading state there: friction, creep) and the next branch
+    starts when the torque really turns. None if the run ends first.
     """
     n = x.size
     best, ibest = -np.inf, start
@@ -156,13 +165,17 @@ def _next_turn(x: np.ndarray, start: int, direction: int, h: float) -> int | Non
         if seg[j] > best:
             best, ibest = float(seg[j]), i + j
         if hit.size:
-            return ibest
+            departure = i + int(hit[0])
+            tail = x[ibest:departure] if direction > 0 else -x[ibest:departure]
+            off = np.flatnonzero(tail < best - plateau_tol)
+            length = int(off[0]) if off.size else tail.size  # contiguous samples at the peak
+            return ibest + length - 1 if length >= MIN_DWELL_SAMPLES else ibest
         i += seg.size
         block = min(2 * block, _MAX_BLOCK)
     return None
 
 
-def _turning_points(x: np.ndarray, h: float) -> tuple[np.ndarray, int]:
+def _turning_points(x: np.ndarray, h: float, plateau_tol: float = 0.0) -> tuple[np.ndarray, int]:
     """Turning-point indices and the direction of the first branch (0: no branch found)."""
     i, first = _first_direction(x, h)
     if first == 0:
@@ -173,7 +186,7 @@ def _turning_points(x: np.ndarray, h: float) -> tuple[np.ndarray, int]:
     turns: list[int] = []
     direction, start = first, origin
     while True:
-        t = _next_turn(x, start, direction, h)
+        t = _next_turn(x, start, direction, h, plateau_tol)
         if t is None:
             break
         turns.append(t)
@@ -223,7 +236,10 @@ def split_branches(
     h = default_threshold_Nm(x, torque_resolution_Nm) if threshold_Nm is None else threshold_Nm
     if not h > 0:
         raise AnalysisError(f"reversal threshold must be > 0 N·m, got {h}")
-    turns, first = _turning_points(x, h)
+    # a dwell at a peak: samples within 4 noise standard deviations (or one resolution step)
+    # of the extremum belong to the branch that reached it
+    plateau_tol = min(max(4.0 * white_noise_std(x), float(torque_resolution_Nm)), 0.5 * h)
+    turns, first = _turning_points(x, h, plateau_tol)
     n = x.size
     if first == 0:
         starts = np.array([0], dtype=np.int64)

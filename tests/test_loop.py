@@ -411,3 +411,18 @@ def test_twist_zero_is_arbitrary():
     for name, m in a.items():
         assert b[name].value == pytest.approx(m.value, rel=1e-6, abs=1e-6 * m.uncertainty)
         assert b[name].uncertainty == pytest.approx(m.uncertainty, rel=1e-3)
+
+
+def test_dwell_at_the_peak_belongs_to_the_loading_branch():
+    """Step-and-dwell with Coulomb friction: the dwell at ±T is still in the loading state.
+
+    Were the peak dwell put on the unloading branch, the midline at 100 % would lean toward
+    the loading branch by T_f/(2K) and bias the stiffness secant by about T_f/(T_r/2).
+    """
+    rng = np.random.default_rng(29)
+    T = step_dwell_profile(RATED, 0.5, dwell=40)
+    friction = 0.4  # N·m: 8 % of the 50 %..100 % torque span
+    th = friction_twist(T, friction, K) + rng.normal(0, 0.002, T.size)
+    r = run(T + rng.normal(0, 0.002, T.size), th)
+    m = r.metrics["stiffness_Nm_per_arcmin"]
+    assert abs(m.value - K) <= 4 * m.uncertainty + 1e-3 * K, m

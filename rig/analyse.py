@@ -1,0 +1,181 @@
+"""Analyse stored runs: loop metrics beside the reference nominal model's prediction.
+
+This is the application service behind ``rig analyse`` (and, later, the sequencer and the page):
+it reads what the run says about itself (rated torque, encoder resolution, unit data) and calls
+the pure numerics of :mod:`analysis.loop` and :mod:`analysis.models.nominal`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from analysis.errors import AnalysisError
+from analysis.loop import PROFILES, LoopResult, analyse_loop, twist_arcmin
+from analysis.models.nominal import NominalModel, reference_nominal_model
+from analysis.models.seed000 import InternalPairUnit
+from rig.errors import RigError
+from rig.runformat import Run
+
+ARCMIN_PER_REV = 360.0 * 60.0
+
+# The keys every per-run JSON object carries (users' scripts rely on them).
+METRIC_KEYS = (
+    "lost_motion_arcmin",
+    "backlash_arcmin",
+    "stiffness_Nm_per_arcmin",
+    "loop_area_J",
+    "torque_offset_Nm",
+)
+
+
+@dataclass
+class RunAnalysis:
+    """Everything ``rig analyse`` reports about one run."""
+
+    run: Run
+    twist_arcmin: np.ndarray
+    loop: LoopResult
+    model: NominalModel | None
+    assumptions: list[str] = field(default_factory=list)
+    rated_torque_Nm: float = 0.0
+    lost_motion_pct: float = 3.0
+    profile: str = "nabtesco"
+
+    def model_twist_arcmin(self) -> np.ndarray | None:
+        """The model loop for this run's torque history, shifted onto the measured twist.
+
+        The twist zero is arbitrary (run-format.md), so the model is offset by the median of
+        measured minus model twist.
+        """
+        if self.model is None:
+            return None
+        start_flank = int(self.run.test.get("start_flank", -1) or -1)
+        model = self.model.twist_arcmin(self.run.torque_Nm, start_flank=start_flank)
+        offset = float(np.nanmedian(self.twist_arcmin - model))
+        return model + offset
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON object of ``rig analyse --json`` for this run."""
+        loop = self.loop.to_dict()
+        out: dict[str, Any] = {"run_id": self.run.run_id}
+        for key in METRIC_KEYS:
+            out[key] = loop.get(key)
+        # every other metric the loop computed (per side stiffness, HD K1-K3 ...)
+        for key, value in loop.items():
+            if key not in out and key not in ("uncertainty", "errors"):
+                out[key] = value
+        out["uncertainty"] = loop.get("uncertainty", {})
+        out["errors"] = loop.get("errors", {})
+        out["profile"] = self.profile
+        out["lost_motion_pct"] = self.lost_motion_pct
+        out["rated_torque_Nm"] = self.rated_torque_Nm
+        out["n_samples"] = self.run.n_samples
+        out["n_cycles"] = self.loop.n_cycles
+        if self.model is not None:
+            out["model"] = {
+                "name": "reference nominal model (rig-run/1)",
+                "lost_motion_arcmin": self.model.lost_motion_arcmin(
+                    self.rated_torque_Nm, self.lost_motion_pct
+                ),
+                "backlash_arcmin": self.model.backlash_arcmin,
+                "stiffness_Nm_per_arcmin": self.model.stiffness_Nm_per_arcmin,
+                "play_arcmin": self.model.play_arcmin,
+            }
+        else:
+            out["model"] = None
+        out["assumptions"] = list(self.assumptions)
+        out["notes"] = list(self.run.notes)
+        return out
+
+
+def resolve_profile(profile: str | None, percent: float | None) -> tuple[str, float]:
+    """The lost-motion band: a named vendor profile, or an explicit percent of rated torque."""
+    if percent is not None:
+        if not 0.0 < percent < 100.0:
+            raise RigError(f"--percent must be between 0 and 100, got {percent}")
+        return (profile or "custom"), float(percent)
+    name = profile or "nabtesco"
+    if name not in PROFILES:
+        raise RigError(f"unknown profile {name!r}; known: {', '.join(sorted(PROFILES))}")
+    return name, float(PROFILES[name])
+
+
+def analyse_run(
+    run: Run,
+    *,
+    profile: str | None = None,
+    percent: float | None = None,
+    rated_torque_Nm: float | None = None,
+    hd_T1_Nm: float | None = None,
+    hd_T2_Nm: float | None = None,
+) -> RunAnalysis:
+    """Loop metrics of one run and the reference nominal model's prediction for its unit."""
+    name, pct = resolve_profile(profile, percent)
+    assumptions: list[str] = []
+    test = run.test
+    rated = rated_torque_Nm if rated_torque_Nm is not None else test.get("rated_torque_Nm")
+    if rated is None:
+        raise RigError(
+            f"run {run.run_id!r}: run.json has no test.rated_torque_Nm; the ±{pct:g} % band "
+            "needs it (give --rated-torque)"
+        )
+    rated = float(rated)
+    if not rated > 0:
+        raise RigError(f"run {run.run_id!r}: rated torque must be > 0 N·m, got {rated}")
+
+    ratio = test.get("ratio")
+    if run.input_angle_deg is not None and ratio:
+        twist = twist_arcmin(run.output_angle_deg, run.input_angle_deg, float(ratio))
+    else:
+        twist = twist_arcmin(run.output_angle_deg)
+        if run.input_angle_deg is not None:
+            assumptions.append(
+                "input angle recorded but test.ratio not given: twist = output angle alone "
+                "(input locked)"
+            )
+
+    counts = run.sensors.get("encoder_counts_per_rev")
+    resolution = ARCMIN_PER_REV / float(counts) if counts else 0.0
+    if not counts:
+        assumptions.append(
+            "sensors.encoder_counts_per_rev unknown: encoder resolution not in the uncertainty"
+        )
+    t1 = hd_T1_Nm if hd_T1_Nm is not None else test.get("hd_T1_Nm")
+    t2 = hd_T2_Nm if hd_T2_Nm is not None else test.get("hd_T2_Nm")
+    loop = analyse_loop(
+        run.t_s,
+        run.torque_Nm,
+        twist,
+        rated_torque_Nm=rated,
+        lost_motion_pct=pct,
+        twist_resolution_arcmin=resolution,
+        hd_T1_Nm=None if t1 is None else float(t1),
+        hd_T2_Nm=None if t2 is None else float(t2),
+    )
+
+    model: NominalModel | None = None
+    unit = run.unit
+    if not unit:
+        assumptions.append("run.json has no unit data: no model prediction")
+    elif unit.get("kind", "internal_involute") != "internal_involute":
+        assumptions.append(f"unit kind {unit.get('kind')!r} has no reference nominal model yet")
+    else:
+        try:
+            parsed, unit_assumptions = InternalPairUnit.from_mapping(unit)
+            assumptions.extend(unit_assumptions)
+            model = reference_nominal_model(parsed)
+        except AnalysisError as exc:
+            assumptions.append(f"no model prediction: {exc}")
+    return RunAnalysis(
+        run=run,
+        twist_arcmin=twist,
+        loop=loop,
+        model=model,
+        assumptions=assumptions,
+        rated_torque_Nm=rated,
+        lost_motion_pct=pct,
+        profile=name,
+    )

@@ -1,0 +1,87 @@
+"""Figures: the Fig. 6-style hysteresis loop (seed 000) with the model loop and the ±p % band."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from rig.analyse import RunAnalysis  # noqa: E402
+
+
+def _fmt(value: float | None, unit: str) -> str:
+    return "n/a" if value is None else f"{value:.3f} {unit}"
+
+
+def plot_loops(
+    analyses: Sequence[RunAnalysis], path: str | Path, *, title: str | None = None
+) -> Path:
+    """Draw measured loops (twist in arcmin against torque in N·m) with the model overlaid.
+
+    One axes for all runs (a campaign's loops on top of each other, each with its model loop),
+    the ±p % lost-motion band shaded, and the first run's metrics in the legend box.
+    Writes a PNG (or whatever matplotlib infers from the suffix) and returns its path.
+    """
+    if not analyses:
+        raise ValueError("nothing to plot")
+    path = Path(path)
+    fig, ax = plt.subplots(figsize=(7.5, 5.2), dpi=120)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    first = analyses[0]
+    band = first.lost_motion_pct / 100.0 * first.rated_torque_Nm
+    ax.axvspan(-band, band, color="0.9", zorder=0, label=f"±{first.lost_motion_pct:g} % of rated")
+    for i, item in enumerate(analyses):
+        color = colors[i % len(colors)]
+        torque = item.run.torque_Nm
+        twist = item.twist_arcmin - float(np.nanmedian(item.twist_arcmin))
+        label = item.run.run_id if len(analyses) > 1 else "measured"
+        ax.plot(torque, twist, color=color, lw=0.9, label=label)
+        model = item.model_twist_arcmin()
+        if model is not None:
+            model = model - float(np.nanmedian(item.twist_arcmin))
+            ax.plot(
+                torque,
+                model,
+                color=color,
+                lw=1.2,
+                ls="--",
+                alpha=0.8,
+                label="model" if i == 0 else None,
+            )
+    metrics = first.to_dict()
+    text = "\n".join(
+        [
+            f"lost motion {_fmt(metrics['lost_motion_arcmin'], 'arcmin')}",
+            f"backlash {_fmt(metrics['backlash_arcmin'], 'arcmin')}",
+            f"stiffness {_fmt(metrics['stiffness_Nm_per_arcmin'], 'N·m/arcmin')}",
+        ]
+    )
+    if metrics.get("model"):
+        text += f"\nmodel lost motion {_fmt(metrics['model']['lost_motion_arcmin'], 'arcmin')}"
+    ax.text(
+        0.02,
+        0.98,
+        text,
+        transform=ax.transAxes,
+        va="top",
+        ha="left",
+        fontsize=8,
+        bbox={"boxstyle": "round", "fc": "white", "ec": "0.7"},
+    )
+    ax.axhline(0, color="0.6", lw=0.5)
+    ax.axvline(0, color="0.6", lw=0.5)
+    ax.set_xlabel("output torque T (N·m)")
+    ax.set_ylabel("output twist (arcmin, zero arbitrary)")
+    ax.set_title(title or f"Hysteresis loop: {first.run.run_id}")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path

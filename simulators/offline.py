@@ -82,8 +82,8 @@ def simulate_run(
     flange = np.empty(n)
     temp = np.empty(n)
     step = model.step
-    for k in range(n):
-        model.command_Nm = commands[k]
+    for k, command in enumerate(commands.tolist()):  # Python floats: numpy scalars are slow
+        model.command_Nm = command
         out[k] = model.output_angle_deg()
         inp[k] = model.input_deg
         flange[k] = model.flange_Nm

@@ -88,9 +88,9 @@ class GearPlant:
             m = self._model
             torque = m.sensor_torque_Nm(true_Nm)
             if self._twist_noise_deg or self._torque_noise:
-                noise = self._rng.standard_normal(2)
-                out_deg += noise[0] * self._twist_noise_deg
-                torque += noise[1] * self._torque_noise
+                noise_twist, noise_torque = self._rng.standard_normal(2).tolist()
+                out_deg += noise_twist * self._twist_noise_deg
+                torque += noise_torque * self._torque_noise
             return PlantSnapshot(
                 t_s=now,
                 output_angle_deg=out_deg,

@@ -272,16 +272,46 @@ class PlantModel:
             phi = _newton(flank, lo, hi, phi_pred, 1e-16)
             return result(phi, (phi - base) * stiff)
 
+        c_lin, soft, scale = compliance.c_lin, compliance.soft_rad, compliance.soft_scale_Nm
+        c_b, t_b = compliance.bearing_c, compliance.bearing_torque_Nm
+        exp = math.exp
+
         def contact(tau: float) -> tuple[float, float]:
-            h, dh = compliance(tau)
-            r, dr, _ = free(base + side * h)
-            return side * r + tau, dr * dh + 1.0
+            # compliance(tau) and free(phi), inlined: this is the hot loop of the slow paths
+            h, dh = tau * c_lin, c_lin
+            if soft:
+                e = exp(-tau / scale)
+                h += soft * (1.0 - e)
+                dh += soft / scale * e
+            if c_b:
+                if tau < t_b:
+                    h += tau * c_b
+                    dh += c_b
+                else:
+                    h += t_b * c_b
+            phi = base + side * h
+            d = phi - phi0
+            if k == 0.0:
+                b, db = 0.0, 0.0
+            elif d >= 0.0:
+                e = exp(-k * d)
+                b = level - (level - b0) * e
+                db = k * (level - b0) * e
+            else:
+                e = exp(k * d)
+                b = -level + (level + b0) * e
+                db = k * (level + b0) * e
+            r = mass * (phi - phi_pred) + b + r1 * (b - b0) + r2 * d - drive_Nm
+            return side * r + tau, (mass + db * (1.0 + r1) + r2) * dh + 1.0
 
         hi = 2.0 * abs(drive_Nm) + 4.0 * f_max + 1.0
         while contact(hi)[0] < 0.0:
             hi *= 2.0
-        guess = max(side * (phi_pred - base), 0.0) / compliance.c_lin
-        tau = _newton(contact, 0.0, hi, min(guess, hi), 1e-11)
+        # predictor: the previous flank torque moved along the compliance's tangent
+        tau_prev = side * self.chain_Nm if side * self.chain_Nm > 0.0 else 0.0
+        h_prev, dh_prev = compliance(tau_prev)
+        guess = tau_prev + (side * (phi_pred - base) - h_prev) / dh_prev
+        tau = _newton(contact, 0.0, hi, min(max(guess, 0.0), hi), 1e-12 * (1.0 + hi))
         return result(base + side * compliance(tau)[0], side * tau)
 
     # -- stepping --------------------------------------------------------------------------

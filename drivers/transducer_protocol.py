@@ -15,6 +15,7 @@ No I/O here: the driver (``drivers/transducer_serial.py``) and the simulator
 
 from __future__ import annotations
 
+import operator
 import re
 from dataclasses import dataclass
 from functools import reduce
@@ -90,7 +91,7 @@ DeviceLine = Measurement | ErrorReply | Reply
 
 def checksum(body: bytes) -> int:
     """XOR of all bytes of ``body`` (0..255), the NMEA 0183 line checksum."""
-    return reduce(lambda acc, b: acc ^ b, body, 0)
+    return reduce(operator.xor, body, 0)
 
 
 def frame_line(body: str, terminator: str = "\r\n") -> bytes:

@@ -144,7 +144,10 @@ class TransducerHealth:
 
 
 class SerialTorqueTransducer:
-    """The transducer behind a narrow interface: read, stream, tare, health, close."""
+    """The transducer behind a narrow interface: read, stream, tare, health, close.
+
+    Not thread-safe: use one instance from one thread (or guard it with a lock).
+    """
 
     def __init__(self, config: TransducerConfig) -> None:
         self.config = config
@@ -458,9 +461,8 @@ class SerialTorqueTransducer:
             ) from exc
 
     def _discard_stale_input(self) -> None:
-        """Drop what came unasked (late replies of an earlier timeout)."""
+        """Drop unparsed input that came unasked (late replies of an earlier timeout)."""
         self._buf.clear()
-        self._pending.clear()
         while self._read_chunk(0.0):
             pass
 

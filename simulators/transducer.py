@@ -454,6 +454,7 @@ class TransducerSimulator:
         """Open the pty or listening socket, start serving, return the address."""
         if self._thread is not None:
             raise RuntimeError("transducer simulator already started")
+        self._stop.clear()
         self._wake_r, self._wake_w = os.pipe()
         os.set_blocking(self._wake_r, False)
         os.set_blocking(self._wake_w, False)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 import tomllib
 from collections.abc import Iterator
 
@@ -205,3 +206,28 @@ def test_config_from_a_toml_table() -> None:
         TransducerConfig.model_validate({**table, "timeout_s": 0})
     with pytest.raises(ValidationError, match="speed"):
         TransducerConfig.model_validate({**table, "speed": 1})
+
+
+def test_samples_sent_before_stop_stay_readable(
+    tt: SerialTorqueTransducer, sim: TransducerSimulator
+) -> None:
+    tt.start_stream(1000)
+    first = tt.next_reading()
+    time.sleep(0.2)  # the device sends on while the host is busy elsewhere
+    tt.stop_stream()
+    rest = []
+    with pytest.raises(RuntimeError, match="no stream running"):
+        while True:
+            rest.append(tt.next_reading())
+    assert rest and [r.seq for r in rest][0] > first.seq
+    assert tt.stats.received == 1 + len(rest)
+    assert tt.stats.lost == sim.device.overruns
+
+
+def test_simulator_restarts(plant: SineTorqueSource, transport: str) -> None:
+    sim = TransducerSimulator(plant, transport)  # type: ignore[arg-type]
+    for _ in range(2):
+        address = sim.start()
+        with SerialTorqueTransducer(TransducerConfig(url=address, timeout_s=2.0)) as driver:
+            assert driver.range_Nm() == 20.0
+        sim.stop()

@@ -31,6 +31,23 @@ METRIC_KEYS = (
 )
 
 
+def loop_centre_arcmin(twist_arcmin: np.ndarray) -> float:
+    """Centre of a loop's twist range (arcmin): midway between its 0.5 and 99.5 percentiles.
+
+    Robust to a few outliers; used only to put loops and model loops on a common zero for
+    display (the twist zero of a run is arbitrary).
+    """
+    low, high = np.nanpercentile(twist_arcmin, [0.5, 99.5])
+    return 0.5 * float(low + high)
+
+
+def _finite_or_none(value: float | None) -> float | None:
+    """JSON has no infinity or NaN: an unknown value is written as null."""
+    if value is None or not np.isfinite(value):
+        return None
+    return float(value)
+
+
 @dataclass
 class RunAnalysis:
     """Everything ``rig analyse`` reports about one run."""
@@ -47,15 +64,14 @@ class RunAnalysis:
     def model_twist_arcmin(self) -> np.ndarray | None:
         """The model loop for this run's torque history, shifted onto the measured twist.
 
-        The twist zero is arbitrary (run-format.md), so the model is offset by the median of
-        measured minus model twist.
+        The twist zero is arbitrary (run-format.md), so the model loop is shifted so that its
+        centre (:func:`loop_centre_arcmin`) lies on the measured loop's centre.
         """
         if self.model is None:
             return None
         start_flank = int(self.run.test.get("start_flank", -1) or -1)
         model = self.model.twist_arcmin(self.run.torque_Nm, start_flank=start_flank)
-        offset = float(np.nanmedian(self.twist_arcmin - model))
-        return model + offset
+        return model + (loop_centre_arcmin(self.twist_arcmin) - loop_centre_arcmin(model))
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON object of ``rig analyse --json`` for this run."""
@@ -77,12 +93,12 @@ class RunAnalysis:
         if self.model is not None:
             out["model"] = {
                 "name": "reference nominal model (rig-run/1)",
-                "lost_motion_arcmin": self.model.lost_motion_arcmin(
-                    self.rated_torque_Nm, self.lost_motion_pct
+                "lost_motion_arcmin": _finite_or_none(
+                    self.model.lost_motion_arcmin(self.rated_torque_Nm, self.lost_motion_pct)
                 ),
-                "backlash_arcmin": self.model.backlash_arcmin,
-                "stiffness_Nm_per_arcmin": self.model.stiffness_Nm_per_arcmin,
-                "play_arcmin": self.model.play_arcmin,
+                "backlash_arcmin": _finite_or_none(self.model.backlash_arcmin),
+                "stiffness_Nm_per_arcmin": _finite_or_none(self.model.stiffness_Nm_per_arcmin),
+                "play_arcmin": _finite_or_none(self.model.play_arcmin),
             }
         else:
             out["model"] = None

@@ -9,9 +9,8 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
 
-from rig.analyse import RunAnalysis  # noqa: E402
+from rig.analyse import RunAnalysis, loop_centre_arcmin  # noqa: E402
 
 
 def _fmt(value: float | None, unit: str) -> str:
@@ -38,17 +37,18 @@ def plot_loops(
     for i, item in enumerate(analyses):
         color = colors[i % len(colors)]
         torque = item.run.torque_Nm
-        twist = item.twist_arcmin - float(np.nanmedian(item.twist_arcmin))
+        centre = loop_centre_arcmin(item.twist_arcmin)
+        twist = item.twist_arcmin - centre
         label = item.run.run_id if len(analyses) > 1 else "measured"
         ax.plot(torque, twist, color=color, lw=0.9, label=label)
         model = item.model_twist_arcmin()
         if model is not None:
-            model = model - float(np.nanmedian(item.twist_arcmin))
+            model = model - centre
             ax.plot(
                 torque,
                 model,
-                color=color,
-                lw=1.2,
+                color="black" if len(analyses) == 1 else color,
+                lw=1.0,
                 ls="--",
                 alpha=0.8,
                 label="model" if i == 0 else None,
@@ -76,7 +76,7 @@ def plot_loops(
     ax.axhline(0, color="0.6", lw=0.5)
     ax.axvline(0, color="0.6", lw=0.5)
     ax.set_xlabel("output torque T (N·m)")
-    ax.set_ylabel("output twist (arcmin, zero arbitrary)")
+    ax.set_ylabel("output twist (arcmin, centred on the loop)")
     ax.set_title(title or f"Hysteresis loop: {first.run.run_id}")
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.legend(loc="lower right", fontsize=8)

@@ -126,5 +126,6 @@ def register(app: typer.Typer) -> None:
         if plot is not None:
             from rig.plots import plot_loops
 
-            plot_loops(items, plot)
+            title = None if single else f"Hysteresis loops: campaign {campaign.name}"
+            plot_loops(items, plot, title=title)
             console.print(f"loop picture written to {plot}")

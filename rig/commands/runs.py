@@ -1,0 +1,101 @@
+"""``rig runs``: list the runs of a measurement store with their status."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+STATUS_STYLE = {"running": "yellow", "completed": "green", "aborted": "red"}
+
+
+def _table(runs: list, root: Path) -> Table:
+    table = Table(title=f"Runs in {root} (newest first)")
+    table.add_column("run", no_wrap=True)
+    table.add_column("status")
+    table.add_column("reason")
+    table.add_column("unit")
+    table.add_column("operator")
+    table.add_column("plan")
+    table.add_column("started (UTC)")
+    table.add_column("samples", justify="right")
+    table.add_column("campaign")
+    for info in runs:
+        style = STATUS_STYLE.get(info.status, "")
+        plan = " ".join(p for p in (info.plan_name, info.plan_version) if p)
+        status = f"[{style}]{info.status}[/{style}]" if style else info.status
+        if info.calibration_warnings:
+            status += " [red]cal. past due[/red]"
+        table.add_row(
+            info.run_id,
+            status,
+            info.reason or "",
+            info.unit_serial or "",
+            info.operator or "",
+            plan,
+            info.started_at.replace("T", " ").removesuffix("Z"),
+            "" if info.n_samples is None else str(info.n_samples),
+            info.campaign_id or "",
+        )
+    return table
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def runs(
+        store: Annotated[
+            Path,
+            typer.Option(
+                envvar="RIG_STORE",
+                help="Store folder. Default: the RIG_STORE environment variable if set, "
+                "else ./rig-store in the current directory.",
+            ),
+        ] = Path("rig-store"),
+        json_file: Annotated[
+            Path | None,
+            typer.Option("--json", help="Also write the list as JSON to this file ('-': stdout)."),
+        ] = None,
+        status: Annotated[
+            str | None,
+            typer.Option(help="Only runs with this status: running, completed, aborted."),
+        ] = None,
+        campaign: Annotated[str | None, typer.Option(help="Only runs of this campaign id.")] = None,
+        limit: Annotated[int | None, typer.Option(min=1, help="At most this many runs.")] = None,
+    ) -> None:
+        """List the stored runs with their status (newest first).
+
+        Opening the store marks runs left "running" by a process that has ended as aborted.
+        The store folder is --store, else $RIG_STORE, else ./rig-store.
+        """
+        from rig.store import Store
+
+        if status is not None and status not in ("running", "completed", "aborted"):
+            raise typer.BadParameter(
+                f"{status!r} is not one of running, completed, aborted", param_hint="--status"
+            )
+        st = Store(store, create=False)
+        infos = st.list_runs(campaign_id=campaign, status=status, limit=limit)
+        if json_file is not None:
+            doc = {"store": str(st.root), "recovered": st.recovered,
+                   "runs": [i.to_dict() for i in infos]}
+            text = json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
+            if str(json_file) == "-":
+                sys.stdout.write(text)
+                return
+            json_file.write_text(text, encoding="utf-8")
+        # rich wraps to 80 columns when not writing to a terminal: allow a wide table then
+        console = Console(width=None if sys.stdout.isatty() else 200)
+        for run_id in st.recovered:
+            console.print(f"[red]marked aborted[/red] {run_id}: its process ended during the run")
+        if not infos:
+            console.print(f"no runs in {st.root}")
+            return
+        console.print(_table(infos, st.root))
+        for info in infos:
+            for message in info.calibration_warnings:
+                console.print(f"[red]warning[/red] {info.run_id}: {message}")

@@ -1,0 +1,154 @@
+"""What the store's index says about a run or a campaign, and the calibration checks.
+
+Sensor calibrations are given in a run's metadata as ``"calibration"``: a list of
+``{"sensor": "<sensor id>", "due": "YYYY-MM-DD", ...}`` (more keys, such as a certificate
+number, are kept). A calibration is *past due* at a run when its due date is earlier than
+the UTC date on which the run started.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import date, datetime
+from pathlib import Path
+from typing import Any
+
+RUN_STATUSES = ("running", "completed", "aborted")
+FINAL_STATUSES = ("completed", "aborted")
+
+
+def parse_due(value: object) -> date:
+    """A calibration due date from ISO text (``2027-01-31`` or a full ISO timestamp)."""
+    if not isinstance(value, str):
+        raise ValueError(f"due date must be an ISO date string, got {value!r}")
+    try:
+        return date.fromisoformat(value)
+    except ValueError:
+        pass
+    try:
+        return datetime.fromisoformat(value).date()
+    except ValueError:
+        raise ValueError(f"due date {value!r} is not an ISO date (YYYY-MM-DD)") from None
+
+
+def check_calibration(calibration: object) -> list[dict[str, Any]]:
+    """Validate a ``calibration`` list (see module doc); return it. ValueError names the entry."""
+    if not isinstance(calibration, list):
+        raise ValueError(
+            f"meta['calibration'] must be a list of {{'sensor': id, 'due': 'YYYY-MM-DD'}}, "
+            f"got {type(calibration).__name__}"
+        )
+    for i, entry in enumerate(calibration):
+        where = f"meta['calibration'][{i}]"
+        if not isinstance(entry, dict):
+            raise ValueError(f"{where} must be an object, got {entry!r}")
+        sensor = entry.get("sensor")
+        if not isinstance(sensor, str) or not sensor:
+            raise ValueError(f"{where}: 'sensor' must be a non-empty string, got {sensor!r}")
+        try:
+            parse_due(entry.get("due"))
+        except ValueError as e:
+            raise ValueError(f"{where} (sensor {sensor!r}): {e}") from None
+    return calibration
+
+
+def past_due(calibration: list[dict[str, Any]], started_at: str | None) -> list[str]:
+    """One message per sensor whose calibration was past due when the run started."""
+    if not calibration or not started_at:
+        return []
+    day = datetime.fromisoformat(started_at.replace("Z", "+00:00")).date()
+    out = []
+    for entry in calibration:
+        try:
+            due = parse_due(entry.get("due"))
+        except ValueError:
+            continue
+        if due < day:
+            out.append(
+                f"calibration of sensor {entry.get('sensor')!r} was past due at the start of "
+                f"the run (due {due.isoformat()}, run started {day.isoformat()})"
+            )
+    return out
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """One row of the store's run index. Times are ISO 8601 UTC strings; ``path`` absolute.
+
+    ``n_samples`` is known once the run has finished (None while running); ``metrics`` is
+    the ``result`` dict given at finish (None if none). ``reason`` says why a run was aborted.
+    """
+
+    run_id: str
+    campaign_id: str | None
+    unit_serial: str | None
+    operator: str | None
+    rig_id: str | None
+    calibration: list[dict[str, Any]]
+    software_version: str
+    plan_name: str | None
+    plan_version: str | None
+    status: str
+    reason: str | None
+    started_at: str
+    finished_at: str | None
+    n_samples: int | None
+    path: Path
+    metrics: dict[str, Any] | None = None
+    writer_pid: int | None = field(default=None, compare=False)
+    writer_host: str | None = field(default=None, compare=False)
+
+    @property
+    def calibration_warnings(self) -> list[str]:
+        """Sensors whose calibration was past due when this run started (empty if none)."""
+        return past_due(self.calibration, self.started_at)
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict of every field, plus ``calibration_warnings``."""
+        return {
+            "run_id": self.run_id,
+            "campaign_id": self.campaign_id,
+            "status": self.status,
+            "reason": self.reason,
+            "unit_serial": self.unit_serial,
+            "operator": self.operator,
+            "rig_id": self.rig_id,
+            "plan_name": self.plan_name,
+            "plan_version": self.plan_version,
+            "software_version": self.software_version,
+            "started_at": self.started_at,
+            "finished_at": self.finished_at,
+            "n_samples": self.n_samples,
+            "path": str(self.path),
+            "calibration": self.calibration,
+            "calibration_warnings": self.calibration_warnings,
+            "metrics": self.metrics,
+            "writer_pid": self.writer_pid,
+            "writer_host": self.writer_host,
+        }
+
+
+@dataclass(frozen=True)
+class CampaignInfo:
+    """One row of the store's campaign index (times ISO 8601 UTC; ``path`` absolute)."""
+
+    campaign_id: str
+    name: str
+    status: str
+    started_at: str
+    finished_at: str | None
+    path: Path
+    meta: dict[str, Any]
+    summary: dict[str, Any] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "campaign_id": self.campaign_id,
+            "name": self.name,
+            "status": self.status,
+            "started_at": self.started_at,
+            "finished_at": self.finished_at,
+            "path": str(self.path),
+            "meta": self.meta,
+            "summary": self.summary,
+        }

@@ -15,7 +15,7 @@ Integration: fixed steps of implicit (backward) Euler. The step's end twist solv
 scalar equation ``J (phi - phi_pred) / dt^2 + F_f(phi) + G(phi) - T_d = 0`` whose left side
 is monotone in ``phi``: its root is unique and found by safeguarded Newton (bisection
 fallback), in the free-play regime or, on a flank, with the flank torque as unknown.
-Unconditionally stable for the stiff mesh (~28 N*m/arcmin, ~500 Hz with J = 0.02 kg m^2)
+Unconditionally stable for the stiff mesh (~28 N*m/arcmin, ~350 Hz with J = 0.02 kg m^2)
 and deterministic. Drive, housing temperature and creep are first-order lags updated
 exactly over the step.
 """

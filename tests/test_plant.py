@@ -306,3 +306,14 @@ def test_snapshot_from_several_threads(base):
         t.join(timeout=60)
     assert not errors
     assert all(not t.is_alive() for t in threads)
+
+
+def test_quasi_static_loop_does_not_depend_on_the_step(base):
+    config = base.nominal().with_effect("friction").with_effect("stiffness_nonlinearity")
+    results = []
+    for step in (0.0005, 0.002):
+        run = simulate_run(config.with_changes(rig={"step_s": step}), triangle(RATED_NM, 20.0),
+                           duration_s=20.0, sample_rate_Hz=250)
+        results.append(measured_play_and_stiffness(run)[:2])
+    assert results[0][0] == pytest.approx(results[1][0], abs=0.001)
+    assert results[0][1] == pytest.approx(results[1][1], rel=0.002)

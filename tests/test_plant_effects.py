@@ -251,3 +251,23 @@ def test_effects_are_listed_and_off_by_default(nominal):
     assert plant.true_parameters()["effects"] == []
     config = nominal.with_effect("creep").with_effect("friction")
     assert GearPlant(config, ManualClock()).true_parameters()["effects"] == ["friction", "creep"]
+
+
+@pytest.mark.parametrize("name,params,angle,temperature", [
+    ("runout", {"beta_deg": 40.0, "internal_phase_deg": 10.0}, 77.0, None),
+    ("thermal_expansion", {}, 0.0, 35.0),
+    ("tooth_spacing_error", {"seed": 11}, 100.0, None),
+    ("bearing_clearance", {}, 0.0, None),
+    ("shaft_compliance", {"stiffness_Nm_per_arcmin": 90.0}, 0.0, None),
+])
+def test_true_parameters_agree_with_the_measured_loop(nominal, name, params, angle, temperature):
+    config = nominal.with_effect(name, **params)
+    run = run_loop(config, input_angle_deg=angle, temperature_C=temperature)
+    changes = {"rig": {"initial_input_angle_deg": angle}}
+    if temperature is not None:
+        changes["housing"] = {"initial_C": temperature, "ambient_C": temperature}
+    truth = GearPlant(config.with_changes(**changes), ManualClock()).true_parameters()
+    assert play_of(run) == pytest.approx(truth["apparent_play_arcmin"], abs=0.003)
+    for side in (1, -1):
+        assert line(run, side, 2.0, 9.0)[0] == pytest.approx(truth["stiffness_Nm_per_arcmin"],
+                                                             rel=0.005)

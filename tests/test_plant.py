@@ -11,6 +11,8 @@ import threading
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.optimize import brentq
 
 from analysis.loop import analyse_loop
@@ -18,7 +20,7 @@ from analysis.models.nominal import reference_nominal_model
 from simulators.clock import ManualClock, MonotonicClock
 from simulators.offline import simulate_run
 from simulators.plant import GearPlant
-from simulators.plant_config import load_plant_config
+from simulators.plant_config import EFFECT_NAMES, load_plant_config
 
 RATED_NM = 10.0
 
@@ -317,3 +319,25 @@ def test_quasi_static_loop_does_not_depend_on_the_step(base):
         results.append(measured_play_and_stiffness(run)[:2])
     assert results[0][0] == pytest.approx(results[1][0], abs=0.001)
     assert results[0][1] == pytest.approx(results[1][1], rel=0.002)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.tuples(st.floats(-200.0, 200.0), st.floats(1e-5, 0.2),
+                          st.floats(-400.0, 400.0)), min_size=1, max_size=40),
+       st.sampled_from(["dahl", "lugre"]))
+def test_any_command_sequence_stays_finite_and_limited(steps, friction_model):
+    config = load_plant_config()
+    for name in EFFECT_NAMES:
+        config = config.with_effect(name)
+    config = config.with_effect("friction", model=friction_model)
+    clock = ManualClock()
+    plant = GearPlant(config, clock)
+    limit = config.rig.drive_torque_limit_Nm
+    for command, dt, angle in steps:
+        plant.command_torque(command)
+        plant.lock_input_at(angle)
+        clock.advance(dt)
+        snap = plant.snapshot()
+        assert all(math.isfinite(v) for v in (snap.output_angle_deg, snap.torque_Nm,
+                                              snap.true_torque_Nm, snap.input_angle_deg))
+        assert abs(plant.true_parameters()["drive_torque_Nm"]) <= limit

@@ -39,7 +39,7 @@ from rig.runformat import (
     SamplesAppender,
     read_run,
 )
-from rig.store_files import WriterLock, cut_incomplete_tail, write_json_atomic
+from rig.store_files import WriterLock, cut_incomplete_tail, sync_dir, write_json_atomic
 from rig.store_ids import (
     InvalidIdError,
     StoreError,
@@ -195,6 +195,8 @@ class Store:
             appender = SamplesAppender(
                 folder / SAMPLES_CSV, columns, flush_interval_s=flush_interval_s
             )
+            sync_dir(folder)
+            sync_dir(folder.parent)
             with self._connect() as conn, write_transaction(conn):
                 conn.execute(
                     """INSERT INTO runs (run_id, campaign_id, unit_serial, operator, rig_id,

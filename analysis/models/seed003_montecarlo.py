@@ -164,7 +164,7 @@ class TransmissionErrorModel:
     def phasors(self, values_um: np.ndarray, phases_rad: np.ndarray) -> np.ndarray:
         """Complex amplitude per frequency, shape (samples, frequencies), arcsec."""
         rotated = values_um * np.where(self.has_phase, np.exp(1j * phases_rad), 1.0)
-        return rotated @ self.mixing
+        return np.einsum("ns,sk->nk", rotated, self.mixing)
 
     def transmission_error_arcsec(
         self, values_um: np.ndarray, phases_rad: np.ndarray, psi_rad: np.ndarray
@@ -177,7 +177,10 @@ class TransmissionErrorModel:
         """max over the window of |dtheta| per sample (arcsec), within ``grid_error_arcsec``.
 
         Evaluated ``EVAL_CHUNK`` samples at a time in float32 (7 significant digits, far
-        below the tolerance), so the curves of one chunk stay in the processor's cache.
+        below the tolerance), so the curves of one chunk stay in the processor's cache. The
+        products use ``np.einsum`` (one thread) rather than ``@``: with 20 inner terms the
+        multi-threaded BLAS spends its time waiting on its threads, 3-4 times slower on a
+        busy 2-core machine (bench/bench_montecarlo.py).
         """
         z = self.phasors(np.atleast_2d(values_um), np.atleast_2d(phases_rad))
         out = np.empty(z.shape[0])
@@ -187,14 +190,15 @@ class TransmissionErrorModel:
 
     def _chunk_max(self, z: np.ndarray) -> np.ndarray:
         coeffs = np.hstack([z.imag, z.real]).astype(np.float32)
-        coarse = np.abs(coeffs @ self._coarse32)
+        coarse = np.abs(np.einsum("nk,kt->nt", coeffs, self._coarse32))
         best = coarse.max(axis=1)
         slack = (np.abs(z) @ self.frequencies**2) * self.coarse_step_rad**2 / 8.0
         ends = np.maximum(coarse[:, :-1], coarse[:, 1:])
         rows, cols = np.nonzero(ends + (slack + 1e-4 * best)[:, None] >= best[:, None])
         if rows.size:
             shifted = z[rows] * self._rotations[cols]
-            fine = np.abs(np.hstack([shifted.imag, shifted.real]).astype(np.float32) @ self._fine32)
+            parts = np.hstack([shifted.imag, shifted.real]).astype(np.float32)
+            fine = np.abs(np.einsum("nk,kt->nt", parts, self._fine32))
             np.maximum.at(best, rows, fine.max(axis=1))
         return best
 

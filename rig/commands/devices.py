@@ -1,0 +1,80 @@
+"""``rig devices``: connect to every device of a rig configuration and report its health."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from rig.config import RigConfigError, load_rig_config
+
+
+def _fmt(value: float | None, digits: int = 6) -> str:
+    return "" if value is None else f"{value:.{digits}g}"
+
+
+def _table(reports: list, title: str) -> Table:
+    from rig.device_check import DeviceReport
+
+    table = Table(title=title)
+    for column in ("device", "samples", "rate Hz", "expected Hz", "lost", "late", "last",
+                   "errors"):
+        table.add_column(column, justify="right" if column not in ("device", "errors")
+                         else "left", overflow="fold")
+    rep: DeviceReport
+    for rep in reports:
+        errors = "; ".join(f"{m} (x{n})" if n > 1 else m for m, n in rep.errors.items())
+        style = "green" if rep.healthy else "red"
+        table.add_row(f"[{style}]{rep.name}[/{style}]\n{rep.device}", str(rep.samples),
+                      f"{rep.rate_Hz:.1f}", _fmt(rep.expected_rate_Hz, 4), str(rep.lost),
+                      str(rep.late), f"{_fmt(rep.last)} {rep.unit}".strip(),
+                      f"[red]{errors}[/red]" if errors else "[green]none[/green]")
+    return table
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def devices(
+        rig_file: Annotated[Path, typer.Option("--rig", help="Rig configuration (TOML).")],
+        seconds: Annotated[float, typer.Option(min=0.1, help="How long to read, s.")] = 5.0,
+        json_file: Annotated[Path | None, typer.Option(
+            "--json", help="Also write the report as JSON here ('-' for stdout).")] = None,
+    ) -> None:
+        """Connect to every device of a rig, read for a while and report each one.
+
+        Exit 0 when every device is healthy, 1 when one has errors, 2 on a bad configuration.
+        """
+        from rig.device_check import check_devices
+
+        err = Console(stderr=True)
+        try:
+            config = load_rig_config(rig_file)
+        except RigConfigError as exc:
+            for line in str(exc).splitlines():
+                print(f"rig: error: {line}", file=sys.stderr)
+            raise typer.Exit(2) from exc
+        with err.status(f"reading {len(config.device_names())} devices for {seconds:g} s"):
+            reports = check_devices(config, seconds)
+        healthy = all(r.healthy for r in reports)
+        doc = {
+            "format": "rig-devices/1",
+            "rig_id": config.rig.rig_id,
+            "rig_config": str(rig_file),
+            "seconds": seconds,
+            "healthy": healthy,
+            "devices": {r.name: r.to_json() for r in reports},
+        }
+        to_stdout = json_file is not None and str(json_file) == "-"
+        console = Console(stderr=to_stdout, width=160)
+        console.print(_table(reports, f"Devices of rig {config.rig.rig_id} ({rig_file}), "
+                                      f"{seconds:g} s"))
+        if to_stdout:
+            print(json.dumps(doc, indent=2))
+        elif json_file is not None:
+            json_file.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+        raise typer.Exit(0 if healthy else 1)

@@ -1,0 +1,58 @@
+"""``rig sim``: run the whole simulated rig (plant + every protocol face) as a process."""
+
+from __future__ import annotations
+
+import json
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+
+class _Transducer(StrEnum):
+    pty = "pty"
+    tcp = "tcp"
+
+
+class _Modbus(StrEnum):
+    tcp = "tcp"
+    rtu_tcp = "rtu-tcp"
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def sim(
+        config: Annotated[Path | None, typer.Option(
+            "--config", help="Plant TOML (default: simulators/default_plant.toml).")] = None,
+        port_base: Annotated[int | None, typer.Option(
+            help="Fixed ports: Modbus on BASE, SLCAN on BASE+1, transducer (tcp) on BASE+2. "
+                 "Default: free ports.")] = None,
+        transducer: Annotated[_Transducer, typer.Option(
+            help="Transducer face: a pseudo-terminal or a TCP port.")] = _Transducer.pty,
+        modbus: Annotated[_Modbus, typer.Option(
+            help="Modbus face: Modbus TCP or RTU frames over TCP.")] = _Modbus.tcp,
+        seed: Annotated[int | None, typer.Option(help="Plant noise seed.")] = None,
+        input_encoder: Annotated[bool, typer.Option(
+            help="Serve the input-shaft encoder (CANopen node 2).")] = True,
+        rig_config: Annotated[Path | None, typer.Option(
+            help="Write the rig configuration here (default: a temporary folder).")] = None,
+        sync_period: Annotated[float, typer.Option(
+            min=0.0005, max=1.0, help="SYNC period written in the rig config, s.")] = 0.002,
+        stream_rate: Annotated[float, typer.Option(
+            min=1.0, help="Transducer stream rate written in the rig config, Hz.")] = 500.0,
+    ) -> None:
+        """Start the simulated rig on 127.0.0.1 and serve until SIGINT/SIGTERM.
+
+        The first output line is one JSON object: the address of every device and
+        "rig_config", the rig configuration file that connects to them.
+        """
+        from rig.simrig import SimulatedRig, serve_until_signalled
+
+        sim_rig = SimulatedRig(config, in_process=True, transducer=transducer.value,
+                               modbus=modbus.value, port_base=port_base, seed=seed,
+                               input_encoder=input_encoder, rig_config_path=rig_config,
+                               sync_period_s=sync_period, stream_rate_Hz=stream_rate)
+        addresses = sim_rig.start()
+        print(json.dumps(addresses), flush=True)
+        raise typer.Exit(serve_until_signalled(sim_rig))

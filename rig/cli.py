@@ -26,17 +26,32 @@ def _root() -> None:
     """backlash-rig: measure the lost motion of a gear reducer and compare it with the model."""
 
 
-def _register_commands() -> None:
+def _register_commands(argv: list[str] | None = None) -> None:
+    """Register the sub-commands of :mod:`rig.commands`.
+
+    Each module is named after its command (``validate_diagnosis`` for ``validate-diagnosis``).
+    When the command line names one, only that module is imported: the heavy numerics of the
+    others (scipy, matplotlib) stay out of a command's start-up. ``rig --help`` imports all.
+    """
     import rig.commands as pkg
 
-    for info in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda i: i.name):
-        module = importlib.import_module(f"{pkg.__name__}.{info.name}")
+    names = sorted(info.name for info in pkgutil.iter_modules(pkg.__path__))
+    wanted = names
+    if argv:
+        first = next((arg for arg in argv if not arg.startswith("-")), None)
+        if first is not None and first.replace("-", "_") in names:
+            wanted = [first.replace("-", "_")]
+    for name in wanted:
+        module = importlib.import_module(f"{pkg.__name__}.{name}")
         register = getattr(module, "register", None)
         if register is not None:
             register(app)
 
 
-_register_commands()
+# Started as the ``rig`` console script: import only the command asked for. Imported as a
+# module (tests, scripts): every command is registered on ``app``.
+_AS_SCRIPT = bool(sys.argv) and sys.argv[0].replace("\\", "/").rsplit("/", 1)[-1] == "rig"
+_register_commands(sys.argv[1:] if _AS_SCRIPT else None)
 
 
 def main() -> None:

@@ -1,0 +1,41 @@
+"""The `rig` console script: help, one-line errors, and lean start-up per command."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+RIG = shutil.which("rig")
+pytestmark = pytest.mark.skipif(
+    RIG is None, reason="the `rig` console script is not installed (pip install -e .)"
+)
+
+
+def run(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, *args], capture_output=True, text=True, timeout=120)
+
+
+def test_help_lists_every_command() -> None:
+    res = run(RIG, "--help")
+    assert res.returncode == 0
+    for name in ("analyse", "model", "montecarlo", "runs", "version"):
+        assert name in res.stdout
+
+
+def test_unknown_command_exits_2() -> None:
+    res = run(RIG, "no-such-command")
+    assert res.returncode == 2
+    assert "no-such-command" in res.stderr
+
+
+def test_a_command_imports_only_its_own_module() -> None:
+    """`rig version` must not pay for scipy/matplotlib that other commands need."""
+    res = run("-X", "importtime", RIG, "version")
+    assert res.returncode == 0 and res.stdout.strip()
+    imported = {line.rsplit("|", 1)[-1].strip() for line in res.stderr.splitlines()}
+    assert "rig.commands.version" in imported
+    assert not any(name.startswith(("scipy", "matplotlib")) for name in imported)
+    assert "rig.commands.analyse" not in imported

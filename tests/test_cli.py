@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 import sys
+import sysconfig
+from pathlib import Path
 
 import pytest
 
-RIG = shutil.which("rig")
+# The console script pip installed for this interpreter (not a pyenv shim in front of it).
+RIG = str(Path(sysconfig.get_path("scripts")) / "rig")
 pytestmark = pytest.mark.skipif(
-    RIG is None, reason="the `rig` console script is not installed (pip install -e .)"
+    not Path(RIG).is_file(), reason="the `rig` console script is not installed (pip install -e .)"
 )
 
 

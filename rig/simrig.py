@@ -113,6 +113,7 @@ class SimulatedRig:
         self._tempdir: Path | None = None
         self._stderr: Any = None
         self.stderr_final = ""
+        self.exit_code: int | None = None
         self._started = False
 
     # -- lifecycle --------------------------------------------------------------------------
@@ -136,6 +137,7 @@ class SimulatedRig:
         code = None
         if self.process is not None:
             code = _terminate(self.process)
+            self.exit_code = code
             self.process = None
         if self._stderr is not None:
             self.stderr_final = self.stderr_text()

@@ -1,0 +1,162 @@
+"""``rig sim`` as its own process, driven over the real protocols from this process.
+
+The contract (issue 3): the first output line is one JSON object with every device's address
+and "rig_config"; that file connects ``rig devices`` and ``open_rig`` to every device; one
+GearPlant drives them all; SIGTERM stops it cleanly with exit 0.
+"""
+
+from __future__ import annotations
+
+import json
+import select
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rig.config import load_rig_config
+from rig.devices import open_rig
+from rig.simrig import SimulatedRig
+from simulators.plant import GearPlant
+from simulators.plant_config import load_plant_config
+
+RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
+TORQUE_NM = 10.0
+
+
+def _first_line(proc: subprocess.Popen, timeout_s: float = 60.0) -> str:
+    ready, _, _ = select.select([proc.stdout], [], [], timeout_s)
+    return proc.stdout.readline() if ready else ""
+
+
+@pytest.fixture(scope="module")
+def sim():
+    proc = subprocess.Popen([*RIG, "sim", "--seed", "3"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    line = _first_line(proc)
+    if not line:
+        proc.kill()
+        pytest.fail(f"rig sim printed nothing: {proc.stderr.read()}")
+    yield proc, json.loads(line)
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait(timeout=20)
+
+
+def _mean_angle(encoder, seconds: float = 0.3) -> float:
+    encoder.readings()
+    time.sleep(seconds)
+    samples = encoder.readings()
+    assert len(samples) >= 10
+    return float(np.mean([s.angle_deg for s in samples]))
+
+
+def _wait(devices, seconds: float) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        devices.alive()
+        time.sleep(0.05)
+
+
+def test_first_line_names_every_device_and_the_rig_config(sim):
+    _, info = sim
+    assert info["modbus_tcp"].startswith("127.0.0.1:")
+    assert info["encoder_slcan"].startswith("socket://127.0.0.1:")
+    assert info["transducer"].startswith("/dev/pts/")
+    assert info["encoder_nodes"] == {"encoder": 1, "input_encoder": 2}
+    config = load_rig_config(info["rig_config"])
+    assert config.can.channel == info["encoder_slcan"]
+    assert config.transducer.url == info["transducer"]
+    assert f"{config.drive.host}:{config.drive.port}" == info["modbus_tcp"]
+
+
+def test_rig_devices_reports_every_device_healthy(sim, tmp_path):
+    _, info = sim
+    report = tmp_path / "devices.json"
+    proc = subprocess.run([*RIG, "devices", "--rig", info["rig_config"], "--seconds", "2",
+                           "--json", str(report)], capture_output=True, text=True, timeout=90)
+    doc = json.loads(report.read_text(encoding="utf-8"))
+    assert proc.returncode == 0, (proc.stdout, proc.stderr)
+    assert doc["healthy"] is True
+    assert set(doc["devices"]) == {"encoder", "input_encoder", "transducer", "torque_sensor",
+                                   "drive", "input_motor", "climate"}
+    for name, dev in doc["devices"].items():
+        assert dev["samples"] > 0, name
+        assert dev["errors"] == [], name
+        assert dev["rate_Hz"] > 0, name
+    assert doc["devices"]["transducer"]["info"]["temperature_C"] == pytest.approx(20.0)
+    assert doc["devices"]["climate"]["last"] == pytest.approx(20.0)
+    assert "torque_sensor" in proc.stdout  # the rich table
+
+
+def test_drive_torque_reaches_every_sensor_as_the_plant_says(sim):
+    _, info = sim
+    config = load_rig_config(info["rig_config"])
+    truth = GearPlant(load_plant_config())  # the same default plant, for its closed forms
+    twist = truth.true_twist_arcmin(np.linspace(0.0, TORQUE_NM, 201))
+    expected_arcmin = twist[-1] - twist[0]
+    with open_rig(config) as rig:
+        before = _mean_angle(rig.encoder)
+        rig.drive.set_torque(TORQUE_NM)
+        rig.drive.enable()
+        _wait(rig, 0.6)  # drive lag 10 ms; the output settles well within this
+        after = _mean_angle(rig.encoder)
+        transducer = np.mean([rig.transducer.read().torque_Nm for _ in range(10)])
+        sensor = np.mean([rig.torque_sensor.read().torque_Nm for _ in range(10)])
+        status = rig.drive.status()
+        assert rig.safe_state()
+        _wait(rig, 0.3)
+        relaxed = rig.torque_sensor.read().torque_Nm
+    assert status.enabled and status.actual_torque_Nm == pytest.approx(TORQUE_NM)
+    # noise 0.005 N*m rms per reading (docs/plant.md), averaged over 10
+    assert transducer == pytest.approx(TORQUE_NM, abs=0.01)
+    assert sensor == pytest.approx(TORQUE_NM, abs=0.01)
+    # play (4.28 arcmin) + T/K: 0.3 arcsec noise and 0.15 arcsec quantisation, averaged
+    assert (after - before) * 60.0 == pytest.approx(expected_arcmin, abs=0.01)
+    assert abs(relaxed) < 0.05
+
+
+def test_input_motor_turns_both_encoders_by_the_gear_ratio(sim):
+    _, info = sim
+    config = load_rig_config(info["rig_config"])
+    ratio = GearPlant(load_plant_config()).true_parameters()["ratio"]
+    with open_rig(config) as rig:
+        out0, in0 = _mean_angle(rig.encoder), _mean_angle(rig.input_encoder)
+        state = rig.input_motor.lock_at(in0 + 45.0, timeout_s=10.0)
+        assert state.locked and not state.moving
+        out1, in1 = _mean_angle(rig.encoder), _mean_angle(rig.input_encoder)
+        rig.input_motor.lock_at(in0, timeout_s=10.0)
+    assert in1 - in0 == pytest.approx(45.0, abs=1e-4)
+    assert out1 - out0 == pytest.approx(-45.0 / ratio, abs=2e-4)  # 0.7 arcsec
+
+
+def test_sigterm_stops_rig_sim_cleanly(sim):
+    proc, info = sim
+    rig_config = Path(info["rig_config"])
+    assert rig_config.exists()
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=30) == 0, proc.stderr.read()
+    assert not rig_config.exists()  # its temporary folder is gone
+
+
+def test_simulated_rig_out_of_process_with_rtu_and_tcp_transducer(tmp_path):
+    sim = SimulatedRig(in_process=False, transducer="tcp", modbus="rtu-tcp", seed=5,
+                       input_encoder=False, rig_config_path=tmp_path / "rig.toml")
+    with sim:
+        assert sim.addresses["modbus_rtu"].startswith("socket://127.0.0.1:")
+        assert sim.addresses["transducer"].startswith("socket://127.0.0.1:")
+        config = load_rig_config(sim.rig_config_path)
+        assert config.input_encoder is None and config.drive.transport == "rtu"
+        with open_rig(config) as rig:
+            rig.drive.set_torque(-5.0)
+            rig.drive.enable()
+            _wait(rig, 0.3)
+            assert rig.transducer.read().torque_Nm == pytest.approx(-5.0, abs=0.03)
+            assert rig.torque_sensor.read().torque_Nm == pytest.approx(-5.0, abs=0.03)
+        assert sim.process is not None and sim.process.poll() is None
+    assert sim.process is None and sim.exit_code == 0
+    assert "Traceback" not in sim.stderr_final

@@ -1,0 +1,225 @@
+"""Input of the diagnosis: one run as arrays, reduced to a few hundred quasi-static points.
+
+Pure numerics. Per run: the twist noise (robust second differences, analysis.loop_branches),
+the samples crossing the free play (a twist jump no torque change explains: not quasi-static,
+left out), block means of the remaining samples (blocks never span a jump), the honest noise of
+a block mean (the scatter of consecutive block means in dwells, where the loop stands still),
+the branch (loading/unloading) and the time since the last torque reversal of each point.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from analysis.errors import AnalysisError
+from analysis.loop import analyse_loop
+from analysis.loop_branches import white_noise_std
+from analysis.models.nominal import NominalModel, reference_nominal_model
+
+#: Decimated points per run kept for fitting.
+TARGET_POINTS = 240
+
+
+@dataclass(frozen=True)
+class RunInput:
+    """One run as the diagnosis sees it: only what the campaign folder says (no labels).
+
+    ``twist_arcmin``: output twist (arcmin, any zero); ``torque_Nm``: measured torque;
+    ``input_angle_deg``: where the eccentric shaft was locked (None: unknown);
+    ``temperature_C``: housing temperature per sample (None: unknown); ``unit``: run.json
+    ``unit`` mapping."""
+
+    run_id: str
+    t_s: np.ndarray
+    torque_Nm: np.ndarray
+    twist_arcmin: np.ndarray
+    rated_torque_Nm: float
+    unit: Mapping[str, Any]
+    input_angle_deg: float | None = None
+    temperature_C: np.ndarray | None = None
+    start_flank: int = -1
+    torque_full_scale_Nm: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class PreparedRun:
+    """A run reduced to block means (arrays of equal length) and its summary numbers."""
+
+    run_id: str
+    torque_Nm: np.ndarray
+    twist_arcmin: np.ndarray
+    temperature_C: np.ndarray | None
+    t_s: np.ndarray
+    branch: np.ndarray  # +1 loading (torque rising), -1 unloading
+    since_reversal_s: np.ndarray
+    sigma_arcmin: float  # noise of one block mean
+    sigma_torque_Nm: float  # noise of one block mean's torque
+    raw_sigma_arcmin: float
+    block: int
+    n_raw: int
+    n_transit: int
+    rated_torque_Nm: float
+    amplitude_Nm: float
+    input_angle_deg: float | None
+    mean_temperature_C: float | None
+    start_flank: int
+    nominal: NominalModel | None
+    lost_motion_arcmin: float  # measured, analysis.loop (NaN: unavailable)
+    raw: RunInput = field(repr=False)
+
+
+def direction_and_reversal(t_s: np.ndarray, torque_Nm: np.ndarray, threshold_Nm: float
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """Torque direction (+1 rising, -1 falling) with hysteresis ``threshold_Nm`` and the time
+    (s) since the last reversal (the running extreme) for every sample."""
+    values = torque_Nm.tolist()
+    times = t_s.tolist()
+    n = len(values)
+    direction = [0.0] * n
+    since = [0.0] * n
+    d = 1.0
+    extreme = values[0] if n else 0.0
+    t_ext = times[0] if n else 0.0
+    for k in range(n):
+        v = values[k]
+        if d > 0:
+            if v >= extreme:
+                extreme, t_ext = v, times[k]
+            elif v < extreme - threshold_Nm:
+                d, extreme, t_ext = -1.0, v, times[k]
+        else:
+            if v <= extreme:
+                extreme, t_ext = v, times[k]
+            elif v > extreme + threshold_Nm:
+                d, extreme, t_ext = 1.0, v, times[k]
+        direction[k] = d
+        since[k] = times[k] - t_ext
+    return np.asarray(direction), np.asarray(since)
+
+
+def transit_mask(twist_arcmin: np.ndarray, torque_Nm: np.ndarray, sigma_arcmin: float,
+                 soft_compliance_arcmin_per_Nm: float) -> tuple[np.ndarray, np.ndarray]:
+    """(keep, jump): ``jump[k]`` marks a step k -> k+1 whose twist change exceeds what the
+    softest plausible flank and the noise allow (crossing the free play, impacts);
+    ``keep`` is False for samples with a jump on both sides (in flight across the play)."""
+    d_twist = np.abs(np.diff(twist_arcmin))
+    d_torque = np.abs(np.diff(torque_Nm))
+    jump = d_twist > d_torque * soft_compliance_arcmin_per_Nm + 6.0 * math.sqrt(2.0) * max(
+        sigma_arcmin, 1e-6)
+    keep = np.ones(twist_arcmin.size, dtype=bool)
+    if twist_arcmin.size > 2:
+        keep[1:-1] = ~(jump[:-1] & jump[1:])
+    return keep, jump
+
+
+def _segments(keep: np.ndarray, jump: np.ndarray) -> list[tuple[int, int]]:
+    """Maximal index ranges [a, b) of kept samples with no jump inside."""
+    n = keep.size
+    brk = np.zeros(n, dtype=bool)
+    brk[0] = True
+    brk[1:] = jump | ~keep[1:] | ~keep[:-1]
+    starts = np.flatnonzero(brk)
+    out = []
+    for i, a in enumerate(starts):
+        b = starts[i + 1] if i + 1 < starts.size else n
+        if keep[a]:
+            out.append((int(a), int(b)))
+    return out
+
+
+def _block_means(values: np.ndarray, segments: list[tuple[int, int]], block: int) -> np.ndarray:
+    out = []
+    for a, b in segments:
+        m = (b - a) // block
+        if m == 0:
+            if b - a >= max(1, block // 2):
+                out.append(values[a:b].mean(keepdims=True))
+            continue
+        out.append(values[a:a + m * block].reshape(m, block).mean(axis=1))
+        if b - (a + m * block) >= max(1, block // 2):
+            out.append(values[a + m * block:b].mean(keepdims=True))
+    return np.concatenate(out) if out else np.empty(0)
+
+
+def _segment_ids(segments: list[tuple[int, int]], block: int) -> np.ndarray:
+    ids = []
+    for i, (a, b) in enumerate(segments):
+        m = (b - a) // block
+        extra = 1 if (b - a - m * block) >= max(1, block // 2) else 0
+        ids.extend([i] * (m + extra))
+    return np.asarray(ids, dtype=int)
+
+
+def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRun:
+    """Reduce one run (see the module docstring). Raises AnalysisError on unusable input."""
+    t = np.asarray(run.t_s, dtype=float)
+    torque = np.asarray(run.torque_Nm, dtype=float)
+    twist = np.asarray(run.twist_arcmin, dtype=float)
+    if not (t.shape == torque.shape == twist.shape) or t.ndim != 1:
+        raise AnalysisError(f"run {run.run_id!r}: t, torque and twist must be 1-D, same length")
+    if t.size < 20:
+        raise AnalysisError(f"run {run.run_id!r}: {t.size} samples, at least 20 needed")
+    if not (np.all(np.isfinite(torque)) and np.all(np.isfinite(twist))):
+        raise AnalysisError(f"run {run.run_id!r}: torque or twist has missing values")
+    if not run.rated_torque_Nm > 0:
+        raise AnalysisError(f"run {run.run_id!r}: rated torque must be > 0 N*m")
+    temp = None if run.temperature_C is None else np.asarray(run.temperature_C, dtype=float)
+    if temp is not None and not np.all(np.isfinite(temp)):
+        finite = np.isfinite(temp)
+        temp = None if not finite.any() else np.where(finite, temp, np.nanmean(temp))
+    nominal: NominalModel | None
+    try:
+        nominal = reference_nominal_model(run.unit) if run.unit else None
+    except AnalysisError:
+        nominal = None
+    sigma = white_noise_std(twist)
+    sigma_t = white_noise_std(torque)
+    amplitude = float(np.percentile(np.abs(torque), 99.5))
+    if nominal is not None and math.isfinite(nominal.stiffness_Nm_per_arcmin):
+        soft = 10.0 / nominal.stiffness_Nm_per_arcmin
+    else:
+        span_t = float(np.ptp(torque)) or 1.0
+        soft = 10.0 * float(np.ptp(twist)) / span_t
+    keep, jump = transit_mask(twist, torque, sigma, soft)
+    segments = _segments(keep, jump)
+    n_keep = int(sum(b - a for a, b in segments))
+    block = max(1, int(round(n_keep / target_points)))
+    thr = max(8.0 * sigma_t, 0.02 * amplitude)
+    direction, since = direction_and_reversal(t, torque, thr)
+    tb = _block_means(torque, segments, block)
+    yb = _block_means(twist, segments, block)
+    seg = _segment_ids(segments, block)
+    sigma_tb = sigma_t / math.sqrt(block)
+    # honest block-mean noise: consecutive blocks of a segment standing still (a dwell)
+    still = (np.diff(seg) == 0) & (np.abs(np.diff(tb)) < 3.0 * sigma_tb + 1e-4 * amplitude)
+    pairs = np.diff(yb)[still]
+    if pairs.size >= 20:
+        sigma_b = 1.4826 * float(np.median(np.abs(pairs - np.median(pairs)))) / math.sqrt(2.0)
+        sigma_b = max(sigma_b, 0.5 * sigma / math.sqrt(block))
+    else:
+        sigma_b = sigma / math.sqrt(block)
+    lost_motion = math.nan
+    try:
+        res = analyse_loop(t, torque, twist, rated_torque_Nm=run.rated_torque_Nm)
+        if "lost_motion_arcmin" in res.metrics:
+            lost_motion = res.metrics["lost_motion_arcmin"].value
+    except AnalysisError:
+        pass
+    return PreparedRun(
+        run_id=run.run_id, torque_Nm=tb, twist_arcmin=yb,
+        temperature_C=None if temp is None else _block_means(temp, segments, block),
+        t_s=_block_means(t, segments, block),
+        branch=np.sign(_block_means(direction, segments, block)),
+        since_reversal_s=_block_means(since, segments, block),
+        sigma_arcmin=max(sigma_b, 1e-7), sigma_torque_Nm=sigma_tb, raw_sigma_arcmin=sigma,
+        block=block, n_raw=int(t.size), n_transit=int((~keep).sum()),
+        rated_torque_Nm=float(run.rated_torque_Nm), amplitude_Nm=amplitude,
+        input_angle_deg=run.input_angle_deg,
+        mean_temperature_C=None if temp is None else float(np.mean(temp)),
+        start_flank=run.start_flank, nominal=nominal, lost_motion_arcmin=lost_motion, raw=run,
+    )

@@ -1,0 +1,94 @@
+"""``rig diagnose`` service: read a campaign folder, diagnose the sim-to-real gap, write reports.
+
+Only what a campaign folder says reaches the diagnosis: each run's ``unit``, ``test`` and
+samples (:func:`run_input`). Anything else in run.json (a generator's labels, notes) is never
+read, so a campaign made by a simulator and the same campaign with those keys stripped give the
+same verdict (tests/test_diagnosis_blind.py).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from analysis.diagnosis import Diagnosis, diagnose
+from analysis.diagnosis_data import RunInput
+from analysis.errors import AnalysisError
+from analysis.loop import twist_arcmin
+from rig.errors import RigError
+from rig.runformat import Campaign, Run, read_run_or_campaign
+
+
+def run_input(run: Run) -> RunInput:
+    """The diagnosis' view of a run: unit, test conditions and samples, nothing else."""
+    test = run.test
+    rated = test.get("rated_torque_Nm")
+    if rated is None:
+        rated = float(np.percentile(np.abs(run.torque_Nm), 99.5))
+    ratio = test.get("ratio")
+    if run.input_angle_deg is not None and ratio:
+        twist = twist_arcmin(run.output_angle_deg, run.input_angle_deg, float(ratio))
+    else:
+        twist = twist_arcmin(run.output_angle_deg)
+    angle = test.get("input_angle_deg")
+    if angle is None and run.input_angle_deg is not None:
+        col = run.input_angle_deg
+        if np.isfinite(col).any():
+            angle = float(np.nanmedian(col))
+    temperature = run.temperature_C
+    if temperature is None and test.get("temperature_C") is not None:
+        temperature = np.full(run.n_samples, float(test["temperature_C"]))
+    start = test.get("start_flank", -1)
+    full_scale = run.sensors.get("torque_full_scale_Nm")
+    return RunInput(
+        run_id=run.run_id, t_s=run.t_s, torque_Nm=run.torque_Nm, twist_arcmin=twist,
+        rated_torque_Nm=float(rated), unit=dict(run.unit),
+        input_angle_deg=None if angle is None else float(angle),
+        temperature_C=temperature, start_flank=1 if start == 1 else -1,
+        torque_full_scale_Nm=None if full_scale is None else float(full_scale),
+    )
+
+
+def diagnose_campaign(campaign: Campaign) -> Diagnosis:
+    """Diagnose a campaign already read; AnalysisError becomes RigError naming the campaign."""
+    try:
+        return diagnose([run_input(r) for r in campaign.runs])
+    except AnalysisError as exc:
+        raise RigError(f"campaign {campaign.path or campaign.name}: {exc}") from exc
+
+
+def diagnose_path(path: str | Path) -> tuple[Campaign, Diagnosis]:
+    """Read a campaign (or one run) folder and diagnose it."""
+    campaign = read_run_or_campaign(path)
+    return campaign, diagnose_campaign(campaign)
+
+
+def report_dict(campaign: Campaign, diagnosis: Diagnosis) -> dict[str, Any]:
+    """The ``rig-diagnosis/1`` report with the campaign named."""
+    out = {"format": "rig-diagnosis/1", "campaign": campaign.name}
+    out.update(diagnosis.to_dict())
+    return out
+
+
+def write_json(report: dict[str, Any], path: str | Path) -> Path:
+    """Write the report as JSON (NaN/inf are not JSON: written as null)."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(_finite(report), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    return p
+
+
+def _finite(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _finite(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, float | np.floating):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj

@@ -11,7 +11,9 @@ import time
 
 import pytest
 
-from drivers.errors import DeviceOutOfRange, DeviceTimeout
+from drivers.errors import DeviceFault, DeviceOutOfRange, DeviceTimeout
+from drivers.modbus_map import encode_float32
+from drivers.rig_controls import CLIMATE_MAP, INPUT_MOTOR_MAP
 from rig.config import load_rig_config
 from rig.devices import open_rig
 from rig.simrig import SimulatedRig
@@ -120,3 +122,24 @@ def test_climate_setpoint_drives_the_housing_temperature(sim, config):
     step = sim.plant.config.rig.step_s
     low, high = first_order(t_read0 - t_write1 - step), first_order(t_read1 - t_write0 + step)
     assert low - 0.01 <= state.housing_C <= high + 0.01
+
+
+def test_controls_refuse_what_their_map_does_not_allow(sim, config):
+    with open_rig(config) as rig:
+        link, motor, climate = rig.input_motor.link, rig.input_motor, rig.climate
+        unit3, unit4 = config.input_motor.device_id, config.climate.device_id
+        with pytest.raises(DeviceFault, match="exception code 2"):  # half a float
+            link.write(motor.name, unit3, 0, [encode_float32(10.0)[0]])
+        with pytest.raises(DeviceFault, match="exception code 3"):  # unknown command
+            link.write(motor.name, unit3, 2, [7])
+        with pytest.raises(DeviceFault, match="exception code 3"):  # beyond the chamber
+            link.write(climate.name, unit4, 0, encode_float32(151.0))
+        with pytest.raises(DeviceOutOfRange):
+            motor.start_lock_at(math.nan)  # refused by the driver, nothing sent
+        assert motor.state().locked
+
+
+def test_every_control_register_is_documented(repo_root):
+    text = (repo_root / "docs" / "rig-config.md").read_text(encoding="utf-8")
+    for reg in [*INPUT_MOTOR_MAP.values(), *CLIMATE_MAP.values()]:
+        assert f"`{reg.name}`" in text, reg.name

@@ -42,8 +42,8 @@ from drivers.transducer_protocol import (
     frame_line,
     max_stream_rate_Hz,
 )
-from simulators.clock import Clock, MonotonicClock
-from simulators.plant_api import Plant, PlantSnapshot
+from simulators.modbus_test_plant import SineTestPlant
+from simulators.plant_api import Plant
 
 Transport = Literal["pty", "tcp"]
 
@@ -55,57 +55,16 @@ DEFAULT_RATE_HZ = 100.0
 
 
 @dataclass
-class SineTorqueSource:
-    """A transducer on a calibration bench: a closed-form torque signal, not a gear model.
+class SineTorqueSource(SineTestPlant):
+    """A transducer on a calibration bench: the closed-form plant of
+    :class:`~simulators.modbus_test_plant.SineTestPlant` with a 5 N*m, 0.5 Hz sine at 22 deg C.
 
-    Implements the :class:`~simulators.plant_api.Plant` protocol for stand-alone runs, the
-    benchmark and tests. Drive disabled: ``torque = offset_Nm + amplitude_Nm *
-    sin(2 pi frequency_Hz t)`` (N*m); drive enabled: the commanded torque plus
-    ``offset_Nm`` (an ideal drive). Temperature is constant (deg C).
+    Drive disabled: ``torque = offset_Nm + amplitude_Nm * sin(2 pi frequency_Hz t)`` (N*m);
+    drive enabled: the commanded torque plus ``offset_Nm`` (an ideal drive).
     """
 
     amplitude_Nm: float = 5.0
-    frequency_Hz: float = 0.5
-    offset_Nm: float = 0.0
     temperature_C: float = 22.0
-    clock: Clock | None = None
-
-    def __post_init__(self) -> None:
-        self._clock: Clock = self.clock or MonotonicClock()
-        self._lock = threading.Lock()
-        self._command_Nm = 0.0
-        self._enabled = False
-        self._input_deg = 0.0
-
-    def snapshot(self) -> PlantSnapshot:
-        with self._lock:
-            t_s = self._clock.now_s()
-            if self._enabled:
-                true_Nm = self._command_Nm
-            else:
-                true_Nm = self.amplitude_Nm * math.sin(2.0 * math.pi * self.frequency_Hz * t_s)
-            return PlantSnapshot(
-                t_s=t_s,
-                output_angle_deg=0.0,
-                input_angle_deg=self._input_deg,
-                torque_Nm=true_Nm + self.offset_Nm,
-                true_torque_Nm=true_Nm,
-                temperature_C=self.temperature_C,
-                torque_command_Nm=self._command_Nm,
-                drive_enabled=self._enabled,
-            )
-
-    def command_torque(self, torque_Nm: float) -> None:
-        with self._lock:
-            self._command_Nm = float(torque_Nm)
-
-    def enable_drive(self, enabled: bool) -> None:
-        with self._lock:
-            self._enabled = bool(enabled)
-
-    def lock_input_at(self, angle_deg: float) -> None:
-        with self._lock:
-            self._input_deg = float(angle_deg)
 
 
 class TransducerBackdoor:

@@ -8,13 +8,13 @@ the pure numerics of :mod:`analysis.loop` and :mod:`analysis.models.nominal`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from analysis.errors import AnalysisError
 from analysis.loop import PROFILES, LoopResult, analyse_loop, twist_arcmin
-from analysis.models.nominal import NominalModel, reference_nominal_model
+from analysis.models.nominal import reference_nominal_model
 from analysis.models.seed000 import InternalPairUnit
 from rig.errors import RigError
 from rig.runformat import Run
@@ -48,6 +48,20 @@ def _finite_or_none(value: float | None) -> float | None:
     return float(value)
 
 
+class LoopModel(Protocol):
+    """What a nominal loop model offers (NominalModel, CycloidNominalModel, ...)."""
+
+    play_arcmin: float
+    stiffness_Nm_per_arcmin: float
+
+    @property
+    def backlash_arcmin(self) -> float: ...
+
+    def twist_arcmin(self, torque_Nm: np.ndarray, start_flank: int = -1) -> np.ndarray: ...
+
+    def lost_motion_arcmin(self, rated_torque_Nm: float, pct: float) -> float: ...
+
+
 @dataclass
 class RunAnalysis:
     """Everything ``rig analyse`` reports about one run."""
@@ -55,7 +69,7 @@ class RunAnalysis:
     run: Run
     twist_arcmin: np.ndarray
     loop: LoopResult
-    model: NominalModel | None
+    model: LoopModel | None
     assumptions: list[str] = field(default_factory=list)
     rated_torque_Nm: float = 0.0
     lost_motion_pct: float = 3.0
@@ -105,6 +119,33 @@ class RunAnalysis:
         out["assumptions"] = list(self.assumptions)
         out["notes"] = list(self.run.notes)
         return out
+
+
+def nominal_model_for_unit(
+    unit: dict[str, Any], rated_torque_Nm: float | None = None
+) -> tuple[LoopModel | None, list[str]]:
+    """The nominal loop model for a run's ``unit`` object, by ``unit.kind``.
+
+    ``internal_involute`` (the default kind): the reference nominal model of run-format.md.
+    ``cycloid``: the seed 002 compound cycloid pair (:mod:`analysis.models.cycloid_nominal`).
+    A unit the model cannot use gives no model and says why; it is never an error, because the
+    measured metrics stand on their own.
+    """
+    if not unit:
+        return None, ["run.json has no unit data: no model prediction"]
+    kind = unit.get("kind", "internal_involute")
+    try:
+        if kind == "internal_involute":
+            parsed, assumptions = InternalPairUnit.from_mapping(unit)
+            return reference_nominal_model(parsed), list(assumptions)
+        if kind == "cycloid":
+            from analysis.models.cycloid_nominal import cycloid_nominal_model
+
+            model, assumptions = cycloid_nominal_model(unit, reference_torque_Nm=rated_torque_Nm)
+            return model, list(assumptions)
+    except AnalysisError as exc:
+        return None, [f"no model prediction: {exc}"]
+    return None, [f"unit kind {kind!r} has no nominal model yet"]
 
 
 def resolve_profile(profile: str | None, percent: float | None) -> tuple[str, float]:
@@ -172,19 +213,8 @@ def analyse_run(
         hd_T2_Nm=None if t2 is None else float(t2),
     )
 
-    model: NominalModel | None = None
-    unit = run.unit
-    if not unit:
-        assumptions.append("run.json has no unit data: no model prediction")
-    elif unit.get("kind", "internal_involute") != "internal_involute":
-        assumptions.append(f"unit kind {unit.get('kind')!r} has no reference nominal model yet")
-    else:
-        try:
-            parsed, unit_assumptions = InternalPairUnit.from_mapping(unit)
-            assumptions.extend(unit_assumptions)
-            model = reference_nominal_model(parsed)
-        except AnalysisError as exc:
-            assumptions.append(f"no model prediction: {exc}")
+    model, model_assumptions = nominal_model_for_unit(run.unit, rated)
+    assumptions.extend(model_assumptions)
     return RunAnalysis(
         run=run,
         twist_arcmin=twist,

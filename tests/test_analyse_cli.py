@@ -140,3 +140,23 @@ def test_unknown_unit_keys_and_missing_face_width_are_reported(tmp_path: Path) -
     text = " ".join(d["assumptions"])
     assert "surface_finish_um" in text and "face_width_mm" in text
     assert d["model"]["stiffness_Nm_per_arcmin"] is None  # unknown, never a made-up number
+
+
+def test_cycloid_unit_gets_the_seed002_model() -> None:
+    """Unit kind `cycloid` is compared with the seed 002 compound-cycloid loop model."""
+    from analysis.models.cycloid_nominal import cycloid_nominal_model
+    from rig.examples import UNITS_DIR
+    from rig.examples.generate import gbt_step_profile
+
+    unit = json.loads((UNITS_DIR / "cycloid-seed002.json").read_text())
+    model, _ = cycloid_nominal_model(unit, reference_torque_Nm=200.0)
+    t_s, torque = gbt_step_profile(200.0)
+    twist = model.twist_arcmin(torque) + np.random.default_rng(5).normal(0, 0.002, t_s.size)
+    run = Run.from_arrays(
+        "cycloid-demo", t_s, torque, 50.0 + twist / 60.0, unit=unit,
+        test={"rated_torque_Nm": 200.0},
+    )
+    d = analyse_run(run).to_dict()
+    assert d["model"]["backlash_arcmin"] == pytest.approx(model.play_arcmin)
+    assert d["backlash_arcmin"] == pytest.approx(model.play_arcmin, abs=0.02)
+    assert d["stiffness_Nm_per_arcmin"] == pytest.approx(model.stiffness_Nm_per_arcmin, rel=0.05)

@@ -59,7 +59,10 @@ GREEDY_GAIN = 0.3
 TIE_SHARE = 0.12
 #: Stiffness deviation from seed 004 eq. (8) taken as a finding (relative).
 STIFFNESS_TOLERANCE = 0.10
-MAX_FOLDS = 6
+MAX_FOLDS = 5
+#: Candidates cross-validated after screening, and the in-sample BIC gain they need.
+SCREEN_KEEP = 3
+SCREEN_DELTA_BIC = -10.0
 
 NEXT_EXPERIMENT = {
     frozenset({"shaft_compliance", "mesh_stiffness"}):
@@ -96,6 +99,7 @@ class Candidate:
     params: dict[str, Any] = field(default_factory=dict)
     plausible: bool = True
     notes: list[str] = field(default_factory=list)
+    screened_out: bool = False
 
 
 @dataclass
@@ -211,6 +215,14 @@ def _heldout(stack: Stack, effects: tuple[str, ...], folds: list[list[int]],
     rms = math.sqrt(sq / n) if n else math.nan
     lm = math.sqrt(float(np.mean(np.square(lm_err)))) if lm_err else math.nan
     return rms, lm, runs, resid
+
+
+def _full_fit(stack: Stack, effects: tuple[str, ...]) -> LinearFit:
+    """Fit on all runs (profiled nonlinear parameters), with the coefficient covariance."""
+    full = fit_profile(stack, ("backlash", *effects)) if any(
+        e in ("friction", "torque_sensor_offset", "stiffness_nonlinearity",
+              "bearing_clearance") for e in effects) else fit(stack, ("backlash", *effects))
+    return fit(stack, ("backlash", *effects), None, full.nl, want_cov=True)
 
 
 def _insample(stack: Stack, f: LinearFit) -> tuple[float, float]:
@@ -345,14 +357,12 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
     k_nom = nom.stiffness_Nm_per_arcmin
     fixed = {"play": nom.play_arcmin, "compliance": 1.0 / k_nom if math.isfinite(k_nom) else 0.0}
     predictive = fit(stack, ("backlash",), fixed=fixed)
-    base = fit(stack, ("backlash",))
+    base = fit(stack, ("backlash",), want_cov=True)
     pred_rms, pred_lm = _insample(stack, predictive)
     base_rms, base_lm = _insample(stack, base)
 
     def evaluate(effects: tuple[str, ...], start: LinearFit | None = None) -> Candidate:
-        full = fit_profile(stack, ("backlash", *effects)) if any(
-            e in ("friction", "torque_sensor_offset", "stiffness_nonlinearity",
-                  "bearing_clearance") for e in effects) else fit(stack, ("backlash", *effects))
+        full = start if start is not None else _full_fit(stack, effects)
         folds, scheme = cfolds, "leave-one-condition-out"
         if "tooth_spacing_error" in effects:
             folds, scheme = rfolds, "leave-one-repeat-out"
@@ -377,11 +387,25 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
             return base_rms, base_lm
         return base_c.heldout_rms_arcmin, base_c.heldout_lm_error_arcmin
 
+    # fast screening: in-sample fits of every testable candidate; held-out fits of the best
     models: dict[str, Candidate] = {}
+    screened: dict[str, LinearFit] = {}
     for name in CANDIDATES:
-        if why_not.get(name):
-            continue
-        models[name] = evaluate((name,))
+        if not why_not.get(name):
+            screened[name] = _full_fit(stack, (name,))
+    base_bic = _bic(base)
+    order = sorted(screened, key=lambda n: _bic(screened[n]))
+    for rank, name in enumerate(order):
+        dbic = _bic(screened[name]) - base_bic
+        if rank < SCREEN_KEEP and dbic < SCREEN_DELTA_BIC:
+            models[name] = evaluate((name,), screened[name])
+        else:
+            f = screened[name]
+            h, lm = _insample(stack, f)
+            cand = Candidate((name,), f, h, lm, 0, "screened out (in-sample fit only)",
+                             delta_bic=dbic, screened_out=True)
+            cand.params, cand.plausible, cand.notes = describe_params(stack, (name,), f)
+            models[name] = cand
 
     def shrink(c: Candidate) -> float:
         b = before(c)[0]
@@ -426,7 +450,8 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
             stack, models, sys0, threshold, noise, evaluate, before)
 
     ranking = []
-    for c in sorted(models.values(), key=lambda c: (c.heldout_runs == 0, c.heldout_rms_arcmin)):
+    for c in sorted(models.values(),
+                    key=lambda c: (c.screened_out, c.heldout_runs == 0, c.heldout_rms_arcmin)):
         b_rms, b_lm = before(c)
         ranking.append({
             "effect": c.effects[0], "shrink": round(shrink(c), 4),
@@ -510,8 +535,9 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before):
     def explains(c: Candidate, ref: float) -> bool:
         return sysh(c) <= max(EXPLAINED_SHARE * ref, threshold)
 
-    pool = [c for c in models.values() if c.plausible and c.heldout_runs > 0]
-    insample_only = [c for c in models.values() if c.heldout_runs == 0]
+    pool = [c for c in models.values()
+            if c.plausible and c.heldout_runs > 0 and not c.screened_out]
+    insample_only = [c for c in models.values() if c.heldout_runs == 0 and not c.screened_out]
     pool.sort(key=lambda c: c.heldout_rms_arcmin)
     explaining = [c for c in pool if explains(c, _sys(before(c)[0], noise))]
     if explaining:

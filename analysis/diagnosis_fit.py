@@ -56,6 +56,7 @@ class Stack:
     spacing_budget_arcmin: float  # prior sd of one tooth's play change
     reference_C: float
     rated_Nm: float
+    cache: dict = field(default_factory=dict, repr=False)
 
     @property
     def n_runs(self) -> int:
@@ -187,99 +188,127 @@ class LinearFit:
         return float(self.beta[self.names.index(name)]) if name in self.names else default
 
 
-def _solve(blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray]], lo: np.ndarray,
-           hi: np.ndarray, prior: np.ndarray, fixed: np.ndarray | None, iterations: int = 3,
-           ) -> tuple[np.ndarray, float, float, int, list[np.ndarray], np.ndarray | None]:
-    """Robust bounded LS with per-run offsets projected out. ``blocks``: (X, y, sigma) per
-    run. ``fixed``: coefficients held (predictive gap) instead of fitted."""
-    p = blocks[0][0].shape[1]
-    weights = [np.ones(y.size) for _, y, _ in blocks]
+def _centre(values: np.ndarray, weights: np.ndarray, run: np.ndarray, n_runs: int
+            ) -> np.ndarray:
+    """Subtract each run's weighted mean (columns of a 2-D array, or a 1-D array)."""
+    wsum = np.bincount(run, weights, minlength=n_runs)
+    wsum[wsum == 0] = 1.0
+    if values.ndim == 1:
+        means = np.bincount(run, weights * values, minlength=n_runs) / wsum
+        return values - means[run]
+    means = np.stack([np.bincount(run, weights * values[:, j], minlength=n_runs)
+                      for j in range(values.shape[1])], axis=1) / wsum[:, None]
+    return values - means[run]
+
+
+def _solve(X: np.ndarray, y: np.ndarray, sig: np.ndarray, run: np.ndarray, n_runs: int,
+           lo: np.ndarray, hi: np.ndarray, prior: np.ndarray, fixed: np.ndarray | None,
+           iterations: int = 3, want_cov: bool = False,
+           ) -> tuple[np.ndarray, float, float, np.ndarray, np.ndarray | None]:
+    """Robust bounded LS with per-run offsets projected out (``run``: run index per point).
+    ``fixed``: coefficients held (predictive gap) instead of fitted. Huber re-weighting."""
+    p = X.shape[1]
+    w = np.ones(y.size)
     beta = fixed if fixed is not None else np.zeros(p)
-    cov = None
-    for _ in range(iterations):
+    has_prior = np.isfinite(prior)
+    pr = np.zeros((int(has_prior.sum()), p))
+    pr[np.arange(pr.shape[0]), np.flatnonzero(has_prior)] = 1.0 / prior[has_prior]
+    inv_var = 1.0 / sig**2
+    A = None
+    for _ in range(iterations if fixed is None else 2):
+        ww = w * inv_var
         if fixed is None:
-            rows, rhs = [], []
-            for (X, y, sig), w in zip(blocks, weights, strict=True):
-                ww = w / sig**2
-                sw = np.sqrt(ww)
-                xm = (ww @ X) / ww.sum()
-                ym = (ww @ y) / ww.sum()
-                rows.append((X - xm) * sw[:, None])
-                rhs.append((y - ym) * sw)
-            has_prior = np.isfinite(prior)
-            if has_prior.any():
-                pr = np.zeros((int(has_prior.sum()), p))
-                pr[np.arange(pr.shape[0]), np.flatnonzero(has_prior)] = 1.0 / prior[has_prior]
-                rows.append(pr)
-                rhs.append(np.zeros(pr.shape[0]))
-            A = np.vstack(rows)
-            b = np.concatenate(rhs)
+            sw = np.sqrt(ww)
+            A = np.vstack([_centre(X, ww, run, n_runs) * sw[:, None], pr])
+            b = np.concatenate([_centre(y, ww, run, n_runs) * sw, np.zeros(pr.shape[0])])
             scale = np.sqrt((A**2).sum(axis=0))
             scale[scale == 0] = 1.0
-            res = lsq_linear(A / scale, b, bounds=(lo * scale, hi * scale), method="bvls",
-                             lsmr_tol="auto")
-            beta = res.x / scale
-            try:
-                cov = np.linalg.pinv(A.T @ A)
-            except np.linalg.LinAlgError:
-                cov = None
-        new_w = []
-        for X, y, sig in blocks:
-            r = y - X @ beta
-            r = r - np.median(r)
-            u = np.abs(r) / sig
-            new_w.append(np.minimum(1.0, HUBER_C / np.maximum(u, 1e-12)))
-        weights = new_w
-    objective, chi2, n, residuals = 0.0, 0.0, 0, []
-    for (X, y, sig), w in zip(blocks, weights, strict=True):
-        r = y - X @ beta
-        ww = w / sig**2
-        r = r - (ww @ r) / ww.sum()
+            x, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
+            beta = x / scale
+            if np.any(beta < lo - 1e-12) or np.any(beta > hi + 1e-12):
+                res = lsq_linear(A / scale, b, bounds=(lo * scale, hi * scale), method="bvls")
+                beta = res.x / scale
+        r = _centre(y - X @ beta, ww, run, n_runs)
         u = np.abs(r) / sig
-        objective += float(np.sum(np.where(u <= HUBER_C, 0.5 * u**2,
-                                           HUBER_C * (u - 0.5 * HUBER_C))))
-        chi2 += float(np.sum(u**2))
-        n += r.size
-        residuals.append(r)
-    return beta, objective, chi2, n, residuals, cov
+        w = np.minimum(1.0, HUBER_C / np.maximum(u, 1e-12))
+    ww = w * inv_var
+    r = _centre(y - X @ beta, ww, run, n_runs)
+    u = np.abs(r) / sig
+    objective = float(np.sum(np.where(u <= HUBER_C, 0.5 * u**2, HUBER_C * (u - 0.5 * HUBER_C))))
+    cov = None
+    if want_cov and A is not None:
+        cov = np.linalg.pinv(A.T @ A)
+    return beta, objective, float(np.sum(u**2)), r, cov
 
 
 def fit(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None = None,
         nl: dict[str, float] | None = None, fixed: dict[str, float] | None = None,
-        ) -> LinearFit:
+        want_cov: bool = False) -> LinearFit:
     """Fit the effects' linear coefficients for given nonlinear ones (``nl``) on ``runs``
     (indices; None: all). ``fixed`` holds play and compliance (predictive gap)."""
     idx = list(range(stack.n_runs)) if runs is None else list(runs)
     nl = dict(nl or {})
     teeth = teeth_of(stack)
     names = column_names(stack, effects, teeth)
-    blocks = []
-    for i in idx:
-        run = stack.runs[i]
-        X = run_columns(stack, run, effects, nl, teeth)
-        blocks.append((X, run.twist_arcmin, np.full(run.twist_arcmin.size, run.sigma_arcmin)))
+    X = np.vstack([cached_columns(stack, i, effects, nl, teeth) for i in idx])
+    y = np.concatenate([stack.runs[i].twist_arcmin for i in idx])
+    sig = np.concatenate([np.full(stack.runs[i].twist_arcmin.size, stack.runs[i].sigma_arcmin)
+                          for i in idx])
+    run = np.concatenate([np.full(stack.runs[i].twist_arcmin.size, k)
+                          for k, i in enumerate(idx)])
     lo, hi, prior = bounds_and_prior(stack, names)
     fixed_beta = None
     if fixed is not None:
         fixed_beta = np.array([fixed.get(nm, 0.0) for nm in names])
-    beta, obj, chi2, n, residuals, cov = _solve(blocks, lo, hi, prior, fixed_beta)
-    fitres = LinearFit(tuple(names), beta, nl, obj, chi2, n, cov=cov)
-    fitres.residual = {stack.runs[i].run_id: r for i, r in zip(idx, residuals, strict=True)}
+    beta, obj, chi2, r, cov = _solve(X, y, sig, run, len(idx), lo, hi, prior, fixed_beta,
+                                     want_cov=want_cov)
+    fitres = LinearFit(tuple(names), beta, nl, obj, chi2, int(y.size), cov=cov)
+    fitres.residual = {stack.runs[i].run_id: r[run == k] for k, i in enumerate(idx)}
     return fitres
+
+
+def cached_columns(stack: Stack, i: int, effects: Sequence[str], nl: dict[str, float],
+                   teeth: Sequence[int]) -> np.ndarray:
+    """:func:`run_columns`, memoised per stack, run, effects and nonlinear values."""
+    key = (id(stack), i, tuple(effects), tuple(sorted(nl.items())))
+    hit = stack.cache.get(key)
+    if hit is None:
+        hit = run_columns(stack, stack.runs[i], effects, nl, teeth)
+        stack.cache[key] = hit
+    return hit
 
 
 def nonlinear_of(effects: Sequence[str]) -> list[str]:
     return [e for e in effects if e in NONLINEAR]
 
 
-def _grid(stack: Stack, effect: str, n: int = 17) -> np.ndarray:
+def _grid(stack: Stack, effect: str, n: int = 13) -> np.ndarray:
     _, lo, hi, log = NONLINEAR[effect]
     r = stack.rated_Nm
+    if effect == "torque_sensor_offset":
+        return offset_grid(stack, lo * r, hi * r)
     if log:
         return np.geomspace(lo * r, hi * r, n)
     if lo == 0.0:
         return np.concatenate([[0.0], np.geomspace(2e-4 * r, hi * r, n - 1)])
     return np.linspace(lo * r, hi * r, 2 * n + 1)
+
+
+def offset_grid(stack: Stack, lo: float, hi: float, most: int = 160) -> np.ndarray:
+    """Candidate torque offsets (N*m): the objective is piecewise constant in the offset, with
+    steps where a point's chain torque crosses the flank band, so the candidates are the
+    midpoints between those crossing offsets (at most ``most``, by quantile)."""
+    vals = []
+    for run in stack.runs:
+        delta = 3.0 * run.sigma_torque_Nm + 1e-4 * run.rated_torque_Nm
+        t = run.torque_Nm[(run.torque_Nm > lo - delta) & (run.torque_Nm < hi + delta)]
+        vals += [t - delta, t + delta]
+    v = np.unique(np.clip(np.concatenate(vals + [np.array([0.0])]), lo, hi))
+    mids = np.concatenate([[0.0], 0.5 * (v[1:] + v[:-1])]) if v.size > 1 else np.array([0.0])
+    mids = np.unique(mids)
+    if mids.size > most:
+        mids = np.unique(np.append(np.quantile(mids, np.linspace(0, 1, most)), 0.0))
+    return mids
 
 
 def fit_profile(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None = None,
@@ -297,7 +326,7 @@ def fit_profile(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None
             grid = _grid(stack, e)
             if local and start is not None and key in start:
                 j = int(np.argmin(np.abs(grid - start[key])))
-                grid = grid[max(0, j - 2): j + 3]
+                grid = np.unique(np.append(grid[max(0, j - 1): j + 2], start[key]))
             results = []
             for v in grid:
                 trial = fit(stack, effects, runs, {**current, key: float(v)})
@@ -306,16 +335,18 @@ def fit_profile(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None
             a = grid[max(0, k - 1)]
             b = grid[min(grid.size - 1, k + 1)]
             cand = results[k]
-            if b > a and e != "torque_sensor_offset":
+            if local:
+                pass
+            elif b > a and e != "torque_sensor_offset":
                 def obj(v: float, key: str = key, held: dict = current) -> float:
                     return fit(stack, effects, runs, {**held, key: v}).objective
 
                 opt = minimize_scalar(obj, bounds=(a, b), method="bounded",
-                                      options={"xatol": 1e-4 * stack.rated_Nm, "maxiter": 12})
+                                      options={"xatol": 1e-4 * stack.rated_Nm, "maxiter": 10})
                 if opt.fun < cand.objective:
                     cand = fit(stack, effects, runs, {**current, key: float(opt.x)})
-            elif b > a:  # the offset moves flank switches: a fine grid, no gradients
-                fine = np.linspace(a, b, 21)
+            elif b > a:  # the offset moves flank switches: a finer grid, no gradients
+                fine = np.linspace(a, b, 9)
                 trials = [fit(stack, effects, runs, {**current, key: float(v)}) for v in fine]
                 j = int(np.argmin([t.objective for t in trials]))
                 if trials[j].objective < cand.objective:

@@ -41,11 +41,13 @@ RATED_NM = 10.0
 
 
 def cycle_profile(rated_Nm: float, n: int, steps_per_quarter: int = 8,
-                  ramp_share: float = 0.35) -> np.ndarray:
-    """Commanded torque (N*m), one value per sample: 0 -> +T -> -T -> +T -> 0 in equal steps,
-    each a ramp (``ramp_share`` of the step) then a dwell; the unit starts on the -1 flank."""
-    q = np.linspace(0.0, 1.0, steps_per_quarter + 1)
-    levels = np.concatenate([q, 1 - 2 * q[1:], -1 + 2 * q[1:], 1 - q[1:]]) * rated_Nm
+                  ramp_share: float = 0.6) -> np.ndarray:
+    """Commanded torque (N*m), one value per sample: 0 -> +T -> -T -> +T -> 0 in equal steps
+    plus a step at +-3 % of rated (the lost-motion points), each a ramp (``ramp_share`` of the
+    step) then a dwell; the unit starts on the -1 flank."""
+    q = np.unique(np.append(np.linspace(0.0, 1.0, steps_per_quarter + 1), 0.03))
+    r = q[::-1]
+    levels = np.concatenate([q, r[1:], -q[1:], -r[1:], q[1:], r[1:]]) * rated_Nm
     per = n / (levels.size - 1)
     k = np.arange(n) / per
     i = np.minimum(k.astype(int), levels.size - 2)
@@ -139,8 +141,8 @@ def make_case(index: int, kind: str, rng: np.random.Generator,
         positions = [p for p in teeth for _ in range(2)]
         temps = [20.0] * len(positions)
     elif kind == "creep":
-        truth = {"stiffness_Nm_per_arcmin": float(rng.uniform(60.0, 200.0)),
-                 "time_constant_s": float(rng.uniform(0.05, 0.2))}
+        truth = {"stiffness_Nm_per_arcmin": float(rng.uniform(40.0, 120.0)),
+                 "time_constant_s": float(rng.uniform(0.15, 0.6))}
     elif kind == "direction_gain":
         truth = {"gain_positive": 1.0, "gain_negative": float(rng.uniform(0.85, 0.93))}
     elif kind != "none":

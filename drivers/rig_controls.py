@@ -8,13 +8,14 @@ addresses, float32 high word first). ``docs/rig-config.md`` documents them for a
 
 Input motor (default unit 3):
 
-- input registers: ``angle`` (deg, actual input angle), ``target`` (deg), ``status``
+- input registers: ``angle`` (deg, actual input angle), ``target_actual`` (deg), ``status``
   (bit 0 LOCKED: at the target and holding, bit 1 MOVING, bit 2 FAULT);
 - holding registers: ``target`` (deg), ``command`` (1 = move to the target and lock).
 
 Climate chamber (default unit 4):
 
-- input registers: ``housing_temperature`` (deg C, measured at the housing), ``setpoint``;
+- input registers: ``housing_temperature`` (deg C, measured at the housing),
+  ``setpoint_actual``;
 - holding register: ``setpoint`` (deg C, the ambient/heater setpoint, within the range).
 """
 
@@ -43,7 +44,8 @@ CLIMATE_DEVICE_ID = 4
 """Default Modbus unit id of the climate chamber (housing temperature)."""
 
 CLIMATE_RANGE_C = (-40.0, 150.0)
-"""Setpoints the simulated climate chamber accepts (deg C); others get exception 3."""
+"""Setpoints the simulated climate chamber accepts (deg C, others get exception 3), and the
+default bounds the driver sends."""
 
 
 class InputMotorStatus(enum.IntFlag):
@@ -95,8 +97,8 @@ class ClimateConfig(ModbusLinkConfig):
     """Climate chamber link; ``min_C``/``max_C`` (deg C) bound the setpoints we send."""
 
     device_id: int = Field(default=CLIMATE_DEVICE_ID, ge=1, le=247)
-    min_C: float = -40.0
-    max_C: float = 150.0
+    min_C: float = CLIMATE_RANGE_C[0]
+    max_C: float = CLIMATE_RANGE_C[1]
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ gave samples and had no errors.
 
 from __future__ import annotations
 
+import re
 import threading
 import time
 from collections.abc import Callable
@@ -30,7 +31,8 @@ from rig.devices import RigDevices, open_rig
 STATUS_POLL_HZ = 10.0
 LATE_FACTOR = 2.5
 MAX_DISTINCT_ERRORS = 5
-TAIL_QUIET_S, TAIL_MAX_S = 0.1, 1.0
+TAIL_QUIET_S, TAIL_MAX_S = 0.3, 2.0
+_NUMBER = re.compile(r"\d+(\.\d+)?")
 _SYNC_LOCK = threading.Lock()
 
 
@@ -49,6 +51,7 @@ class DeviceReport:
     unit: str = ""
     errors: dict[str, int] = field(default_factory=dict)
     info: dict[str, Any] = field(default_factory=dict)
+    _shown: dict[str, str] = field(default_factory=dict, repr=False)
 
     @property
     def error_count(self) -> int:
@@ -59,14 +62,21 @@ class DeviceReport:
         return self.samples > 0 and not self.errors
 
     def note_error(self, exc: BaseException) -> None:
+        """Count an error; messages that differ only in their numbers count as one (the
+        first one is kept as it came)."""
         text = str(exc) if isinstance(exc, DeviceError) else f"{type(exc).__name__}: {exc}"
-        if text in self.errors or len(self.errors) < MAX_DISTINCT_ERRORS:
-            self.errors[text] = self.errors.get(text, 0) + 1
-        else:
-            self.errors["(more errors)"] = self.errors.get("(more errors)", 0) + 1
+        key = _NUMBER.sub("#", text)
+        shown = self._shown.get(key)
+        if shown is None:
+            if len(self.errors) >= MAX_DISTINCT_ERRORS:
+                shown = "(more errors)"
+            else:
+                shown = self._shown[key] = text
+        self.errors[shown] = self.errors.get(shown, 0) + 1
 
     def to_json(self) -> dict[str, Any]:
         out = asdict(self)
+        del out["_shown"]
         out["errors"] = [{"message": m, "count": n} for m, n in self.errors.items()]
         out["error_count"] = self.error_count
         out["healthy"] = self.healthy

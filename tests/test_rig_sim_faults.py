@@ -21,7 +21,7 @@ RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 
 @pytest.fixture
 def sim():
-    with SimulatedRig(seed=11) as rig:
+    with SimulatedRig(seed=11, sync_period_s=0.005) as rig:
         yield rig
 
 

@@ -125,9 +125,16 @@ def test_input_motor_turns_both_encoders_by_the_gear_ratio(sim):
     config = load_rig_config(info["rig_config"])
     ratio = GearPlant(load_plant_config()).true_parameters()["ratio"]
     with open_rig(config) as rig:
+        # a small preload holds the output on one flank (inside the play it would be free),
+        # so the twist is the same before and after the move: the play does not depend on
+        # the input angle with the default plant's effects off
+        rig.drive.set_torque(2.0)
+        rig.drive.enable()
+        _wait(rig, 0.5)
         out0, in0 = _mean_angle(rig.encoder), _mean_angle(rig.input_encoder)
         state = rig.input_motor.lock_at(in0 + 45.0, timeout_s=10.0)
         assert state.locked and not state.moving
+        _wait(rig, 0.3)
         out1, in1 = _mean_angle(rig.encoder), _mean_angle(rig.input_encoder)
         rig.input_motor.lock_at(in0, timeout_s=10.0)
     assert in1 - in0 == pytest.approx(45.0, abs=1e-4)
@@ -160,3 +167,13 @@ def test_simulated_rig_out_of_process_with_rtu_and_tcp_transducer(tmp_path):
         assert sim.process is not None and sim.process.poll() is None
     assert sim.process is None and sim.exit_code == 0
     assert "Traceback" not in sim.stderr_final
+
+
+def test_rig_sim_refuses_a_bad_plant_file(tmp_path):
+    plant = tmp_path / "plant.toml"
+    plant.write_text("[unit]\nkind = 'internal_involute'\n[rig]\nstep_s = -1\n",
+                     encoding="utf-8")
+    proc = subprocess.run([*RIG, "sim", "--config", str(plant)], capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert f"rig: error: {plant}: key rig.step_s" in proc.stderr

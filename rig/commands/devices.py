@@ -11,8 +11,6 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from rig.config import RigConfigError, load_rig_config
-
 
 def _fmt(value: float | None, digits: int = 6) -> str:
     return "" if value is None else f"{value:.{digits}g}"
@@ -49,6 +47,7 @@ def register(app: typer.Typer) -> None:
 
         Exit 0 when every device is healthy, 1 when one has errors, 2 on a bad configuration.
         """
+        from rig.config import RigConfigError, load_rig_config
         from rig.device_check import check_devices
 
         err = Console(stderr=True)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
@@ -48,11 +49,17 @@ def register(app: typer.Typer) -> None:
         "rig_config", the rig configuration file that connects to them.
         """
         from rig.simrig import SimulatedRig, serve_until_signalled
+        from simulators.plant_config import PlantConfigError
 
-        sim_rig = SimulatedRig(config, in_process=True, transducer=transducer.value,
-                               modbus=modbus.value, port_base=port_base, seed=seed,
-                               input_encoder=input_encoder, rig_config_path=rig_config,
-                               sync_period_s=sync_period, stream_rate_Hz=stream_rate)
-        addresses = sim_rig.start()
+        try:
+            sim_rig = SimulatedRig(config, in_process=True, transducer=transducer.value,
+                                   modbus=modbus.value, port_base=port_base, seed=seed,
+                                   input_encoder=input_encoder, rig_config_path=rig_config,
+                                   sync_period_s=sync_period, stream_rate_Hz=stream_rate)
+            addresses = sim_rig.start()
+        except (PlantConfigError, ValueError, OSError) as exc:  # bad file, port taken, ...
+            for line in str(exc).splitlines():
+                print(f"rig: error: {line}", file=sys.stderr)
+            raise typer.Exit(2) from exc
         print(json.dumps(addresses), flush=True)
         raise typer.Exit(serve_until_signalled(sim_rig))

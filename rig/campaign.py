@@ -1,0 +1,228 @@
+"""Campaign files (TOML): the unit under test, the plan, what varies, and pass/fail limits.
+
+docs/campaigns.md describes every key. Errors name the file and the key (pydantic), a TOML
+syntax error the file, line and column. Results of a campaign: per-run metrics beside the
+model's prediction, lost motion against position (mean, spread, and the runout signature: a
+once-per-revolution sine fitted over the input angle) and pass/fail with the cause.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from rig.errors import RigError
+from rig.plans import CampaignAxes, LoopParams, Plan, campaign_plan
+
+_TOML_POSITION = re.compile(r"\(at line (\d+), column (\d+)\)")
+
+
+class CampaignError(RigError):
+    """A campaign file is malformed: names the file and the key (or line:column)."""
+
+
+class Limits(BaseModel):
+    """Pass/fail limits; None = not checked. Lost motion and backlash in arcmin (at most),
+    stiffness in N*m/arcmin (at least)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    lost_motion_arcmin_max: float | None = Field(None, gt=0)
+    backlash_arcmin_max: float | None = Field(None, gt=0)
+    stiffness_Nm_per_arcmin_min: float | None = Field(None, gt=0)
+
+    def check(self, run: dict[str, Any]) -> list[str]:
+        """The causes of failure of one run's metrics (empty: passed)."""
+        causes = []
+        label = run.get("label") or run.get("run_id")
+        if run.get("status") != "completed":
+            return [f"run {label}: {run.get('status')}: {run.get('reason')}"]
+        for key, bound, worse in (
+            ("lost_motion_arcmin", self.lost_motion_arcmin_max, "above"),
+            ("backlash_arcmin", self.backlash_arcmin_max, "above"),
+            ("stiffness_Nm_per_arcmin", self.stiffness_Nm_per_arcmin_min, "below"),
+        ):
+            if bound is None:
+                continue
+            value = run.get(key)
+            if value is None:
+                why = (run.get("errors") or {}).get(key, "not measured")
+                causes.append(f"run {label}: {key} unavailable ({why})")
+            elif (value > bound) if worse == "above" else (value < bound):
+                causes.append(f"run {label}: {key} = {value:.4g} is {worse} the limit {bound:g}")
+        return causes
+
+
+class UnitSection(BaseModel):
+    """The unit under test: ``file`` (a run.json ``unit`` JSON, relative to the campaign
+    file) and/or the unit keys inline (they override the file's); ``serial`` names it."""
+
+    model_config = ConfigDict(extra="allow")
+
+    file: str | None = None
+    serial: str | None = None
+
+
+class SimulationSection(BaseModel):
+    """Used only with ``--simulated``: the plant's tables beyond the unit (``effects``,
+    ``noise``, ``housing``, ``rig``; docs/plant.md) and its noise ``seed``."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    seed: int | None = None
+    plant: dict[str, Any] = Field(default_factory=dict)
+
+
+class CampaignFile(BaseModel):
+    """A whole campaign file (validated). ``unit`` is the resolved unit mapping."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+    description: str = ""
+    operator: str | None = None
+    profile: str = "nabtesco"
+    torque_limit_Nm: float | None = Field(None, gt=0)
+    unit: UnitSection
+    plan: LoopParams
+    axes: CampaignAxes = Field(default_factory=CampaignAxes)
+    limits: Limits = Field(default_factory=Limits)
+    simulation: SimulationSection = Field(default_factory=SimulationSection)
+    source: str = "<memory>"
+
+    def unit_data(self) -> dict[str, Any]:
+        """The run.json ``unit`` mapping: the file's keys, then the inline ones."""
+        data: dict[str, Any] = {}
+        if self.unit.file is not None:
+            path = Path(self.unit.file)
+            if not path.is_absolute() and self.source != "<memory>":
+                path = Path(self.source).parent / path
+            try:
+                data = json.loads(path.read_text(encoding="utf-8"))
+            except OSError as exc:
+                raise CampaignError(f"{self.source}: unit.file: cannot read {path} "
+                                    f"({exc.strerror or exc})") from exc
+            except json.JSONDecodeError as exc:
+                raise CampaignError(f"{path}:{exc.lineno}:{exc.colno}: {exc.msg} "
+                                    f"(named by {self.source}: unit.file)") from exc
+            if not isinstance(data, dict):
+                raise CampaignError(f"{path}: a unit must be a JSON object (unit.file)")
+        inline = {k: v for k, v in (self.unit.model_extra or {}).items()}
+        data.update(inline)
+        if self.unit.serial is not None:
+            data["serial"] = self.unit.serial
+        data.setdefault("serial", self.name)
+        return data
+
+    def build_plan(self) -> Plan:
+        return campaign_plan(self.plan, self.axes)
+
+
+def _describe(exc: ValidationError, source: str) -> str:
+    lines = []
+    for err in exc.errors():
+        key = ".".join(str(p) for p in err["loc"]) or "(top level)"
+        got = err.get("input")
+        shown = "" if isinstance(got, dict) else f" (got {got!r})"
+        lines.append(f"{source}: {key}: {err['msg']}{shown}")
+    return "\n".join(lines)
+
+
+def campaign_from_mapping(data: dict[str, Any], source: str = "<memory>") -> CampaignFile:
+    """Validate a parsed TOML mapping; errors name ``source`` and the key."""
+    try:
+        camp = CampaignFile.model_validate({**data, "source": source})
+    except ValidationError as exc:
+        raise CampaignError(_describe(exc, source)) from exc
+    camp.unit_data()  # a unit file that cannot be read is an error now, not mid-campaign
+    return camp
+
+
+def load_campaign(path: str | Path) -> CampaignFile:
+    """Read and validate a campaign TOML (CampaignError naming file and key/line:column)."""
+    file = Path(path)
+    try:
+        text = file.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise CampaignError(f"{file}: cannot read the campaign ({exc.strerror or exc})") from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        message = str(exc)
+        match = _TOML_POSITION.search(message)
+        where = f"{file}:{match.group(1)}:{match.group(2)}" if match else str(file)
+        raise CampaignError(f"{where}: TOML syntax error: "
+                            f"{_TOML_POSITION.sub('', message).strip()}") from exc
+    return campaign_from_mapping(data, str(file))
+
+
+# --------------------------------------------------------------------------- results
+
+
+def runout_signature(angles_deg: list[float], values: list[float]) -> dict[str, Any] | None:
+    """Least-squares fit ``v(theta) = mean + amplitude cos(theta - phase)`` over the input
+    angle theta (deg): the once-per-revolution signature of runout (seed 000 eq. 4: the ring
+    gear's eccentricity turns with the eccentric shaft). Needs 3 distinct angles (mod 360);
+    returns None otherwise. ``residual_rms`` is in the values' unit."""
+    theta = np.radians(np.asarray(angles_deg, dtype=float))
+    v = np.asarray(values, dtype=float)
+    keep = np.isfinite(v)
+    theta, v = theta[keep], v[keep]
+    if len(np.unique(np.round(np.degrees(theta) % 360.0, 6))) < 3:
+        return None
+    design = np.column_stack([np.ones_like(theta), np.cos(theta), np.sin(theta)])
+    coef, *_ = np.linalg.lstsq(design, v, rcond=None)
+    resid = v - design @ coef
+    amplitude = float(math.hypot(coef[1], coef[2]))
+    return {
+        "mean": float(coef[0]),
+        "amplitude": amplitude,
+        "phase_deg": float(math.degrees(math.atan2(coef[2], coef[1])) % 360.0),
+        "peak_to_peak": 2.0 * amplitude,
+        "residual_rms": float(np.sqrt(np.mean(resid**2))),
+        "n_positions": int(v.size),
+    }
+
+
+def summarise(runs: list[dict[str, Any]], limits: Limits) -> dict[str, Any]:
+    """Campaign results from the per-run dicts (``RunOutcome.to_dict()``): lost motion
+    {mean, min, max, std} (arcmin) over completed runs, by position, its runout signature,
+    the model's prediction, and pass/fail with every cause."""
+    done = [r for r in runs if r.get("status") == "completed"]
+    lm = [r["lost_motion_arcmin"] for r in done if r.get("lost_motion_arcmin") is not None]
+    stats: dict[str, Any] = {"mean": None, "min": None, "max": None, "std": None, "n": len(lm)}
+    if lm:
+        stats.update(mean=float(np.mean(lm)), min=float(np.min(lm)), max=float(np.max(lm)),
+                     std=float(np.std(lm, ddof=1)) if len(lm) > 1 else 0.0)
+    by_position: dict[str, list[float]] = {}
+    for r in done:
+        if r.get("lost_motion_arcmin") is not None and r.get("input_angle_deg") is not None:
+            by_position.setdefault(f"{r['input_angle_deg']:g}", []).append(
+                r["lost_motion_arcmin"])
+    angles = [float(k) for k in by_position]
+    means = [float(np.mean(v)) for v in by_position.values()]
+    model = next((r.get("model") for r in done if r.get("model")), None)
+    causes = [c for r in runs for c in limits.check(r)]
+    if not runs:
+        causes.append("no run was measured")
+    return {
+        "lost_motion_arcmin": stats,
+        "lost_motion_by_position": [
+            {"input_angle_deg": a, "lost_motion_arcmin": m, "n": len(by_position[f"{a:g}"])}
+            for a, m in sorted(zip(angles, means, strict=True))
+        ],
+        "runout_signature": runout_signature(angles, means),
+        "model": model,
+        "limits": limits.model_dump(),
+        "passed": not causes,
+        "failures": causes,
+        "n_runs": len(runs),
+        "n_completed": len(done),
+    }

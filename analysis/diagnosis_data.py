@@ -155,6 +155,24 @@ def _segment_ids(segments: list[tuple[int, int]], block: int) -> np.ndarray:
     return np.asarray(ids, dtype=int)
 
 
+def dwell_lost_motion_arcmin(torque_Nm: np.ndarray, twist_arcmin: np.ndarray,
+                             direction: np.ndarray, rated_torque_Nm: float, window_Nm: float,
+                             pct: float = 3.0) -> float:
+    """Lost motion (arcmin) from the samples standing at +-pct % of rated torque (a plan with
+    dwells there): midline ``(median loading + median unloading) / 2`` at +p minus at -p.
+    Used when analysis.loop cannot read the run's branches; NaN when a point is missing."""
+    p = pct / 100.0 * rated_torque_Nm
+    mids = []
+    for sign in (1.0, -1.0):
+        near = np.abs(torque_Nm - sign * p) < window_Nm
+        up = twist_arcmin[near & (direction > 0)]
+        down = twist_arcmin[near & (direction < 0)]
+        if up.size < 3 or down.size < 3:
+            return math.nan
+        mids.append(0.5 * (float(np.median(up)) + float(np.median(down))))
+    return mids[0] - mids[1]
+
+
 def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRun:
     """Reduce one run (see the module docstring). Raises AnalysisError on unusable input."""
     t = np.asarray(run.t_s, dtype=float)
@@ -210,6 +228,9 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRu
             lost_motion = res.metrics["lost_motion_arcmin"].value
     except AnalysisError:
         pass
+    if not math.isfinite(lost_motion):
+        lost_motion = dwell_lost_motion_arcmin(torque, twist, direction, run.rated_torque_Nm,
+                                               max(3.0 * sigma_t, 0.01 * run.rated_torque_Nm))
     return PreparedRun(
         run_id=run.run_id, torque_Nm=tb, twist_arcmin=yb,
         temperature_C=None if temp is None else _block_means(temp, segments, block),

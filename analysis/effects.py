@@ -342,7 +342,8 @@ def predict_twist_arcmin(
 
 
 def cycle_path_Nm(amplitude_Nm: float, points_per_quarter: int = 200) -> np.ndarray:
-    """A quasi-static torque path 0 -> +A -> -A -> +A (N*m) for reading a model loop."""
+    """A quasi-static torque path 0 -> +A -> -A -> +A (N*m) for reading a model loop:
+    ``points_per_quarter + 1`` points up, then ``2 points_per_quarter`` down, then up."""
     q = np.linspace(0.0, 1.0, points_per_quarter + 1)
     return amplitude_Nm * np.concatenate([q, 1 - 2 * q[1:], -1 + 2 * q[1:]])
 
@@ -358,13 +359,13 @@ def model_lost_motion_arcmin(
     if not rated_torque_Nm > 0:
         raise AnalysisError(f"rated torque must be > 0 N*m, got {rated_torque_Nm}")
     amp = amplitude_Nm if amplitude_Nm is not None else rated_torque_Nm
-    n = 400
-    path = cycle_path_Nm(amp, n // 2)
+    m = 200
+    path = cycle_path_Nm(amp, m)  # indices: 0..m up to +A, m..2m down to -A, 2m..3m up
     twist = predict_twist_arcmin(params, path, input_angle_deg=input_angle_deg,
                                  temperature_C=temperature_C, z_internal=z_internal,
                                  z_external=z_external)
-    down = slice(n // 2, n // 2 + n + 1)  # +A -> -A
-    up = slice(n // 2 + n, None)  # -A -> +A
+    down = slice(m, 2 * m + 1)  # +A -> -A
+    up = slice(2 * m, None)  # -A -> +A
     p = pct / 100.0 * rated_torque_Nm
 
     def branch(sl: slice, at: float) -> float:

@@ -1,0 +1,58 @@
+"""``rig diagnose CAMPAIGN --json REPORT.json [--html REPORT.html]``: the sim-to-real gap."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+console = Console()
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def diagnose(
+        campaign: Annotated[Path, typer.Argument(help="A campaign folder (or one run folder).")],
+        json_file: Annotated[
+            Path | None, typer.Option("--json", help="Write the rig-diagnosis/1 report.")
+        ] = None,
+        html_file: Annotated[
+            Path | None, typer.Option("--html", help="Write the HTML report (self-contained).")
+        ] = None,
+    ) -> None:
+        """Where model and measurement disagree, which unmodelled effect, how far it shrinks."""
+        from rig.diagnose import diagnose_path, report_dict, write_json
+
+        with console.status("diagnosing..."):
+            camp, result = diagnose_path(campaign)
+            report = report_dict(camp, result)
+        console.print(f"[bold]verdict: {report['verdict']}[/bold] — {report['reason']}")
+        if report.get("candidates"):
+            console.print(f"candidates: {', '.join(report['candidates'])}")
+        if report.get("next_experiment"):
+            console.print(f"next experiment: {report['next_experiment']}")
+        loc = report["localization"]
+        console.print(f"where: {loc['where']} — {loc['detail']}")
+        table = Table(title="Candidates (held-out gap)")
+        for col in ("effect", "shrink", "RMS after, arcsec", "ΔBIC", "cross-validation"):
+            table.add_column(col)
+        for r in report["ranking"]:
+            after = (r.get("gap_after") or {}).get("rms_arcsec")
+            ev = r.get("evidence", {})
+            table.add_row(r["effect"], "" if r.get("shrink") is None else f"{r['shrink']:.3f}",
+                          "" if after is None else f"{after:.3f}", str(ev.get("delta_bic", "")),
+                          str(ev.get("cv", ev.get("from", ""))))
+        console.print(table)
+        console.print(f"gap before: {report['gap_before']['rms_arcsec']:.3f} arcsec RMS "
+                      f"(noise {report['noise_arcsec']:.3f})")
+        if json_file is not None:
+            write_json(report, json_file)
+            console.print(f"report written to {json_file}")
+        if html_file is not None:
+            from rig.report_html import write_html
+
+            write_html(report, result, html_file)
+            console.print(f"HTML report written to {html_file}")

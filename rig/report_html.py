@@ -1,0 +1,164 @@
+"""The diagnosis as one self-contained HTML page (figures as inline base64 PNG, no CDN).
+
+Plain words first (verdict, how far the gap shrinks, what to do next), then the loops with the
+model before and after, the gap map, the free play against position and the ranking.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from analysis.diagnosis import Diagnosis  # noqa: E402
+from analysis.diagnosis_fit import predict_run  # noqa: E402
+
+
+def _png(fig: Any) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    plt.close(fig)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _loops_figure(diagnosis: Diagnosis, effects: tuple[str, ...] | None) -> str:
+    stack = diagnosis.stack
+    runs = list(range(min(stack.n_runs, 4)))
+    fig, axes = plt.subplots(1, len(runs), figsize=(3.6 * len(runs), 3.2), squeeze=False)
+    after = diagnosis.models.get(effects[0]) if effects else None
+    for ax, i in zip(axes[0], runs, strict=False):
+        run = stack.runs[i]
+        y = run.twist_arcmin - run.twist_arcmin.mean()
+        r0 = predict_run(stack, diagnosis.base, ("backlash",), i)
+        ax.plot(run.torque_Nm, y * 60, ".", ms=2, color="0.4", label="measured")
+        ax.plot(run.torque_Nm, (y - r0) * 60, "-", lw=1, color="tab:red",
+                label="model before")
+        if after is not None:
+            r1 = predict_run(stack, after.fit, ("backlash", *after.effects), i)
+            ax.plot(run.torque_Nm, (y - r1) * 60, "-", lw=1, color="tab:green",
+                    label="model after")
+        ax.set_title(run.run_id, fontsize=8)
+        ax.set_xlabel("torque (N·m)")
+        ax.set_ylabel("twist (arcsec)")
+    axes[0][0].legend(fontsize=7)
+    return _png(fig)
+
+
+def _gap_map_figure(report: dict[str, Any]) -> str:
+    gm = report.get("gap_map") or {}
+    names = list(gm)
+    fig, axes = plt.subplots(1, len(names), figsize=(2.6 * len(names), 2.8), squeeze=False)
+    for ax, name in zip(axes[0], names, strict=True):
+        bins = gm[name]["bins"]
+        labels = [str(b["bin"]) for b in bins]
+        ax.bar(range(len(bins)), [b["flank_signed_mean_z"] for b in bins], color="tab:blue",
+               alpha=0.6, label="flank-signed mean z")
+        ax.plot(range(len(bins)), [b["rms_z"] for b in bins], "o-", color="tab:red", ms=3,
+                label="rms z")
+        ax.set_xticks(range(len(bins)), labels, rotation=60, fontsize=6)
+        ax.set_title(f"{name} ({gm[name]['share']:.0%})", fontsize=8)
+    axes[0][0].legend(fontsize=6)
+    return _png(fig)
+
+
+def _play_figure(report: dict[str, Any]) -> str | None:
+    plays = [p for p in report.get("free_play_by_run") or [] if p["input_angle_deg"] is not None]
+    if len({round(p["input_angle_deg"], 1) for p in plays}) < 2:
+        return None
+    fig, ax = plt.subplots(figsize=(5, 3))
+    x = np.array([p["input_angle_deg"] for p in plays])
+    y = np.array([p["play_arcmin"] for p in plays])
+    ax.errorbar(x, y, yerr=[2 * p["se_arcmin"] for p in plays], fmt="o", ms=3)
+    fourier = report.get("free_play_fourier")
+    if fourier:
+        grid = np.linspace(x.min(), x.max(), 400)
+        th = np.radians(grid)
+        curve = np.full_like(grid, fourier["mean_arcmin"])
+        for k, a, ph in zip(fourier["orders"], fourier["amplitude_arcmin"],
+                            fourier["phase_deg"], strict=True):
+            curve += a * np.cos(k * th - math.radians(ph))
+        ax.plot(grid, curve, "-", lw=1, label="Fourier fit")
+        ax.legend(fontsize=7)
+    ax.set_xlabel("input_angle_deg (eccentric shaft)")
+    ax.set_ylabel("free play (arcmin)")
+    return _png(fig)
+
+
+def _plain_words(report: dict[str, Any]) -> str:
+    v = report["verdict"]
+    before = report["gap_before"]["rms_arcsec"]
+    if v == "none":
+        return (f"The model explains the measurements within the noise: the held-out gap is "
+                f"{before:.2f} arcsec RMS against a noise of {report['noise_arcsec']:.2f} arcsec.")
+    if v == "ambiguous":
+        return (f"The gap ({before:.2f} arcsec RMS) is explained equally well by "
+                f"{', '.join(report.get('candidates', []))}. "
+                f"Next: {report.get('next_experiment')}.")
+    if v == "unexplained":
+        return (f"A systematic gap of {before:.2f} arcsec RMS remains that no effect of the "
+                f"vocabulary closes (closest: {', '.join(report.get('candidates', []))}).")
+    after = report.get("gap_after", {}).get("rms_arcsec", math.nan)
+    text = (f"The gap is caused by <b>{html.escape(v)}</b>: adding it shrinks the held-out gap "
+            f"from {before:.2f} to {after:.2f} arcsec RMS (shrink {report.get('shrink', 0):.0%}).")
+    for a in report.get("also", []):
+        text += f" Also {html.escape(a['effect'])} (shrink {a['shrink']:.0%} of what is left)."
+    return text
+
+
+def render_html(report: dict[str, Any], diagnosis: Diagnosis) -> str:
+    """The whole page as a string."""
+    verdict = report["verdict"]
+    effects = (verdict,) if verdict in diagnosis.models else None
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'>",
+        f"<title>Gap diagnosis: {html.escape(str(report.get('campaign', '')))}</title>",
+        "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}"
+        "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 6px;"
+        "font-size:13px}</style></head><body>",
+        f"<h1>Sim-to-real gap: {html.escape(verdict)}</h1>",
+        f"<p>{_plain_words(report)}</p>",
+        f"<p>Where: <b>{html.escape(report['localization']['where'])}</b> — "
+        f"{html.escape(report['localization']['detail'])}.</p>",
+        f"<p>Predictive gap (model as designed): {report['predictive_gap']['rms_arcsec']:.2f}"
+        f" arcsec RMS; structural gap (play and stiffness calibrated): "
+        f"{report['structural_gap']['rms_arcsec']:.2f} arcsec RMS.</p>",
+        "<h2>Loops, model before and after</h2>",
+        f"<img src='{_loops_figure(diagnosis, effects)}'>",
+        "<h2>Gap map (standardised residuals of the calibrated model)</h2>",
+        f"<img src='{_gap_map_figure(report)}'>",
+    ]
+    play = _play_figure(report)
+    if play:
+        parts += ["<h2>Free play against position</h2>", f"<img src='{play}'>"]
+    parts.append("<h2>Ranking</h2><table><tr><th>effect</th><th>shrink</th>"
+                 "<th>held-out RMS after (arcsec)</th><th>ΔBIC</th><th>cross-validation</th>"
+                 "<th>parameters</th></tr>")
+    for r in report["ranking"]:
+        after = (r.get("gap_after") or {}).get("rms_arcsec")
+        params = ", ".join(f"{k}={v:.4g}" for k, v in (r.get("params") or {}).items()
+                           if isinstance(v, int | float))
+        ev = r.get("evidence", {})
+        parts.append(
+            f"<tr><td>{html.escape(r['effect'])}</td>"
+            f"<td>{'' if r.get('shrink') is None else format(r['shrink'], '.2f')}</td>"
+            f"<td>{'' if after is None else format(after, '.3f')}</td>"
+            f"<td>{ev.get('delta_bic', '')}</td><td>{html.escape(str(ev.get('cv', '')))}</td>"
+            f"<td>{html.escape(params)}</td></tr>")
+    parts.append("</table></body></html>")
+    return "\n".join(parts)
+
+
+def write_html(report: dict[str, Any], diagnosis: Diagnosis, path: str | Path) -> Path:
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(render_html(report, diagnosis), encoding="utf-8")
+    return p

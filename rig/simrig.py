@@ -252,12 +252,12 @@ class SimulatedRig:
                     "bus_options": {"sleep_after_open": 0}},
         }
         for key, node in self.encoder_nodes.items():
-            # heartbeat 200 ms, missing after 3 periods: generous, so that a loaded
-            # development machine (simulator and drivers on two cores) is not a fault
+            # heartbeat 200 ms, missing after 3 periods, 250 SYNCs without a PDO: generous, so
+            # that a loaded development machine (simulator and drivers on 2 cores) is no fault
             tables[key] = {"name": key.replace("_", " "), "node_id": node.node_id,
                            "counts_per_rev": config.rig.encoder_counts_per_rev,
                            "heartbeat_ms": 200, "heartbeat_timeout_periods": 3.0,
-                           "timeout_s": 2.0}
+                           "missed_periods": 250, "timeout_s": 2.0}
         tables["transducer"] = {"url": self.addresses["transducer"],
                                 "full_scale_Nm": TRANSDUCER_FULL_SCALE_NM,
                                 "stream_rate_Hz": self.stream_rate_Hz, **timeout}

@@ -1,0 +1,5 @@
+"""``python -m rig`` runs the ``rig`` command line."""
+
+from rig.cli import main
+
+main()

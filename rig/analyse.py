@@ -128,6 +128,7 @@ def nominal_model_for_unit(
 
     ``internal_involute`` (the default kind): the reference nominal model of run-format.md.
     ``cycloid``: the seed 002 compound cycloid pair (:mod:`analysis.models.cycloid_nominal`).
+    ``beveloid``: the seed 001 beveloid pair (:mod:`analysis.models.beveloid_nominal`).
     A unit the model cannot use gives no model and says why; it is never an error, because the
     measured metrics stand on their own.
     """
@@ -142,6 +143,11 @@ def nominal_model_for_unit(
             from analysis.models.cycloid_nominal import cycloid_nominal_model
 
             model, assumptions = cycloid_nominal_model(unit, reference_torque_Nm=rated_torque_Nm)
+            return model, list(assumptions)
+        if kind == "beveloid":
+            from analysis.models.beveloid_nominal import beveloid_nominal_model
+
+            model, assumptions = beveloid_nominal_model(unit)
             return model, list(assumptions)
     except AnalysisError as exc:
         return None, [f"no model prediction: {exc}"]

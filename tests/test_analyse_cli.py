@@ -160,3 +160,22 @@ def test_cycloid_unit_gets_the_seed002_model() -> None:
     assert d["model"]["backlash_arcmin"] == pytest.approx(model.play_arcmin)
     assert d["backlash_arcmin"] == pytest.approx(model.play_arcmin, abs=0.02)
     assert d["stiffness_Nm_per_arcmin"] == pytest.approx(model.stiffness_Nm_per_arcmin, rel=0.05)
+
+
+def test_beveloid_unit_gets_the_seed001_model() -> None:
+    """Unit kind `beveloid`: play set by the axial shift (seed 001), loop from its model."""
+    from analysis.models.beveloid_nominal import beveloid_nominal_model
+    from rig.examples import UNITS_DIR
+    from rig.examples.generate import gbt_step_profile
+
+    unit = json.loads((UNITS_DIR / "beveloid-seed001.json").read_text())
+    model, _ = beveloid_nominal_model(unit)
+    t_s, torque = gbt_step_profile(20.0)
+    twist = model.twist_arcmin(torque) + np.random.default_rng(6).normal(0, 0.002, t_s.size)
+    run = Run.from_arrays(
+        "beveloid-demo", t_s, torque, 10.0 + twist / 60.0, unit=unit,
+        test={"rated_torque_Nm": 20.0},
+    )
+    d = analyse_run(run).to_dict()
+    assert d["model"]["backlash_arcmin"] == pytest.approx(model.play_arcmin)
+    assert d["backlash_arcmin"] == pytest.approx(model.play_arcmin, abs=0.02)

@@ -295,7 +295,7 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             out["internal_um"] = float(arcmin_to_um(amp_int, m, z1)) / k
             out["internal_phase_deg"] = math.degrees(math.atan2(-c[1], -c[0]))
             out["external_um"] = float(arcmin_to_um(amp_ext, m, z1)) / k
-            out["beta_deg"] = math.degrees(math.atan2(c[3], -c[2]))
+            out["beta_deg"] = math.degrees(math.atan2(-c[3], -c[2]))
             out["amplitude_um"] = out["internal_um"] + out["external_um"]
             budget = 2.0 * stack.runout_budget_arcmin
             if out["amplitude_arcmin"] > budget:

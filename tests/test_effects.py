@@ -91,7 +91,8 @@ def test_runout_eq4_and_its_first_order_form() -> None:
     assert float(peak) == pytest.approx(18.5, abs=1e-9)
     play = runout_play_change_arcmin(0.0, pressure_angle_deg=20.0, module_mm=1.0,
                                      z_internal=45, center_distance_mm=2.5, internal_um=11.0,
-                                     internal_phase_deg=0.0, external_um=7.5, beta_deg=0.0)
+                                     internal_phase_deg=0.0, external_um=7.5, beta_deg=0.0,
+                                     z_external=40)
     assert float(play) == pytest.approx(-um_to_arcmin(2 * math.tan(math.radians(20)) * 18.5,
                                                       1.0, 45))
 

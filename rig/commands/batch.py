@@ -1,0 +1,74 @@
+"""``rig batch UNIT.json``: lost motion a production batch of seed 000 pairs will show."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def batch(
+        unit_file: Annotated[Path, typer.Argument(help="A unit JSON (or a whole run.json).")],
+        samples: Annotated[int, typer.Option("--samples", "-n", help="Units sampled.")] = 20_000,
+        seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+        compensate: Annotated[
+            bool,
+            typer.Option(help="Set each unit's eccentric distance by seed 000 eq. (9)."),
+        ] = False,
+        rated_torque: Annotated[float, typer.Option(help="Rated torque, N·m.")] = 10.0,
+        percent: Annotated[float, typer.Option(help="Lost-motion band, % of rated.")] = 3.0,
+        json_file: Annotated[Path | None, typer.Option("--json", help="Write JSON.")] = None,
+    ) -> None:
+        """Monte Carlo lost motion of a batch built to this design within seed 000 Table 1.
+
+        Seed 003's method (random errors within their tolerance grades) on the seed 000 pair:
+        M value deviations, runouts with random phases, bearing clearances and the eccentric
+        distance error; each unit's lost motion at its worst eccentric-shaft position.
+        """
+        from analysis.models.seed000_batch import lost_motion_batch
+        from analysis.models.seed000_unit import InternalPairUnit
+        from rig.commands.model import load_unit_mapping
+
+        unit, _ = InternalPairUnit.from_mapping(load_unit_mapping(unit_file))
+        result = lost_motion_batch(
+            unit,
+            samples=samples,
+            seed=seed,
+            compensate=compensate,
+            rated_torque_Nm=rated_torque,
+            lost_motion_pct=percent,
+        )
+        report = {
+            "format": "rig-batch/1",
+            "unit_file": str(unit_file),
+            "compensated": compensate,
+            **result.to_dict(),
+        }
+        table = Table(
+            title=f"Lost motion of {samples} units (±{percent:g} % of {rated_torque:g} N·m)"
+        )
+        for column in ("position", "mean", "std", "2.5 %", "median", "97.5 %", "max"):
+            table.add_column(column, justify="right")
+        for key, label in (
+            ("worst_position_arcmin", "worst"),
+            ("random_position_arcmin", "random"),
+        ):
+            row = report[key]
+            table.add_row(
+                label,
+                *(f"{row[k]:.3f}'" for k in ("mean", "std", "p2_5", "median", "p97_5", "max")),
+            )
+        console = Console()
+        console.print(table)
+        console.print(
+            f"units that bind somewhere (play < 0): {100 * result.interference_fraction:.1f} % "
+            f"(deepest {result.interference_max_um:.2f} um)"
+        )
+        if json_file is not None:
+            json_file.write_text(json.dumps(report, indent=2) + "\n")

@@ -54,9 +54,9 @@ NONE_SIGMAS = 0.8
 EXPLAINED_SHARE = 0.35
 #: A greedy addition must remove at least this share of the systematic gap left (squared).
 GREEDY_GAIN = 0.3
-#: Two explaining candidates tie when their held-out RMS differ by less than this share of
-#: the best one's gain.
-TIE_SHARE = 0.12
+#: Two explaining candidates tie when the systematic gap the second leaves is within the
+#: noise threshold or at most this factor of the best one's.
+TIE_FACTOR = 2.0
 #: Stiffness deviation from seed 004 eq. (8) taken as a finding (relative).
 STIFFNESS_TOLERANCE = 0.10
 MAX_FOLDS = 5
@@ -542,9 +542,8 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before):
     explaining = [c for c in pool if explains(c, _sys(before(c)[0], noise))]
     if explaining:
         best = explaining[0]
-        gain = before(best)[0] - best.heldout_rms_arcmin
         ties = [c for c in explaining[1:]
-                if c.heldout_rms_arcmin - best.heldout_rms_arcmin < TIE_SHARE * gain
+                if sysh(c) <= max(threshold, TIE_FACTOR * sysh(best))
                 and c.scheme == best.scheme]
         if ties:
             names = [best.effects[0]] + [c.effects[0] for c in ties]

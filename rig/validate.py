@@ -144,7 +144,7 @@ def make_case(index: int, kind: str, rng: np.random.Generator,
         truth = {"stiffness_Nm_per_arcmin": float(rng.uniform(40.0, 120.0)),
                  "time_constant_s": float(rng.uniform(0.15, 0.6))}
     elif kind == "direction_gain":
-        truth = {"gain_positive": 1.0, "gain_negative": float(rng.uniform(0.85, 0.93))}
+        truth = {"gain_positive": 1.0, "gain_negative": float(rng.uniform(0.6, 0.8))}
     elif kind != "none":
         raise ValueError(f"unknown case kind {kind!r}; known: {', '.join(KINDS)}")
     if kind != "none":

@@ -1,0 +1,41 @@
+"""The diagnosis' cost and the blind validation figures.
+
+* ``diagnosis_12_runs_5000_samples_s``: wall time of the diagnosis (rig.diagnose, from the
+  campaign in memory) of a 12-run campaign of 5,000 samples each (runout withheld, 12
+  positions). Target: under 10 s on the 2-core box, never over 60 s.
+* ``validation_<N>_cases_s``: wall time of generating and diagnosing N cases
+  (``BENCH_CASES``, default 100; target: 100 cases under 600 s), with the four figures of the
+  issue (correct verdicts, false alarms, out-of-vocabulary handling, median shrink).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterator
+
+import numpy as np
+
+from rig.diagnose import diagnose_campaign
+from rig.validate import make_case, run_validation, simulate_campaign, summarise
+from simulators.plant_config import load_plant_config
+
+
+def run() -> Iterator[dict]:
+    case = make_case(0, "runout", np.random.default_rng(12), load_plant_config())
+    case.positions_deg = [30.0 * k for k in range(12)]
+    case.temperatures_C = [20.0] * 12
+    campaign = simulate_campaign(case, samples=5000)
+    t0 = time.perf_counter()
+    report = diagnose_campaign(campaign).to_dict()
+    yield {"name": "diagnosis_12_runs_5000_samples_s", "value": time.perf_counter() - t0,
+           "unit": "s", "verdict": report["verdict"], "target": "< 10 s"}
+    n = int(os.environ.get("BENCH_CASES", "100"))
+    t0 = time.perf_counter()
+    summary = summarise(run_validation(n, seed=1))
+    yield {"name": f"validation_{n}_cases_s", "value": time.perf_counter() - t0, "unit": "s",
+           "target": "100 cases < 600 s"}
+    for key in ("correct_share", "false_alarm_share", "oov_unexplained_or_ambiguous_share",
+                "median_shrink"):
+        yield {"name": f"validation_{key}", "value": summary[key], "unit": "1",
+               "target": summary["targets"][key]}

@@ -65,7 +65,8 @@ def main() -> None:
             f"pair {r['pair']}: gap {r['gap_arcsec']:>3.0f}\" | bearing clearance (eqs. 3, 7) "
             f"up to {r['bearing_clearance_arcsec']:.0f}\" | runout phase swings "
             f"+-{r['runout_swing_arcsec']:.0f}\" | elastic +-3 % band "
-            f"{r['elastic_band_arcsec']:.1f}\" at 10 N*m (needs T_r = {r['rated_torque_for_gap_Nm']:.0f} N*m) | thermal needs "
+            f"{r['elastic_band_arcsec']:.1f}\" at 10 N*m (needs T_r = "
+            f"{r['rated_torque_for_gap_Nm']:.0f} N*m) | thermal needs "
             f"{r['thermal_K_for_gap']:.0f} K | friction needs {r['friction_for_gap_Nm']:.1f} N*m"
         )
     print("Plausible: bearing clearance (the same size as the gap, absent from the model), the "

@@ -115,3 +115,21 @@ def test_report_keys_and_blindness_to_generator_labels(tmp_path) -> None:
     assert first["format"] == "rig-diagnosis/1"
     assert first["ranking"][0]["effect"] == "bearing_clearance"
     assert {"shrink", "gap_after", "params", "evidence"} <= set(first["ranking"][0])
+
+
+def test_seed000_gap_example_numbers() -> None:
+    """examples/seed000_gap.py: the gaps of Table 3 and the bearing term of eqs. (3), (7)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "examples" / "seed000_gap.py"
+    spec = importlib.util.spec_from_file_location("seed000_gap", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    rows = module.gap_rows()
+    assert [r["gap_arcsec"] for r in rows] == [32, 27, 16, 23]
+    # pair 1: bearings 5 + 6 um -> 2 tan20 (5.5 um) -> 0.6118 arcmin = 36.7 arcsec
+    assert rows[0]["bearing_clearance_arcsec"] == pytest.approx(36.7, abs=0.1)
+    assert all(r["bearing_clearance_arcsec"] >= r["gap_arcsec"] for r in rows)
+    assert all(r["runout_swing_arcsec"] > r["gap_arcsec"] for r in rows)
+    assert rows[0]["elastic_band_arcsec"] == pytest.approx(60 * 0.6 / 27.8598, rel=1e-4)

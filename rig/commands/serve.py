@@ -1,0 +1,119 @@
+"""``rig serve``: the control page (FastAPI + uvicorn) over the simulated or a real rig."""
+
+from __future__ import annotations
+
+import json
+import socket
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def serve(
+        simulated: Annotated[bool, typer.Option(
+            "--simulated", help="Start the simulated rig (its own process) and serve it.")] = False,
+        rig: Annotated[Path | None, typer.Option(
+            "--rig", help="A rig configuration TOML (a real rig).")] = None,
+        host: Annotated[str, typer.Option(
+            help="Address to listen on. Other than 127.0.0.1 needs --token.")] = "127.0.0.1",
+        port: Annotated[int, typer.Option(
+            min=0, max=65535, help="Port (0: a free one, printed).")] = 8765,
+        store: Annotated[Path | None, typer.Option(
+            help="Measurement store (default: $RIG_STORE or ./rig-store).")] = None,
+        token: Annotated[str | None, typer.Option(
+            help="Operator token (default: $RIG_WEB_TOKEN, else the store's token file, "
+                 "else generated and printed).")] = None,
+        unit: Annotated[str, typer.Option(
+            help="With --simulated: the example unit (rig/examples/units) the simulated "
+                 "plant is built from.")] = "seed000-pair1",
+    ) -> None:
+        """Serve the control page: devices, plans, live loop, E-stop, results, history.
+
+        Prints the page's address and the operator token; stops on Ctrl-C (the rig is left
+        in its safe state).
+        """
+        import uvicorn
+
+        from rig.campaign import SimulationSection
+        from rig.errors import RigError
+        from rig.measure import open_session, plant_config_for
+        from rig.store import Store, default_store_root
+        from rig.web.app import create_app
+        from rig.web.controller import RigController
+        from rig.web.live import LiveHub
+        from rig.web.settings import resolve_settings
+
+        if simulated == (rig is not None):
+            raise RigError("say which rig: --simulated (start the simulated rig) or --rig FILE "
+                           "(a rig configuration)")
+        sim_plant = SimulationSection(seed=1, plant=SIMULATED_EFFECTS)
+        root = store if store is not None else default_store_root()
+        settings = resolve_settings(host, port, store_root=root, token=token)
+        the_store = Store(root)
+        hub = LiveHub()
+        if simulated:
+            unit_data = _example_unit(unit)
+            plant = plant_config_for(unit_data, sim_plant)
+
+            def factory():  # noqa: ANN202 - a context manager of the rig session
+                return open_session(simulated=True, plant=plant)
+
+            description = f"simulated rig (plant: example unit {unit})"
+        else:
+            rig_path = rig
+
+            def factory():  # noqa: ANN202
+                return open_session(rig=rig_path)
+
+            description = f"rig {rig}"
+        controller = RigController(the_store, hub, factory, simulated=simulated,
+                                   description=description)
+        web_app = create_app(settings, controller)
+
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        sock = socket.socket(family, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((host, port))
+        except OSError as exc:
+            raise RigError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from exc
+        sock.listen(128)
+        bound = sock.getsockname()[1]
+        url = settings.url.replace(f":{port}/", f":{bound}/")
+        where = {"option": "from --token", "environment": "from $RIG_WEB_TOKEN",
+                 "file": f"from {root / 'web' / 'operator-token'}",
+                 "generated": f"generated; kept in {root / 'web' / 'operator-token'}"}
+        print(f"control page: {url}", flush=True)
+        print(f"operator token: {settings.token} ({where[settings.token_source]})", flush=True)
+        print(f"operator link: {url}#token={settings.token}", flush=True)
+        print(f"store: {the_store.root}; {description}; Ctrl-C stops (the rig is left safe)",
+              file=sys.stderr, flush=True)
+        config = uvicorn.Config(web_app, log_level="warning", lifespan="on",
+                                timeout_graceful_shutdown=5)
+        uvicorn.Server(config).run(sockets=[sock])
+
+
+SIMULATED_EFFECTS = {"effects": {
+    "runout": {"enabled": True},
+    "friction": {"enabled": True, "model": "lugre", "coulomb_torque_Nm": 0.02,
+                 "static_torque_Nm": 0.03, "viscous_Nms_per_arcmin": 0.002},
+}}
+"""The simulated plant around the unit (docs/plant.md), as examples/campaigns/seed000-pair1.toml:
+the unit's runout (seed 000 eq. 4) and a little seal and oil drag."""
+
+
+def _example_unit(name: str) -> dict:
+    """An example unit of the package by name (``seed000-pair1`` ...)."""
+    from importlib import resources
+
+    from rig.errors import RigError
+
+    folder = resources.files("rig.examples") / "units"
+    names = sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".json"))
+    if name not in names:
+        raise RigError(f"--unit {name!r}: no such example unit; known: {', '.join(names)}")
+    return json.loads((folder / f"{name}.json").read_text(encoding="utf-8"))

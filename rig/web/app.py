@@ -1,0 +1,75 @@
+"""The FastAPI app of the control page: ``create_app(settings, controller)``.
+
+The lifespan opens the rig (``controller.start()``: on a thread, the page answers meanwhile)
+and starts the live pump; leaving it stops any measurement (safe state) and closes the rig.
+The page itself is plain HTML/CSS/JS from the package's static files (no build step, no
+CDN: it works offline), uPlot vendored under ``static/vendor/uplot``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator
+from importlib import resources
+
+from fastapi import FastAPI, Request
+from fastapi.responses import FileResponse
+from fastapi.staticfiles import StaticFiles
+
+from rig import __version__
+from rig.store import Store
+from rig.web.controller import RigController
+from rig.web.live import LiveHub
+from rig.web.settings import WebSettings
+
+STATIC = resources.files("rig.web") / "static"
+
+DESCRIPTION = """
+The control page of backlash-rig: lab operators run the rig from a browser.
+
+* **Viewers** (no token) can read the status, the history and watch the live stream.
+* **Operators** send `Authorization: Bearer <token>` (printed by `rig serve`) to start,
+  pause, resume, abort, tare and lock the input. The E-stop never needs a token.
+* Live data: `GET /api/live` (server-sent events). Units are in the field names.
+"""
+
+
+def create_app(settings: WebSettings, controller: RigController | None = None, *,
+               store: Store | None = None, hub: LiveHub | None = None) -> FastAPI:
+    """The app. ``controller`` None: no rig (history only) on ``settings.store_root``."""
+    store = store or (controller.store if controller is not None
+                      else Store(settings.store_root))
+    hub = hub or (controller.hub if controller is not None else LiveHub())
+    controller = controller or RigController(store, hub, None)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        hub.start()
+        controller.start()
+        try:
+            yield
+        finally:
+            await asyncio.to_thread(controller.close)
+            await hub.stop()
+
+    app = FastAPI(title="backlash-rig control page", version=__version__,
+                  description=DESCRIPTION, lifespan=lifespan)
+    app.state.settings = settings
+    app.state.store = store
+    app.state.hub = hub
+    app.state.controller = controller
+
+    from rig.web import routes_control, routes_history, routes_live
+
+    app.include_router(routes_control.router)
+    app.include_router(routes_history.router)
+    app.include_router(routes_live.router)
+    app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
+
+    @app.get("/", include_in_schema=False)
+    def index(request: Request) -> FileResponse:
+        return FileResponse(str(STATIC / "index.html"), media_type="text/html",
+                            headers={"Cache-Control": "no-cache"})
+
+    return app

@@ -1,0 +1,562 @@
+"""The page's hold on the rig: one opened rig session, at most one measurement at a time.
+
+:class:`RigController` opens the rig (the simulated one, or a rig TOML) with
+:func:`rig.measure.open_session`, watches the devices while idle (heartbeats, last values),
+and runs plans and campaigns with the engine (:func:`rig.measure.measure_plan`,
+:func:`rig.measure.run_campaign`) on a thread of its own, the store wrapped by
+:class:`rig.web.live_tap.TapStore` so that the rows recorded are also drawn live.
+
+Device access: while a measurement runs only the engine talks to the serial transducer and
+consumes the encoders' samples; the monitor then reads only what cannot disturb it (encoder
+health, drive status over the shared Modbus link) and takes the live numbers from the rows
+being recorded.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import threading
+import time
+from collections.abc import Callable
+from contextlib import AbstractContextManager
+from typing import Any
+
+from drivers.errors import DeviceError
+from rig.campaign import campaign_from_mapping
+from rig.engine import Engine, EngineOptions
+from rig.engine_events import ProgressEvent
+from rig.engine_record import json_safe
+from rig.engine_safety import PlanRejected, preflight
+from rig.errors import RigError
+from rig.measure import RigSession, measure_plan, run_campaign, run_meta, run_result
+from rig.plan_estimate import estimate
+from rig.plans import Plan, campaign_plan, hysteresis_plan
+from rig.store import Store
+from rig.web.faults import explain
+from rig.web.live import LiveHub
+from rig.web.live_tap import TapStore
+from rig.web.models import InputLockRequest, RunRequest
+
+log = logging.getLogger(__name__)
+
+PREVIEW_LINES = 400
+MONITOR_PERIOD_S = 0.5
+LIVE_METRICS_PERIOD_S = 2.0
+
+SessionFactory = Callable[[], AbstractContextManager[RigSession]]
+
+
+class ControlError(RigError):
+    """A command that cannot be done now (HTTP 409): says why and what to do."""
+
+
+def build_plan(req: RunRequest) -> Plan:
+    """The engine plan of a request: one hysteresis run, or a campaign over ``axes``."""
+    loop = req.plan.loop_params()
+    if req.kind == "run":
+        return hysteresis_plan(loop, req.position_deg)
+    return campaign_plan(loop, req.axes.axes())
+
+
+def model_summary(req: RunRequest) -> tuple[dict[str, Any] | None, list[str]]:
+    """The reference nominal model's loop for the unit (arcmin, N*m/arcmin), or None."""
+    from rig.analyse import nominal_model_for_unit, resolve_profile
+
+    model, assumptions = nominal_model_for_unit(req.unit.mapping(), req.plan.rated_torque_Nm)
+    if model is None:
+        return None, assumptions
+    _, pct = resolve_profile(req.profile, None)
+    out: dict[str, Any] = {"lost_motion_pct": pct}
+    for key in ("play_arcmin", "backlash_arcmin", "stiffness_Nm_per_arcmin"):
+        value = getattr(model, key, None)
+        out[key] = value if isinstance(value, int | float) else None
+    out["lost_motion_arcmin"] = model.lost_motion_arcmin(req.plan.rated_torque_Nm, pct)
+    return json_safe(out), assumptions
+
+
+class RigController:
+    """See the module docstring. ``session_factory`` None: no rig (history only)."""
+
+    def __init__(self, store: Store, hub: LiveHub, session_factory: SessionFactory | None,
+                 *, simulated: bool = False, description: str = "") -> None:
+        self.store = store
+        self.hub = hub
+        self.session_factory = session_factory
+        self.simulated = simulated
+        self.description = description
+        self.session: RigSession | None = None
+        self.open_error: str | None = None
+        self.state = "no_rig" if session_factory is None else "starting"
+        self.message = ("no rig: history only" if session_factory is None
+                        else "connecting to the rig ...")
+        self._stack = contextlib.ExitStack()
+        self._lock = threading.RLock()
+        self._device_lock = threading.Lock()  # idle monitor vs a measurement starting
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._engine: Engine | None = None
+        self._tap: TapStore | None = None
+        self._run_thread: threading.Thread | None = None
+        self._progress: ProgressEvent | None = None
+        self._current: dict[str, Any] | None = None
+        self._fault_reason: str | None = None
+        self._last_result: dict[str, Any] | None = None
+        self._devices: list[dict[str, Any]] = []
+        self._live: dict[str, Any] = {}
+        self._safe: bool | None = None
+        self._lock_confirmed = False
+        self._lock_angle: float | None = None
+        self._lock_by_motor = False
+        self._profile: str | None = None
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def start(self) -> None:
+        """Open the rig on a thread (the page is up meanwhile) and start the monitor."""
+        if self.session_factory is None:
+            return
+        thread = threading.Thread(target=self._open_and_monitor, name="rig web monitor",
+                                  daemon=True)
+        thread.start()
+        self._threads.append(thread)
+
+    def close(self) -> None:
+        """Stop any measurement (safe state), stop the monitor, close the rig."""
+        self._stop.set()
+        engine = self._engine
+        if engine is not None:
+            engine.abort("the control page was shut down")
+        run_thread = self._run_thread
+        if run_thread is not None:
+            run_thread.join(timeout=30.0)
+        for thread in self._threads:
+            thread.join(timeout=30.0)
+        with self._lock:
+            self._stack.close()
+            self.session = None
+
+    def _open_and_monitor(self) -> None:
+        assert self.session_factory is not None
+        try:
+            session = self._stack.enter_context(self.session_factory())
+        except Exception as exc:  # any failure to open is shown on the page, not raised
+            log.exception("the rig did not open")
+            with self._lock:
+                self.open_error = f"{type(exc).__name__}: {exc}"
+                self.state = "no_rig"
+                self.message = f"the rig did not open: {exc}"
+            return
+        with self._lock:
+            self.session = session
+            self.state = "idle"
+            self.message = "rig connected"
+            self._lock_by_motor = session.devices.input_motor is not None
+        self.hub.add_event({"type": "state", "state": "idle"})
+        next_metrics = time.monotonic()
+        while not self._stop.wait(MONITOR_PERIOD_S):
+            self._monitor_once()
+            if self._busy() and time.monotonic() >= next_metrics:
+                next_metrics = time.monotonic() + LIVE_METRICS_PERIOD_S
+                self._live_metrics()
+
+    # ------------------------------------------------------------------ monitor
+
+    def _monitor_once(self) -> None:
+        session = self.session
+        if session is None:
+            return
+        devices = session.devices
+        busy = self._run_thread is not None and self._run_thread.is_alive()
+        rows: list[dict[str, Any]] = []
+        live: dict[str, Any] = {}
+        for name in ("encoder", "input_encoder"):
+            enc = getattr(devices, name)
+            if enc is None:
+                continue
+            h = enc.health()
+            rows.append({"name": name.replace("_", " "), "connected": h.ok or h.samples > 0,
+                         "ok": h.ok, "heartbeat_age_s": h.heartbeat_age_s,
+                         "detail": h.last_error or f"NMT {h.nmt_state}, {h.samples} samples"})
+        if not busy and self._device_lock.acquire(blocking=False):
+            try:
+                devices.alive()
+                live.update(self._idle_values(devices, rows))
+            finally:
+                self._device_lock.release()
+        else:
+            tap = self._tap
+            latest = tap.recorder.latest if tap is not None and tap.recorder else None
+            if latest is not None:
+                live.update(torque_Nm=latest[1], twist_arcmin=latest[2])
+            rows.append({"name": "torque transducer", "connected": True, "ok": True,
+                         "detail": "streaming to the measurement"})
+        drive = devices.drive
+        if drive is not None:
+            try:
+                st = drive.status()
+                live.update(setpoint_Nm=st.setpoint_Nm, drive_enabled=st.enabled)
+                self._safe = (not st.enabled) and st.setpoint_Nm == 0
+                rows.append({"name": "loading drive", "connected": True, "ok": not st.faulted,
+                             "detail": ("enabled" if st.enabled else "disabled") +
+                             f", setpoint {st.setpoint_Nm:+.3f} N*m" +
+                             (f", fault {st.fault_code.name}" if st.faulted else "")})
+            except DeviceError as exc:
+                self._safe = None
+                rows.append({"name": "loading drive", "connected": False, "ok": False,
+                             "detail": str(exc)})
+        with self._lock:
+            self._devices = json_safe(rows)
+            self._live = json_safe(live)
+        self.hub.add_event({"type": "status"})
+
+    def _idle_values(self, devices: Any, rows: list[dict[str, Any]]) -> dict[str, Any]:
+        """Last values while no measurement runs (each device read once)."""
+        live: dict[str, Any] = {}
+        readers: list[tuple[str, Callable[[], None]]] = []
+        if devices.encoder is not None:
+            def enc() -> None:
+                live["twist_arcmin"] = devices.encoder.read().angle_deg * 60.0
+            readers.append(("", enc))
+        if devices.input_encoder is not None:
+            def inp() -> None:
+                live["input_angle_deg"] = devices.input_encoder.read().angle_deg
+            readers.append(("", inp))
+        if devices.transducer is not None:
+            def tt() -> None:
+                live["torque_Nm"] = devices.transducer.read().torque_Nm
+                live.setdefault("temperature_C", devices.transducer.temperature_C())
+            readers.append(("torque transducer", tt))
+        if devices.torque_sensor is not None:
+            def ts() -> None:
+                live["crosscheck_torque_Nm"] = devices.torque_sensor.read().torque_Nm
+            readers.append(("torque sensor", ts))
+        if devices.climate is not None:
+            def cl() -> None:
+                live["temperature_C"] = devices.climate.state().housing_C
+            readers.append(("climate chamber", cl))
+        if devices.input_motor is not None:
+            def im() -> None:
+                s = devices.input_motor.state()
+                live["input_angle_deg"] = s.angle_deg
+                rows.append({"name": "input motor", "connected": True, "ok": not s.fault,
+                             "detail": ("locked" if s.locked else "not locked") +
+                             f" at {s.angle_deg:.2f} deg"})
+            readers.append(("", im))
+        for name, read in readers:
+            try:
+                read()
+                if name:
+                    rows.append({"name": name, "connected": True, "ok": True, "detail": "ok"})
+            except DeviceError as exc:
+                rows.append({"name": name or exc.device, "connected": False, "ok": False,
+                             "detail": str(exc)})
+        return live
+
+    def _live_metrics(self) -> None:
+        """Analyse the run being recorded as far as it goes (from the store: what is on disk)
+        and send its metrics: they fill in as the loop closes (unavailable ones are None)."""
+        from rig.analyse import analyse_run
+
+        with self._lock:
+            profile = self._profile
+        tap = self._tap
+        recorder = tap.recorder if tap is not None else None
+        if recorder is None or recorder.finished:
+            return
+        try:
+            run = self.store.load_run(recorder.run_id)
+            if run.n_samples < 50:
+                return
+            metrics = json_safe(analyse_run(run, profile=profile).to_dict())
+        except Exception as exc:  # a loop half measured is often not analysable yet
+            log.debug("live metrics of %s not available yet: %s", recorder.run_id, exc)
+            return
+        self.hub.add_event({"type": "metrics", "run_id": recorder.run_id, "partial": True,
+                            "metrics": metrics})
+
+    # ------------------------------------------------------------------ status
+
+    def status(self, operator: bool) -> dict[str, Any]:
+        """The page's view of the rig now (the ``Status`` model)."""
+        with self._lock:
+            progress = self._progress
+            session = self.session
+            out = {
+                "state": self.state, "operator": operator,
+                "rig": (session.io.description if session is not None else
+                        (self.description or None)),
+                "simulated": self.simulated,
+                "torque_limit_Nm": session.io.torque_limit_Nm if session is not None else None,
+                "devices": list(self._devices), "live": dict(self._live), "safe": self._safe,
+                "progress": None if progress is None else {
+                    "step": progress.step, "n_steps": progress.n_steps,
+                    "elapsed_s": progress.elapsed_s, "remaining_s": progress.remaining_s,
+                    "description": progress.description or progress.message,
+                    "run_label": progress.run_label, "run_id": progress.run_id},
+                "fault": None if (f := explain(self._fault_reason)) is None else f.to_dict(),
+                "input_lock": {"confirmed": self._lock_confirmed, "angle_deg": self._lock_angle,
+                               "by_motor": self._lock_by_motor},
+                "current": None if self._current is None else dict(self._current),
+                "last_result": self._last_result,
+                "message": self.message,
+            }
+        return json_safe(out)
+
+    def _require_session(self) -> RigSession:
+        session = self.session
+        if session is None:
+            why = self.open_error or self.message
+            raise ControlError(f"no rig is connected ({why})")
+        return session
+
+    def _busy(self) -> bool:
+        return self._run_thread is not None and self._run_thread.is_alive()
+
+    # ------------------------------------------------------------------ preview
+
+    def preview(self, req: RunRequest) -> dict[str, Any]:
+        """Steps, duration estimate and whether the plan fits the rig (nothing moves)."""
+        plan = build_plan(req)
+        steps = list(plan.steps())
+        est = estimate(steps)
+        problems: list[str] = []
+        session = self.session
+        limit = None
+        if session is not None:
+            limit = session.io.torque_limit_Nm
+            if req.torque_limit_Nm is not None:
+                limit = min(limit, req.torque_limit_Nm)
+            try:
+                preflight(steps, limit, has_input_motor=session.io.has_input_motor,
+                          has_climate=session.io.has_climate)
+            except PlanRejected as exc:
+                problems.append(str(exc))
+        else:
+            problems.append("no rig connected: the plan cannot be checked against a rig")
+        model, assumptions = model_summary(req)
+        listing = [line.strip() for line in plan.listing()[:PREVIEW_LINES]]
+        return json_safe({
+            "name": plan.name, "n_steps": len(steps), "n_runs": est.n_runs,
+            "estimated_s": est.total_s, "dwell_s": est.dwell_s, "steps": listing,
+            "truncated": len(steps) > len(listing), "torque_limit_Nm": limit,
+            "amplitude_Nm": req.plan.loop_params().amplitude_Nm,
+            "fits": not problems, "problems": problems, "assumptions": assumptions,
+            "model": model,
+        })
+
+    # ------------------------------------------------------------------ commands
+
+    def start_measurement(self, req: RunRequest) -> dict[str, Any]:
+        """Start a run or a campaign on a thread; 409 (ControlError) when not possible."""
+        with self._lock:
+            session = self._require_session()
+            if self._busy():
+                raise ControlError(f"a measurement is already {self.state}: abort it first")
+            if not self._lock_confirmed:
+                raise ControlError("confirm the input lock first (Devices: Confirm input "
+                                   "lock): a test may start only with the input locked")
+            plan = build_plan(req)
+            steps = list(plan.steps())
+            limit = session.io.torque_limit_Nm
+            if req.torque_limit_Nm is not None:
+                limit = min(limit, req.torque_limit_Nm)
+            try:
+                preflight(steps, limit, has_input_motor=session.io.has_input_motor,
+                          has_climate=session.io.has_climate)
+            except PlanRejected as exc:
+                raise ControlError(str(exc)) from exc
+            self.state = "running"
+            self.message = f"{req.kind} starting"
+            self._fault_reason = None
+            self._progress = None
+            self._current = {"kind": req.kind, "run_id": None, "campaign_id": None,
+                             "plan": plan.name, "n_steps": len(steps),
+                             "estimated_s": estimate(steps).total_s}
+            self._tap = TapStore(self.store, self.hub)
+            self._profile = req.profile
+            thread = threading.Thread(target=self._measure, args=(req, session),
+                                      name="rig web measurement", daemon=True)
+            self._run_thread = thread
+        self.hub.add_event({"type": "state", "state": "running"})
+        thread.start()
+        return {"ok": True, "message": f"{req.kind} started: {plan.name}, {len(steps)} steps"}
+
+    def _measure(self, req: RunRequest, session: RigSession) -> None:
+        tap = self._tap
+        assert tap is not None
+        result: dict[str, Any] | None = None
+        reason: str | None = None
+        state = "aborted"
+        with self._device_lock:
+            try:
+                if req.kind == "run":
+                    result, state, reason = self._measure_run(req, session, tap)
+                else:
+                    result, state, reason = self._measure_campaign(req, session, tap)
+            except (RigError, DeviceError, ValueError) as exc:
+                reason = str(exc)
+                log.error("measurement failed: %s", exc)
+            except Exception as exc:  # a bug: shown on the page, the rig made safe
+                reason = f"{type(exc).__name__}: {exc}"
+                log.exception("measurement failed")
+            finally:
+                session.devices.safe_state()
+        with self._lock:
+            self.state = state
+            self._engine = None
+            self._fault_reason = reason if state != "completed" else None
+            self._last_result = json_safe(result) if result is not None else None
+            self.message = f"{req.kind} {state}" + (f": {reason}" if reason else "")
+            if self._lock_by_motor:
+                self._lock_confirmed = False  # the plan moved the input: confirm it again
+        self.hub.add_event({"type": "state", "state": state, "result": self._last_result})
+
+    def _options(self, req: RunRequest) -> EngineOptions:
+        return EngineOptions(torque_limit_Nm=req.torque_limit_Nm, profile=req.profile)
+
+    def _measure_run(self, req: RunRequest, session: RigSession, tap: TapStore
+                     ) -> tuple[dict[str, Any], str, str | None]:
+        unit = req.unit.mapping()
+        meta = run_meta(unit, session, req.operator)
+        plan = hysteresis_plan(req.plan.loop_params(), req.position_deg)
+        engine, outcomes = measure_plan(session, tap, plan, meta, options=self._options(req),
+                                        progress=self._on_event, on_engine=self._set_engine)
+        limits = req.limits.limits()
+        runs = [run_result(o.to_dict(), limits) for o in outcomes]
+        state = "completed" if engine.state == "completed" else "aborted"
+        passed = state == "completed" and bool(runs) and all(r["passed"] for r in runs)
+        failures = [c for r in runs for c in r["failures"]]
+        if state == "aborted" and engine.stopping_reason:
+            failures.append(f"run aborted: {engine.stopping_reason}")
+        return ({"kind": "run", "status": state, "reason": engine.stopping_reason,
+                 "passed": passed, "failures": failures, "runs": runs},
+                state, engine.stopping_reason)
+
+    def _measure_campaign(self, req: RunRequest, session: RigSession, tap: TapStore
+                          ) -> tuple[dict[str, Any], str, str | None]:
+        data: dict[str, Any] = {
+            "name": req.name, "operator": req.operator, "profile": req.profile,
+            "torque_limit_Nm": req.torque_limit_Nm, "unit": req.unit.mapping(),
+            "plan": req.plan.loop_params().model_dump(), "axes": req.axes.model_dump(),
+            "limits": req.limits.model_dump(),
+        }
+        camp = campaign_from_mapping({k: v for k, v in data.items() if v is not None},
+                                     source="<control page>")
+        result = run_campaign(camp, session, tap, progress=self._on_event,
+                              on_engine=self._set_engine)
+        with self._lock:
+            if self._current is not None:
+                self._current["campaign_id"] = result.get("campaign_id")
+        return {"kind": "campaign", **result}, result["status"], result.get("reason")
+
+    def _set_engine(self, engine: Engine) -> None:
+        with self._lock:
+            self._engine = engine
+            stop = self._stop.is_set()
+        if stop:
+            engine.abort("the control page was shut down")
+
+    def _on_event(self, event: ProgressEvent) -> None:
+        """Engine thread: keep the latest progress, forward it to the pages (cheap)."""
+        with self._lock:
+            self._progress = event
+            if event.kind in ("paused", "resumed"):
+                self.state = event.state
+            if event.kind in ("fault", "abort", "estop"):
+                self.state = "stopping"
+                self._fault_reason = event.message
+            if self._current is not None and event.run_id:
+                self._current["run_id"] = event.run_id
+            if event.kind == "run_started" and self._current is not None:
+                camp = getattr(self._engine, "campaign_id", None)
+                if camp:
+                    self._current["campaign_id"] = camp
+        self.hub.add_event({"type": "progress", **json_safe(event.to_dict())})
+
+    def _running_engine(self) -> Engine:
+        engine = self._engine
+        if engine is None or not self._busy():
+            raise ControlError("no measurement is running")
+        return engine
+
+    def pause(self) -> str:
+        self._running_engine().pause()
+        return "pause requested: the rig holds its torque at the next checkpoint"
+
+    def resume(self) -> str:
+        self._running_engine().resume()
+        with self._lock:
+            if self.state == "paused":
+                self.state = "running"
+        return "resumed"
+
+    def abort(self) -> str:
+        self._running_engine().abort("aborted by the operator")
+        return "aborted: the drive is off and the torque zero; the samples so far are kept"
+
+    def estop(self) -> str:
+        """Safe state now, whatever the state: the engine's E-stop if a measurement runs,
+        else zero torque and the drive disabled directly. Never refused."""
+        engine = self._engine
+        done = []
+        if engine is not None:
+            engine.estop("E-stop pressed on the control page")
+            done.append("measurement stopped")
+        session = self.session
+        if session is not None:
+            ok = session.devices.safe_state()
+            done.append("drive disabled, torque zero" if ok else
+                        "drive not reachable: its watchdog disables it")
+            with self._lock:
+                self._fault_reason = "E-stop pressed on the control page"
+                if not self._busy():
+                    self.state = "idle"
+                self._lock_confirmed = False
+        else:
+            done.append("no rig connected")
+        self.hub.add_event({"type": "state", "state": self.state, "estop": True})
+        return "E-stop: " + "; ".join(done)
+
+    def tare(self) -> float:
+        """Tare the torque transducer (unit unloaded, no measurement running); N*m."""
+        session = self._require_session()
+        if self._busy():
+            raise ControlError("cannot tare during a measurement")
+        transducer = session.devices.transducer
+        if transducer is None:
+            raise ControlError("the rig has no torque transducer to tare")
+        with self._device_lock:
+            try:
+                offset = transducer.tare()
+            except DeviceError as exc:
+                raise ControlError(f"tare refused: {exc}") from exc
+        return float(offset)
+
+    def confirm_input_lock(self, req: InputLockRequest) -> str:
+        """Lock the input with the motor (if any, at ``angle_deg``) and record the operator's
+        confirmation; ``confirm`` False withdraws it."""
+        session = self._require_session()
+        if self._busy():
+            raise ControlError("cannot change the input lock during a measurement")
+        if not req.confirm:
+            with self._lock:
+                self._lock_confirmed = False
+            return "input lock confirmation withdrawn"
+        motor = session.devices.input_motor
+        angle = req.angle_deg
+        if motor is not None:
+            target = angle if angle is not None else motor.state().angle_deg
+            with self._device_lock:
+                try:
+                    state = motor.lock_at(target, 30.0)
+                except DeviceError as exc:
+                    raise ControlError(f"the input did not lock: {exc}") from exc
+            angle = state.angle_deg
+            text = f"input locked by the motor at {angle:.3f} deg"
+        else:
+            text = "input lock confirmed by the operator"
+        with self._lock:
+            self._lock_confirmed = True
+            self._lock_angle = angle
+        return text

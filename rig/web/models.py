@@ -1,0 +1,368 @@
+"""Request and response models of the control page's API (pydantic; units in the names).
+
+Requests are validated here with bounds that keep every value finite and every plan small
+enough to preview: a bad value is a 422 naming the field, never a 500. The plan and campaign
+settings map one to one onto :class:`rig.plans.LoopParams`, :class:`rig.plans.CampaignAxes`
+and :class:`rig.campaign.Limits`.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from rig.campaign import Limits
+from rig.plans import CampaignAxes, LoopParams
+
+ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_-]{0,99}$"
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,79}$"
+MAX_PLAN_STEPS = 200_000
+"""A plan longer than this is refused (its preview alone would take seconds)."""
+
+_strict = ConfigDict(extra="forbid")
+
+
+def _length(min_value: float, max_value: float, **kw: Any) -> Any:
+    return Field(ge=min_value, le=max_value, allow_inf_nan=False, **kw)
+
+
+class UnitData(BaseModel):
+    """The unit under test: the seed 000 fields of run.json ``unit`` (mm, deg).
+
+    Optional fields left out are unknown to the model (not zero); run-format.md says how the
+    reference nominal model uses each one.
+    """
+
+    model_config = _strict
+
+    kind: Literal["internal_involute"] = "internal_involute"
+    serial: str | None = Field(None, pattern=NAME_PATTERN, description="Serial number.")
+    z_internal: int = Field(ge=3, le=2000, description="Teeth of the internal gear (ring).")
+    z_external: int = Field(ge=3, le=2000, description="Teeth of the external gear.")
+    module_mm: float = _length(0.01, 100.0)
+    pressure_angle_deg: float | None = Field(None, gt=0, lt=45, allow_inf_nan=False)
+    addendum_coeff: float | None = _length(0.0, 2.0, default=None)
+    clearance_coeff: float | None = _length(0.0, 1.0, default=None)
+    face_width_mm: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
+    center_distance_mm: float | None = _length(0.0, 10_000.0, default=None)
+    pin_diameter_mm: float | None = Field(None, gt=0, le=1000, allow_inf_nan=False)
+    m_value_internal_mm: list[float] | None = Field(None, min_length=1, max_length=64)
+    m_value_external_mm: list[float] | None = Field(None, min_length=1, max_length=64)
+    runout_internal_mm: float | None = _length(0.0, 10.0, default=None)
+    runout_external_mm: float | None = _length(0.0, 10.0, default=None)
+    bearing_clearance_mm: list[float] | None = Field(None, min_length=1, max_length=8)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> UnitData:
+        if self.z_internal <= self.z_external:
+            raise ValueError(f"z_internal ({self.z_internal}) must exceed z_external "
+                             f"({self.z_external})")
+        for key in ("m_value_internal_mm", "m_value_external_mm", "bearing_clearance_mm"):
+            values = getattr(self, key)
+            if values is not None and not all(0 <= v <= 100_000 for v in values):
+                raise ValueError(f"{key}: every value must be in [0, 100000] mm")
+        return self
+
+    def mapping(self) -> dict[str, Any]:
+        """The run.json ``unit`` object (unknown fields left out)."""
+        return self.model_dump(exclude_none=True)
+
+
+class PlanSettings(BaseModel):
+    """One hysteresis run's loading (rig/plans.py, :class:`rig.plans.LoopParams`): N*m, %,
+    s, arcmin. The defaults are the GB/T loop of examples/campaigns/seed000-pair1.toml:
+    4 equal torque steps per quarter, settled points at +-3 % of rated too, the free play
+    crossed slowly (|T| < 0.3 N*m at 0.3 N*m/s)."""
+
+    model_config = _strict
+
+    rated_torque_Nm: float = Field(gt=0, le=100_000, allow_inf_nan=False)
+    amplitude_pct: float = Field(100.0, gt=0, le=100, allow_inf_nan=False)
+    mode: Literal["equal_torque", "equal_position", "constant_rate"] = "equal_torque"
+    cycles: int = Field(1, ge=1, le=20)
+    pre_cycles: int = Field(1, ge=0, le=10)
+    rate_Nm_per_s: float = Field(25.0, ge=0.001, le=100_000, allow_inf_nan=False)
+    steps_per_quarter: int = Field(4, ge=1, le=200)
+    twist_step_arcmin: float = Field(0.5, ge=0.001, le=600, allow_inf_nan=False)
+    dwell_s: float = _length(0.0, 600.0, default=0.05)
+    settle_rate_arcmin_per_s: float = Field(2.0, ge=0.001, le=600, allow_inf_nan=False)
+    settle_hold_s: float = Field(0.1, ge=0.001, le=60, allow_inf_nan=False)
+    settle_timeout_s: float = Field(2.0, ge=0.01, le=600, allow_inf_nan=False)
+    sample_s: float = _length(0.0, 60.0, default=0.05)
+    extra_levels_pct: list[float] = Field(default_factory=lambda: [3.0], max_length=10)
+    zero_band_Nm: float = _length(0.0, 100_000.0, default=0.3)
+    zero_rate_Nm_per_s: float | None = Field(0.3, ge=0.001, le=100_000, allow_inf_nan=False)
+
+    @model_validator(mode="after")
+    def _levels(self) -> PlanSettings:
+        bad = [v for v in self.extra_levels_pct if not 0 < v < 100]
+        if bad:
+            raise ValueError(f"extra_levels_pct: values must be in (0, 100), got {bad}")
+        return self
+
+    def loop_params(self) -> LoopParams:
+        return LoopParams(**self.model_dump())
+
+
+class LimitSettings(BaseModel):
+    """Pass/fail limits (:class:`rig.campaign.Limits`): arcmin at most, N*m/arcmin at least;
+    None: not checked."""
+
+    model_config = _strict
+
+    lost_motion_arcmin_max: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
+    backlash_arcmin_max: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
+    stiffness_Nm_per_arcmin_min: float | None = Field(None, gt=0, le=1e9, allow_inf_nan=False)
+
+    def limits(self) -> Limits:
+        return Limits(**self.model_dump())
+
+
+class AxesSettings(BaseModel):
+    """What a campaign varies (:class:`rig.plans.CampaignAxes`): input angles (deg),
+    amplitudes (% of rated), housing temperatures (deg C; empty: none) and repeats."""
+
+    model_config = _strict
+
+    positions_deg: list[float] = Field(default_factory=lambda: [0.0], min_length=1,
+                                       max_length=360)
+    amplitudes_pct: list[float] = Field(default_factory=lambda: [100.0], min_length=1,
+                                        max_length=20)
+    temperatures_C: list[float] = Field(default_factory=list, max_length=20)
+    repeats: int = Field(1, ge=1, le=50)
+
+    @model_validator(mode="after")
+    def _ranges(self) -> AxesSettings:
+        for key, lo, hi in (("positions_deg", -3600.0, 3600.0), ("amplitudes_pct", 0.0, 100.0),
+                            ("temperatures_C", -60.0, 200.0)):
+            bad = [v for v in getattr(self, key) if not lo <= v <= hi or
+                   (key == "amplitudes_pct" and v == 0)]
+            if bad:
+                raise ValueError(f"{key}: values must be in [{lo:g}, {hi:g}]"
+                                 f"{' and > 0' if key == 'amplitudes_pct' else ''}, got {bad}")
+        return self
+
+    def axes(self) -> CampaignAxes:
+        return CampaignAxes(**self.model_dump())
+
+
+def _plan_size(plan: PlanSettings, n_runs: int) -> int:
+    """An upper bound of the steps of the plan (a few steps per level and quarter)."""
+    per_quarter = 4 * (plan.steps_per_quarter + 2 * len(plan.extra_levels_pct)) + 5
+    return n_runs * (plan.cycles * 4 * per_quarter + 2 * plan.pre_cycles + 12)
+
+
+class RunRequest(BaseModel):
+    """Set up a single run (``kind`` "run") or a campaign (``kind`` "campaign": runs over
+    ``axes``). ``position_deg`` (run only) locks the input there first (needs an input
+    motor); ``torque_limit_Nm`` may only lower the rig's limit."""
+
+    model_config = _strict
+
+    kind: Literal["run", "campaign"] = "run"
+    name: str = Field("web", pattern=NAME_PATTERN, description="Campaign name (campaigns).")
+    operator: str | None = Field(None, min_length=1, max_length=80)
+    unit: UnitData
+    plan: PlanSettings
+    position_deg: float | None = Field(None, ge=-3600, le=3600, allow_inf_nan=False)
+    axes: AxesSettings = Field(default_factory=AxesSettings)
+    limits: LimitSettings = Field(default_factory=LimitSettings)
+    torque_limit_Nm: float | None = Field(None, gt=0, le=100_000, allow_inf_nan=False)
+    profile: Literal["nabtesco", "harmonic-drive", "gbt", "spinea"] = "nabtesco"
+
+    @model_validator(mode="after")
+    def _small_enough(self) -> RunRequest:
+        a = self.axes
+        n_runs = 1 if self.kind == "run" else (
+            len(a.positions_deg) * len(a.amplitudes_pct) * max(1, len(a.temperatures_C))
+            * a.repeats)
+        size = _plan_size(self.plan, n_runs)
+        if size > MAX_PLAN_STEPS:
+            raise ValueError(f"the plan would have about {size} steps (at most "
+                             f"{MAX_PLAN_STEPS}): fewer positions, repeats, cycles or steps")
+        return self
+
+
+class PlanPreview(BaseModel):
+    """The plan before it runs: its steps (the first ``len(steps)`` of ``n_steps``), the
+    expected duration (s), the number of runs, and whether it fits the rig."""
+
+    name: str
+    n_steps: int
+    n_runs: int
+    estimated_s: float
+    dwell_s: float
+    steps: list[str]
+    truncated: bool
+    torque_limit_Nm: float | None
+    amplitude_Nm: float
+    fits: bool
+    problems: list[str]
+    assumptions: list[str]
+    model: dict[str, Any] | None
+
+
+class Message(BaseModel):
+    """A short answer: ``ok`` and what was done."""
+
+    ok: bool
+    message: str
+
+
+class TareResult(BaseModel):
+    """The torque transducer's stored tare offset (N*m) after taring."""
+
+    ok: bool
+    offset_Nm: float
+    message: str
+
+
+class InputLockRequest(BaseModel):
+    """Confirm the input lock. With an input motor, ``angle_deg`` (deg) locks it there first;
+    without one the operator confirms the input is locked by hand."""
+
+    model_config = _strict
+
+    angle_deg: float | None = Field(None, ge=-3600, le=3600, allow_inf_nan=False)
+    confirm: bool = True
+
+
+class Device(BaseModel):
+    """One device: connected, healthy, heartbeat age (s), a readable detail."""
+
+    name: str
+    connected: bool
+    ok: bool
+    heartbeat_age_s: float | None = None
+    detail: str = ""
+
+
+class LiveValues(BaseModel):
+    """Latest values: output twist (arcmin), torque (N*m), housing temperature (deg C),
+    torque setpoint (N*m), drive enabled; None when unknown."""
+
+    twist_arcmin: float | None = None
+    torque_Nm: float | None = None
+    crosscheck_torque_Nm: float | None = None
+    temperature_C: float | None = None
+    setpoint_Nm: float | None = None
+    drive_enabled: bool | None = None
+    input_angle_deg: float | None = None
+
+
+class Progress(BaseModel):
+    """Step ``step`` of ``n_steps``; times in s."""
+
+    step: int
+    n_steps: int
+    elapsed_s: float
+    remaining_s: float
+    description: str
+    run_label: str | None
+    run_id: str | None
+
+
+class FaultOut(BaseModel):
+    """A fault in plain words (title, what to do) with the engine's message (detail)."""
+
+    title: str
+    action: str
+    detail: str
+
+
+class InputLock(BaseModel):
+    """Whether the operator confirmed the input lock (a run may start only then)."""
+
+    confirmed: bool
+    angle_deg: float | None
+    by_motor: bool
+
+
+class Status(BaseModel):
+    """Everything the page shows about the rig now."""
+
+    state: Literal["no_rig", "idle", "starting", "running", "paused", "stopping",
+                   "completed", "aborted"]
+    operator: bool
+    rig: str | None
+    simulated: bool
+    torque_limit_Nm: float | None
+    devices: list[Device]
+    live: LiveValues
+    safe: bool | None
+    progress: Progress | None
+    fault: FaultOut | None
+    input_lock: InputLock
+    current: dict[str, Any] | None
+    last_result: dict[str, Any] | None
+    message: str
+
+
+class RunSummary(BaseModel):
+    """One run of the store's index (docs/store.md)."""
+
+    run_id: str
+    campaign_id: str | None
+    status: str
+    reason: str | None
+    unit_serial: str | None
+    operator: str | None
+    rig_id: str | None
+    plan_name: str | None
+    plan_version: str | None
+    started_at: str
+    finished_at: str | None
+    n_samples: int | None
+    calibration_warnings: list[str]
+    metrics: dict[str, Any] | None
+
+
+class RunDetail(BaseModel):
+    """A run's run.json (``meta``), its index row and its columns."""
+
+    summary: RunSummary
+    meta: dict[str, Any]
+    columns: list[str]
+
+
+class LoopData(BaseModel):
+    """A stored run's loop for drawing: torque (N*m) and twist (arcmin, centred on the loop),
+    the model loop on the same torque (or None), the ±p % band half-width (N*m) and the
+    metrics (``rig analyse --json`` keys; empty with ``analysis_error`` when not analysable).
+    """
+
+    run_id: str
+    n_samples: int
+    torque_Nm: list[float | None]
+    twist_arcmin: list[float | None]
+    model_twist_arcmin: list[float | None] | None
+    band_Nm: float | None
+    metrics: dict[str, Any]
+    analysis_error: str | None
+
+
+class CampaignSummary(BaseModel):
+    """One campaign of the store: status, its meta and results summary."""
+
+    campaign_id: str
+    name: str
+    status: str
+    started_at: str
+    finished_at: str | None
+    meta: dict[str, Any]
+    summary: dict[str, Any] | None
+    runs: list[RunSummary]
+
+
+class UnitExample(BaseModel):
+    """An example unit shipped with the package (rig/examples/units)."""
+
+    name: str
+    unit: dict[str, Any]
+
+
+class ErrorBody(BaseModel):
+    """An error: ``detail`` says what was wrong and what to do."""
+
+    detail: str

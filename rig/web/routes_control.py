@@ -1,0 +1,115 @@
+"""Commands: status, plan preview, start/pause/resume/abort, E-stop, tare, input lock.
+
+Everything that moves the rig or changes data needs the operator token
+(:func:`rig.web.auth.require_operator`); the E-stop does not: it only ever takes the rig to
+its safe state, and a stop must never wait for a login.
+"""
+
+from __future__ import annotations
+
+import json
+from importlib import resources
+from typing import Any
+
+from fastapi import APIRouter, HTTPException, Request
+
+from rig.web.auth import Operator, is_operator
+from rig.web.controller import ControlError, RigController
+from rig.web.models import (
+    ErrorBody,
+    InputLockRequest,
+    Message,
+    PlanPreview,
+    RunRequest,
+    Status,
+    TareResult,
+    UnitExample,
+)
+
+router = APIRouter(prefix="/api", tags=["control"])
+
+AUTH = {401: {"model": ErrorBody, "description": "No operator token: the page can only watch."},
+        403: {"model": ErrorBody, "description": "Wrong operator token."}}
+CONFLICT = {409: {"model": ErrorBody, "description": "Not possible now (the message says why)."}}
+
+
+def _controller(request: Request) -> RigController:
+    return request.app.state.controller
+
+
+def _do(action: Any) -> Any:
+    try:
+        return action()
+    except ControlError as exc:
+        raise HTTPException(409, str(exc)) from exc
+
+
+@router.get("/status", response_model=Status, summary="The rig now: devices, live values, "
+            "progress, fault, results")
+def status(request: Request) -> dict[str, Any]:
+    return _controller(request).status(is_operator(request))
+
+
+@router.post("/plan/preview", response_model=PlanPreview,
+             summary="Preview a run or campaign: steps, estimated duration, fits the rig")
+def preview(request: Request, body: RunRequest) -> dict[str, Any]:
+    return _controller(request).preview(body)
+
+
+@router.post("/control/start", response_model=Message, responses={**AUTH, **CONFLICT},
+             summary="Start a run or a campaign (needs the input lock confirmed)")
+def start(request: Request, body: RunRequest,
+          _token: Operator) -> dict[str, Any]:
+    return _do(lambda: _controller(request).start_measurement(body))
+
+
+@router.post("/control/pause", response_model=Message, responses={**AUTH, **CONFLICT},
+             summary="Pause at the next checkpoint (the torque is held)")
+def pause(request: Request, _token: Operator) -> dict[str, Any]:
+    return {"ok": True, "message": _do(_controller(request).pause)}
+
+
+@router.post("/control/resume", response_model=Message, responses={**AUTH, **CONFLICT},
+             summary="Resume a paused measurement")
+def resume(request: Request, _token: Operator) -> dict[str, Any]:
+    return {"ok": True, "message": _do(_controller(request).resume)}
+
+
+@router.post("/control/abort", response_model=Message, responses={**AUTH, **CONFLICT},
+             summary="Abort: safe state at once, the run kept as aborted")
+def abort(request: Request, _token: Operator) -> dict[str, Any]:
+    return {"ok": True, "message": _do(_controller(request).abort)}
+
+
+@router.post("/control/estop", response_model=Message,
+             summary="E-stop: zero torque and the drive disabled, always (no token needed)")
+def estop(request: Request) -> dict[str, Any]:
+    return {"ok": True, "message": _controller(request).estop()}
+
+
+@router.post("/devices/tare", response_model=TareResult, responses={**AUTH, **CONFLICT},
+             summary="Tare the torque transducer (unit unloaded, no measurement running)")
+def tare(request: Request, _token: Operator) -> dict[str, Any]:
+    offset = _do(_controller(request).tare)
+    return {"ok": True, "offset_Nm": offset,
+            "message": f"torque transducer tared (offset {offset:+.4f} N*m)"}
+
+
+@router.post("/devices/input-lock", response_model=Message, responses={**AUTH, **CONFLICT},
+             summary="Lock the input (motor) and confirm it, or withdraw the confirmation")
+def input_lock(request: Request, body: InputLockRequest,
+               _token: Operator) -> dict[str, Any]:
+    return {"ok": True, "message": _do(lambda: _controller(request).confirm_input_lock(body))}
+
+
+@router.get("/units", response_model=list[UnitExample],
+            summary="Example units shipped with the package (seed 000 pairs)")
+def units() -> list[dict[str, Any]]:
+    folder = resources.files("rig.examples") / "units"
+    out = []
+    for item in sorted(folder.iterdir(), key=lambda p: p.name):
+        if item.name.endswith(".json"):
+            data = json.loads(item.read_text(encoding="utf-8"))
+            if data.get("kind", "internal_involute") == "internal_involute":
+                out.append({"name": item.name[:-5], "unit": data})
+    return out

@@ -186,15 +186,15 @@ def run_campaign(camp: CampaignFile, session: RigSession, store: Store, *,
     campaign_id = store.create_campaign(camp.name, meta=json_safe(cmeta))
     options = EngineOptions(torque_limit_Nm=camp.torque_limit_Nm, profile=camp.profile,
                             stale_timeout_s=session.stale_timeout_s)
-    engine: Engine | None = None
     try:
         engine, outcomes = measure_plan(
             session, store, plan, run_meta(unit, session, camp.operator),
             campaign_id=campaign_id, options=options, progress=progress, on_engine=on_engine)
-    finally:
-        if engine is None:  # refused before it ran, or an error: close the campaign
-            with contextlib.suppress(Exception):
-                store.finish_campaign(campaign_id, "aborted", {"reason": "did not run"})
+    except BaseException as exc:  # refused before it ran, Ctrl-C, a bug: close the campaign
+        with contextlib.suppress(Exception):
+            store.finish_campaign(campaign_id, "aborted",
+                                  {"reason": f"{type(exc).__name__}: {exc}"})
+        raise
     runs = [o.to_dict() for o in outcomes]
     summary = summarise(runs, camp.limits)
     status = "completed" if engine.state == "completed" else "aborted"

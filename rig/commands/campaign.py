@@ -1,0 +1,116 @@
+"""``rig campaign run FILE``: a campaign (positions, amplitudes, temperatures, repeats) into a
+rig-campaign/1 folder of the store, with pass/fail against the file's limits.
+
+Exit codes: 0 every limit passed, 1 a limit failed, 2 an error (bad file, device fault,
+an aborted campaign).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.table import Table
+
+from rig.commands.measure import STORE_HELP, console, progress_bar, write_json
+
+
+def _summary_table(result: dict[str, Any]) -> Table:
+    table = Table(title=f"Campaign {result['campaign']} ({result['status']})")
+    for name in ("run", "input angle\ndeg", "lost motion\narcmin", "backlash\narcmin",
+                 "stiffness\nN·m/arcmin", "status"):
+        table.add_column(name, justify="left" if name in ("run", "status") else "right")
+    for r in result["runs"]:
+        u = r.get("uncertainty") or {}
+
+        def f(key: str, digits: int = 3, r=r, u=u) -> str:
+            v = r.get(key)
+            if v is None:
+                return "n/a"
+            return f"{v:.{digits}f}" + (f" ± {u[key]:.{digits}f}" if u.get(key) else "")
+
+        angle = r.get("input_angle_deg")
+        table.add_row(r.get("label") or r["run_id"], "" if angle is None else f"{angle:g}",
+                      f("lost_motion_arcmin"), f("backlash_arcmin"),
+                      f("stiffness_Nm_per_arcmin", 2), r["status"])
+    return table
+
+
+def register(app: typer.Typer) -> None:
+    campaign_app = typer.Typer(help="Measurement campaigns (TOML files, docs/campaigns.md).",
+                               no_args_is_help=True)
+    app.add_typer(campaign_app, name="campaign")
+
+    @campaign_app.command("run")
+    def run(
+        file: Annotated[Path, typer.Argument(help="Campaign file (TOML).")],
+        simulated: Annotated[bool, typer.Option(
+            "--simulated", help="Start the simulated rig (its own process) with the "
+            "campaign's unit for the duration.")] = False,
+        rig: Annotated[Path | None, typer.Option(
+            "--rig", help="Rig configuration (TOML) of real or simulated device addresses.")
+        ] = None,
+        store: Annotated[Path, typer.Option(envvar="RIG_STORE", help=STORE_HELP)
+                         ] = Path("rig-store"),
+        json_file: Annotated[Path | None, typer.Option(
+            "--json", help="Write the per-run metrics and the campaign summary as JSON "
+            "('-': stdout).")] = None,
+        preview: Annotated[bool, typer.Option(
+            "--preview", help="List the plan's steps and its duration; measure nothing.")
+        ] = False,
+    ) -> None:
+        """Run a campaign; write its runs and campaign.json under the store's campaigns/."""
+        from rig.campaign import load_campaign
+        from rig.errors import RigError
+        from rig.measure import open_session, plant_config_for, run_campaign
+        from rig.plan_estimate import estimate
+        from rig.store import Store
+
+        out = console()
+        camp = load_campaign(file)
+        plan = camp.build_plan()
+        est = estimate(plan.steps())
+        if preview:
+            for line in plan.listing():
+                out.print(line, highlight=False)
+            out.print(f"{est.n_steps} steps, {est.n_runs} runs, about {est.total_s:.1f} s "
+                      f"({est.dwell_s:.1f} s dwelling)")
+            return
+        plant_cfg = plant_config_for(camp.unit_data(), camp.simulation, camp.source) \
+            if simulated else None
+        st = Store(store)
+        out.print(f"campaign {camp.name}: {est.n_runs} runs, about {est.total_s:.0f} s")
+        with open_session(rig=rig, simulated=simulated, plant=plant_cfg) as session, \
+                progress_bar(out, est.total_s) as on_event:
+            try:
+                result = run_campaign(camp, session, st, progress=on_event)
+            except KeyboardInterrupt:
+                out.print("[red]interrupted: the rig is in its safe state; the runs are kept"
+                          "[/red]")
+                raise typer.Exit(2) from None
+        if json_file is not None:
+            write_json(json_file, result)
+        out.print(_summary_table(result))
+        lm = result["lost_motion_arcmin"]
+        if lm["mean"] is not None:
+            out.print(f"lost motion over {lm['n']} runs: mean {lm['mean']:.3f}, min "
+                      f"{lm['min']:.3f}, max {lm['max']:.3f}, std {lm['std']:.3f} arcmin")
+        sig = result.get("runout_signature")
+        if sig:
+            out.print(f"runout signature (once per input revolution): amplitude "
+                      f"{sig['amplitude']:.3f} arcmin at {sig['phase_deg']:.0f} deg, "
+                      f"residual {sig['residual_rms']:.3f} arcmin")
+        model = result.get("model") or {}
+        if model.get("lost_motion_arcmin") is not None:
+            out.print(f"model (reference nominal, no runout): lost motion "
+                      f"{model['lost_motion_arcmin']:.3f} arcmin")
+        out.print(f"campaign folder: {result['path']}")
+        if result["status"] != "completed":
+            out.print(f"[red]campaign aborted: {result['reason']}[/red]")
+            raise typer.Exit(2)
+        for cause in result["failures"]:
+            out.print(f"[red]FAIL[/red] {cause}")
+        if not result["passed"] and not result["failures"]:
+            raise RigError("campaign failed without a cause (a bug)")
+        raise typer.Exit(0 if result["passed"] else 1)

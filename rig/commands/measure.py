@@ -1,0 +1,209 @@
+"""``rig measure``: one hysteresis run on the real or the simulated rig, into the store.
+
+Exit codes (scripts rely on them): 0 every limit passed, 1 a limit failed, 2 an error
+(bad input, a device fault, an aborted run).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+if TYPE_CHECKING:
+    from rig.engine_events import ProgressEvent
+
+STORE_HELP = ("Store folder. Default: the RIG_STORE environment variable if set, else "
+              "./rig-store in the current directory (as `rig runs`).")
+
+
+def console() -> Console:
+    return Console(stderr=True, width=None if sys.stderr.isatty() else 120)
+
+
+@contextmanager
+def progress_bar(out: Console, total_s: float):
+    """A rich progress bar over the plan's estimated time; yields the engine callback."""
+    columns = (TextColumn("{task.description}"), BarColumn(),
+               TextColumn("step {task.fields[step]}/{task.fields[n]}"), TimeRemainingColumn())
+    with Progress(*columns, console=out, transient=False) as bar:
+        task = bar.add_task("starting", total=max(total_s, 1e-3), step=0, n=0)
+
+        def on_event(event: ProgressEvent) -> None:
+            done = max(0.0, total_s - event.remaining_s)
+            label = event.run_label or ""
+            if event.kind == "step":
+                bar.update(task, completed=done, step=event.step + 1, n=event.n_steps,
+                           description=f"{label} {event.description}".strip()[:60])
+            elif event.kind in ("run_finished", "fault", "abort", "estop", "paused",
+                                "resumed"):
+                style = "red" if event.kind in ("fault", "abort", "estop") else "green"
+                bar.console.print(f"[{style}]{event.message}[/{style}]")
+                _print_run(bar.console, event.data)
+            elif event.kind == "finished":
+                bar.update(task, completed=total_s if event.state == "completed" else done)
+
+        yield on_event
+
+
+def _print_run(out: Console, data: dict[str, Any]) -> None:
+    if not data or data.get("status") != "completed":
+        return
+
+    def f(key: str, digits: int = 3) -> str:
+        value = data.get(key)
+        u = (data.get("uncertainty") or {}).get(key)
+        if value is None:
+            return "n/a"
+        return f"{value:.{digits}f}" + (f" ± {u:.{digits}f}" if u is not None else "")
+
+    model = data.get("model") or {}
+    m = model.get("lost_motion_arcmin")
+    out.print(f"  lost motion {f('lost_motion_arcmin')} arcmin"
+              + (f" (model {m:.3f})" if m is not None else "")
+              + f", backlash {f('backlash_arcmin')} arcmin, stiffness "
+              f"{f('stiffness_Nm_per_arcmin', 2)} N·m/arcmin")
+
+
+def write_json(path: Path, payload: dict[str, Any]) -> None:
+    text = json.dumps(payload, indent=2, allow_nan=False, ensure_ascii=False) + "\n"
+    if str(path) == "-":
+        sys.stdout.write(text)
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="utf-8")
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def measure(
+        simulated: Annotated[bool, typer.Option(
+            "--simulated", help="Start the simulated rig (its own process) for the run.")
+        ] = False,
+        rig: Annotated[Path | None, typer.Option(
+            "--rig", help="Rig configuration (TOML) of real or simulated device addresses.")
+        ] = None,
+        unit: Annotated[Path | None, typer.Option(
+            help="Unit data (run.json 'unit' JSON); with --simulated also the plant's unit.")
+        ] = None,
+        serial: Annotated[str | None, typer.Option(help="Serial number of the unit.")] = None,
+        plant: Annotated[Path | None, typer.Option(
+            help="Plant TOML for --simulated (default: the default plant with --unit).")
+        ] = None,
+        rated_torque: Annotated[float, typer.Option(help="Rated torque, N·m.")] = 10.0,
+        amplitude: Annotated[float, typer.Option(help="Loop amplitude, % of rated.")] = 100.0,
+        position: Annotated[float | None, typer.Option(
+            help="Lock the input (eccentric shaft) at this angle first, deg.")] = None,
+        mode: Annotated[str, typer.Option(
+            help="equal_torque, equal_position or constant_rate.")] = "equal_torque",
+        rate: Annotated[float, typer.Option(help="Loading rate, N·m/s.")] = 25.0,
+        steps: Annotated[int, typer.Option(help="Torque steps per quarter cycle.")] = 4,
+        dwell: Annotated[float, typer.Option(help="Dwell at each step, s.")] = 0.05,
+        cycles: Annotated[int, typer.Option(help="Recorded cycles.")] = 1,
+        pre_cycles: Annotated[int, typer.Option(help="Unrecorded cycles before.")] = 1,
+        zero_band: Annotated[float, typer.Option(
+            help="Cross |T| below this slowly, N·m (0: off).")] = 0.3,
+        zero_rate: Annotated[float, typer.Option(help="Rate inside the zero band, N·m/s.")
+                             ] = 0.3,
+        extra_level: Annotated[list[float] | None, typer.Option(
+            help="Extra settled levels, % of rated (repeat; default 3).")] = None,
+        profile: Annotated[str, typer.Option(
+            help="Lost-motion band: nabtesco (±3 %) or harmonic-drive (±4 %).")] = "nabtesco",
+        max_lost_motion: Annotated[float | None, typer.Option(
+            help="Limit: lost motion at most this, arcmin.")] = None,
+        max_backlash: Annotated[float | None, typer.Option(
+            help="Limit: backlash at most this, arcmin.")] = None,
+        min_stiffness: Annotated[float | None, typer.Option(
+            help="Limit: stiffness at least this, N·m/arcmin.")] = None,
+        store: Annotated[Path, typer.Option(envvar="RIG_STORE", help=STORE_HELP)
+                         ] = Path("rig-store"),
+        json_file: Annotated[Path | None, typer.Option(
+            "--json", help="Write the run's metrics, status and reason as JSON ('-': stdout).")
+        ] = None,
+        preview: Annotated[bool, typer.Option(
+            "--preview", help="List the plan's steps and its duration; measure nothing.")
+        ] = False,
+    ) -> None:
+        """Measure one hysteresis loop (GB/T order -T -> 0 -> +T -> 0 -> -T) into the store."""
+        from pydantic import ValidationError
+
+        from rig.campaign import Limits
+        from rig.errors import RigError
+        from rig.measure import measure_plan, open_session, plant_config_for, run_meta, run_result
+        from rig.plan_estimate import estimate
+        from rig.plans import LoopParams, hysteresis_plan
+        from rig.store import Store
+        from simulators.plant_config import PlantConfigError, load_plant_config
+
+        out = console()
+        try:
+            loop = LoopParams(
+                rated_torque_Nm=rated_torque, amplitude_pct=amplitude, mode=mode,
+                rate_Nm_per_s=rate, steps_per_quarter=steps, dwell_s=dwell, cycles=cycles,
+                pre_cycles=pre_cycles, zero_band_Nm=zero_band,
+                zero_rate_Nm_per_s=zero_rate if zero_band > 0 else None,
+                extra_levels_pct=[3.0] if extra_level is None else list(extra_level))
+            limits = Limits(lost_motion_arcmin_max=max_lost_motion,
+                            backlash_arcmin_max=max_backlash,
+                            stiffness_Nm_per_arcmin_min=min_stiffness)
+        except ValidationError as exc:
+            raise RigError("; ".join(f"--{'-'.join(str(p) for p in e['loc'])}: {e['msg']}"
+                                     for e in exc.errors())) from exc
+        plan = hysteresis_plan(loop, position)
+        est = estimate(plan.steps())
+        if preview:
+            for line in plan.listing():
+                out.print(line, highlight=False)
+            out.print(f"{est.n_steps} steps, 1 run, about {est.total_s:.1f} s "
+                      f"({est.dwell_s:.1f} s dwelling)")
+            return
+        unit_data: dict[str, Any] = {}
+        if unit is not None:
+            try:
+                unit_data = json.loads(unit.read_text(encoding="utf-8"))
+            except OSError as exc:
+                raise RigError(f"{unit}: cannot read the unit data ({exc.strerror})") from exc
+            except json.JSONDecodeError as exc:
+                raise RigError(f"{unit}:{exc.lineno}:{exc.colno}: {exc.msg}") from exc
+        if serial:
+            unit_data["serial"] = serial
+        plant_cfg = None
+        if simulated:
+            try:
+                plant_cfg = (load_plant_config(plant) if plant is not None
+                             else plant_config_for(unit_data or load_plant_config().unit))
+            except PlantConfigError as exc:
+                raise RigError(str(exc)) from exc
+            if not unit_data:
+                unit_data = dict(plant_cfg.unit)
+        st = Store(store)
+        with open_session(rig=rig, simulated=simulated, plant=plant_cfg) as session, \
+                progress_bar(out, est.total_s) as on_event:
+            from rig.engine import EngineOptions
+
+            options = EngineOptions(profile=profile, stale_timeout_s=session.stale_timeout_s)
+            try:
+                engine, outcomes = measure_plan(session, st, plan, run_meta(unit_data, session),
+                                                options=options, progress=on_event)
+            except KeyboardInterrupt:
+                out.print("[red]interrupted: the rig is in its safe state; the run is kept "
+                          "as aborted[/red]")
+                raise typer.Exit(2) from None
+        if not outcomes:
+            raise RigError(f"no run was recorded: {engine.stopping_reason}")
+        result = run_result(outcomes[-1].to_dict(), limits)
+        if json_file is not None:
+            write_json(json_file, result)
+        out.print(f"run {result['run_id']} {result['status']} in {st.root}")
+        if result["status"] != "completed":
+            out.print(f"[red]aborted: {result['reason']}[/red]")
+            raise typer.Exit(2)
+        for cause in result["failures"]:
+            out.print(f"[red]FAIL[/red] {cause}")
+        raise typer.Exit(0 if result["passed"] else 1)

@@ -1,0 +1,160 @@
+"""End to end: plans run by the engine on the simulated rig (its own process, real protocols:
+CANopen over SLCAN/TCP, Modbus TCP, the serial transducer on a pty) into the store."""
+
+from __future__ import annotations
+
+import json
+import threading
+
+import pytest
+from typer.testing import CliRunner
+
+from rig.campaign import SimulationSection
+from rig.cli import app
+from rig.engine import EngineOptions
+from rig.engine_safety import PlanRejected
+from rig.measure import RigSession, measure_plan, open_session, plant_config_for, run_meta
+from rig.plans import LoopParams, hysteresis_plan
+from rig.runformat import read_run
+from rig.store import Store
+from simulators.clock import ManualClock
+from simulators.plant import GearPlant
+from simulators.plant_config import load_plant_config
+
+# a little drag (seals, oil) so the output crosses the free play without a flank impact
+DRAG = {"effects": {"friction": {"enabled": True, "model": "lugre", "coulomb_torque_Nm": 0.02,
+                                 "static_torque_Nm": 0.03, "viscous_Nms_per_arcmin": 0.002}}}
+UNIT = dict(load_plant_config().unit, serial="e2e-unit")
+PLANT = plant_config_for(UNIT, SimulationSection(plant=DRAG))
+SHORT = LoopParams(rated_torque_Nm=10.0, steps_per_quarter=2, extra_levels_pct=[3.0],
+                   dwell_s=0.0, sample_s=0.05, settle_hold_s=0.1, pre_cycles=0,
+                   zero_band_Nm=0.3, zero_rate_Nm_per_s=0.6, rate_Nm_per_s=25.0)
+LONG = SHORT.model_copy(update={"cycles": 20})
+
+
+@pytest.fixture(scope="module")
+def session():
+    with open_session(simulated=True, plant=PLANT) as s:
+        yield s
+
+
+def _options(s: RigSession, **kw) -> EngineOptions:
+    return EngineOptions(stale_timeout_s=s.stale_timeout_s, **kw)
+
+
+def _run_in_thread(s: RigSession, store: Store, plan, options=None):
+    """Start the plan on a thread; return (thread, engine holder, events, run-started)."""
+    box: dict = {}
+    started = threading.Event()
+    events: list = []
+
+    def on_event(e):
+        events.append(e)
+        if e.kind == "run_started":
+            started.set()
+
+    def target():
+        box["engine"], box["outcomes"] = measure_plan(
+            s, store, plan, run_meta(UNIT, s), options=options or _options(s),
+            progress=on_event, on_engine=lambda eng: box.setdefault("live", eng))
+
+    thread = threading.Thread(target=target, daemon=True)
+    thread.start()
+    return thread, box, events, started
+
+
+def _assert_safe(s: RigSession) -> None:
+    status = s.io.devices.drive.status()
+    assert not status.enabled and status.setpoint_Nm == 0.0
+
+
+def test_a_run_is_recorded_analysed_and_close_to_the_true_loop(session, tmp_path) -> None:
+    store = Store(tmp_path / "store")
+    events: list = []
+    engine, outcomes = measure_plan(session, store, hysteresis_plan(SHORT), run_meta(UNIT, session),
+                                    options=_options(session), progress=events.append)
+    assert engine.state == "completed" and len(outcomes) == 1
+    out = outcomes[0].to_dict()
+    assert out["status"] == "completed" and out["reason"] is None
+    truth = GearPlant(PLANT, clock=ManualClock()).true_lost_motion_arcmin(10.0, 3.0)
+    u = out["uncertainty"]["lost_motion_arcmin"]
+    print(f"\nlost motion {out['lost_motion_arcmin']:.4f} +- {u:.4f}, true {truth:.4f} arcmin")
+    assert abs(out["lost_motion_arcmin"] - truth) <= 3 * u + 0.02
+    assert out["model"]["lost_motion_arcmin"] == pytest.approx(4.304, abs=0.001)
+    # stored: rig-run/1 with every channel, the loading recorded, the result in run.json
+    run = read_run(outcomes[0].path)
+    assert run.columns[:5] == ["t_s", "torque_Nm", "output_angle_deg", "input_angle_deg",
+                               "temperature_C"]
+    assert run.meta["status"] == "completed" and run.n_samples > 1000
+    assert run.meta["test"]["loading"]["rate_Nm_per_s"] == 25.0
+    assert "torque_zero_before_Nm" in run.meta["test"]
+    assert set(run.meta["result"]["torque_zero"]) == {"before", "after"}
+    assert run.meta["acquisition"]["master_clock"].startswith("output encoder")
+    assert store.get_run(out["run_id"]).status == "completed"
+    # progress events: every step, with the time left falling to zero
+    steps = [e for e in events if e.kind == "step"]
+    assert steps[0].n_steps == len(steps) and steps[-1].remaining_s < steps[0].remaining_s
+    # `rig analyse` reads the stored run and finds the same lost motion
+    res = CliRunner().invoke(app, ["analyse", str(outcomes[0].path), "--json",
+                                   str(tmp_path / "a.json")])
+    assert res.exit_code == 0, res.output
+    again = json.loads((tmp_path / "a.json").read_text())
+    assert again["lost_motion_arcmin"] == pytest.approx(out["lost_motion_arcmin"])
+    _assert_safe(session)
+
+
+def test_pause_holds_at_a_checkpoint_and_resume_finishes(session, tmp_path) -> None:
+    store = Store(tmp_path / "store")
+    thread, box, events, started = _run_in_thread(session, store, hysteresis_plan(SHORT))
+    assert started.wait(30)
+    box["live"].pause()
+    for _ in range(300):
+        if any(e.kind == "paused" for e in events):
+            break
+        threading.Event().wait(0.05)
+    assert box["live"].state == "paused"
+    status = session.io.devices.drive.status()
+    assert status.enabled  # the torque is held, not dropped
+    box["live"].resume()
+    thread.join(60)
+    assert box["engine"].state == "completed"
+    assert any("paused at" in n for n in box["outcomes"][0].result["engine_notes"])
+
+
+@pytest.mark.parametrize("how", ["abort", "estop"])
+def test_abort_and_estop_leave_the_rig_safe_and_keep_the_run(session, tmp_path, how) -> None:
+    store = Store(tmp_path / "store")
+    thread, box, events, started = _run_in_thread(session, store, hysteresis_plan(LONG))
+    assert started.wait(30)
+    threading.Event().wait(1.0)
+    getattr(box["live"], how)()
+    _assert_safe(session)  # at once, from this thread
+    thread.join(30)
+    assert not thread.is_alive() and box["engine"].state == "aborted"
+    (outcome,) = box["outcomes"]
+    expected = "E-stop" if how == "estop" else "aborted by the operator"
+    assert outcome.status == "aborted" and outcome.reason.startswith(expected)
+    info = store.get_run(outcome.run_id)
+    assert info.status == "aborted" and info.reason == outcome.reason
+    run = read_run(outcome.path)
+    assert run.n_samples > 100 and run.meta["reason"] == outcome.reason
+    assert any(e.kind == how for e in events)
+
+
+def test_torque_limit_refuses_a_plan_and_trips_on_measured_torque(session, tmp_path) -> None:
+    store = Store(tmp_path / "store")
+    with pytest.raises(PlanRejected, match="beyond the torque limit"):
+        measure_plan(session, store, hysteresis_plan(SHORT), run_meta(UNIT, session),
+                     options=_options(session, torque_limit_Nm=5.0))
+    assert store.list_runs() == []  # nothing moved, nothing recorded
+    # commanded exactly at the limit: the measured torque (noise 5 mNm) goes beyond it
+    at_limit = SHORT.model_copy(update={"amplitude_pct": 30.0, "extra_levels_pct": []})
+    engine, outcomes = measure_plan(session, store, hysteresis_plan(at_limit),
+                                    run_meta(UNIT, session),
+                                    options=_options(session, torque_limit_Nm=3.0))
+    assert engine.state == "aborted"
+    assert "torque limit: torque transducer measured -3.0" in engine.stopping_reason \
+        or "torque limit: cross-check torque sensor measured -3.0" in engine.stopping_reason
+    _assert_safe(session)
+    if outcomes:  # tripped during the preload (before the run) or in the run: kept
+        assert outcomes[0].status == "aborted"

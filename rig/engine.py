@@ -510,7 +510,7 @@ class Engine:
         is over: the run then ends where it began, as the loop analysis expects)."""
         self._stop_recording()
         self._ramp(0.0, step.rate_Nm_per_s, 0.02)
-        self._sleep_until(time.monotonic() + 0.1)
+        self._sleep_until(time.monotonic() + step.settle_s)
         t0 = time.monotonic()
         self._sleep_until(t0 + step.window_s)
         rows = [r for r in self._recent_rows(step.window_s + 0.5) if r.t_mono_s >= t0]

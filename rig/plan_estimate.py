@@ -64,9 +64,9 @@ def estimate(steps: Iterable[Step], *, input_speed_deg_per_s: float = 360.0,
                 dt = dwell = s
             case Sample(window_s=w):
                 dt = dwell = w
-            case ReadTorqueZero(window_s=w, rate_Nm_per_s=rate):
-                dwell = w
-                dt = _ramp_s(torque, 0.0, rate) + w
+            case ReadTorqueZero(window_s=w, rate_Nm_per_s=rate, settle_s=settle):
+                dwell = w + settle
+                dt = _ramp_s(torque, 0.0, rate) + settle + w
                 torque = 0.0
             case LockInput(angle_deg=a):
                 dt = _ramp_s(torque, 0.0, None) + abs(a - angle) / input_speed_deg_per_s

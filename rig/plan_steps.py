@@ -121,12 +121,14 @@ class StepTwist:
 
 @dataclass(frozen=True)
 class ReadTorqueZero:
-    """Bring the setpoint to zero and average the measured torque over ``window_s``: the torque
-    zero before (``when="before"``) or after (``"after"``) a loop, kept with the run."""
+    """Bring the setpoint to zero, wait ``settle_s`` and average the measured torque over
+    ``window_s``: the torque zero before (``when="before"``) or after (``"after"``) a loop,
+    kept with the run."""
 
     when: str = "before"
     window_s: float = 0.3
     rate_Nm_per_s: float | None = None
+    settle_s: float = 0.1
 
 
 @dataclass(frozen=True)

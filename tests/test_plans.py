@@ -83,13 +83,14 @@ def test_equal_position_mode_steps_in_twist_toward_each_quarter_end() -> None:
 
 
 def test_estimate_of_a_constant_rate_loop_is_the_closed_form() -> None:
-    # zero read (0.2 s), preload 0->-T, 1 pre-cycle (4T), settle 0.1 s, loop 4T, zero back
+    # zero read (0.1 s settle + 0.2 s), preload 0->-T, 1 pre-cycle (4T), settle 0.1 s,
+    # loop 4T, zero back (ramp T, 0.1 s + 0.2 s)
     p = LoopParams(rated_torque_Nm=10.0, mode="constant_rate", rate_Nm_per_s=10.0,
                    settle_hold_s=0.1, zero_window_s=0.2)
     est = estimate(hysteresis_plan(p).steps())
     ramps = (10 + 40 + 40 + 10) / 10.0
-    assert est.total_s == pytest.approx(0.2 + ramps + 0.1 + 0.2)
-    assert est.dwell_s == pytest.approx(0.5)
+    assert est.total_s == pytest.approx(0.3 + ramps + 0.1 + 0.3)
+    assert est.dwell_s == pytest.approx(0.7)
     assert est.n_runs == 1
     assert est.remaining_s(0) == pytest.approx(est.total_s)
     assert est.remaining_s(est.n_steps) == 0.0

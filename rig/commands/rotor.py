@@ -1,0 +1,69 @@
+"""``rig rotor``: critical speeds of the seed 004 geared rotor beside the paper's Table 3."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from rig.errors import RigError
+
+console = Console()
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def rotor(
+        json_file: Annotated[
+            Path | None, typer.Option("--json", help="Write all critical speeds as JSON.")
+        ] = None,
+        disc_at: Annotated[
+            float, typer.Option(help="Disc position, fraction of each shaft's length.")
+        ] = 1.0 / 3.0,
+        gear_at: Annotated[
+            float, typer.Option(help="Gear position, fraction of each shaft's length.")
+        ] = 2.0 / 3.0,
+        elements: Annotated[int, typer.Option(help="Shaft elements per rotor.")] = 24,
+    ) -> None:
+        """Seed 004 Table 3: single-rotor and coupled critical speeds (r/min), paper vs ours."""
+        from analysis.models.seed004_paper import Assumptions, table3
+
+        for name, value in (("--disc-at", disc_at), ("--gear-at", gear_at)):
+            if not 0.0 <= value <= 1.0:
+                raise RigError(f"{name} must be between 0 and 1 (a fraction of the shaft), "
+                               f"got {value}")
+        if elements < 1:
+            raise RigError(f"--elements must be >= 1, got {elements}")
+        result = table3(Assumptions(disc_at=disc_at, gear_at=gear_at, elements=elements))
+        table = Table(title="Seed 004 Table 3: critical speeds (r/min), paper vs ours")
+        for col in ("", "paper", "ours", "difference", "%"):
+            table.add_column(col, justify="left" if not col else "right")
+        for label, paper, ours in result.rows + result.family_rows:
+            table.add_row(label, f"{paper:.2f}", f"{ours:.2f}", f"{ours - paper:+.2f}",
+                          f"{100 * (ours - paper) / paper:+.1f}")
+        console.print(table)
+        modes = Table(title="Coupled critical speeds (driving rotor's 1X line)")
+        for col in ("r/min", "kind", "rotor", "waves", "torsion share", "forward fraction"):
+            modes.add_column(col, justify="right")
+        for c in result.coupled:
+            modes.add_row(f"{c.speed_rpm:.2f}", c.kind, str(c.dominant_rotor + 1), f"{c.waves:g}",
+                          f"{c.torsion_share:.3f}", f"{c.forward_fraction:.3f}")
+        console.print(modes)
+        mesh = result.mesh
+        console.print(
+            f"mesh: k_m = {mesh.mesh_stiffness_N_per_m:.4g} N/m (eps = {mesh.contact_ratio:.4f}),"
+            f" c_m = {mesh.mesh_damping_Ns_per_m:.4g} N s/m; eq. (11) equivalent mass "
+            f"{mesh.equivalent_mass_standard_kg:.4f} kg (printed form "
+            f"{mesh.equivalent_mass_paper_kg:.4f} kg)"
+        )
+        console.print("[dim]assumptions: steel E 206 GPa, rho 7850 kg/m^3; bearings at the shaft "
+                      f"ends; disc at {disc_at:.3f} L, gear at {gear_at:.3f} L; J_d = J_p / 2 "
+                      "(docs/seed004.md)[/dim]")
+        if json_file is not None:
+            json_file.parent.mkdir(parents=True, exist_ok=True)
+            json_file.write_text(json.dumps(result.to_dict(), indent=2, allow_nan=False) + "\n")
+            console.print(f"critical speeds written to {json_file}")

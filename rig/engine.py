@@ -486,12 +486,14 @@ class Engine:
         direction = 1.0 if step.limit_Nm > self._setpoint else -1.0
         while self._setpoint != step.limit_Nm:
             ref = self._latest_angle_deg()
-            t0, start = time.monotonic(), self._setpoint
-            k = 0
+            next_t = time.monotonic()
+            target = self._setpoint
             while True:
-                k += 1
-                self._sleep_until(t0 + k * step.update_s)
-                target = start + direction * step.rate_Nm_per_s * k * step.update_s
+                next_t += step.update_s
+                self._sleep_until(next_t)
+                slow = step.zero_rate_Nm_per_s is not None and abs(target) < step.zero_band_Nm
+                rate = step.zero_rate_Nm_per_s if slow else step.rate_Nm_per_s
+                target += direction * rate * step.update_s
                 if direction * (target - step.limit_Nm) >= 0:
                     self._command(step.limit_Nm)
                     break

@@ -107,6 +107,7 @@ class StepTwist:
     dwell ``dwell_s`` and sample ``sample_s``; repeat until the torque reaches ``limit_Nm``.
 
     ``expected_steps`` only feeds the duration estimate (the count depends on the unit).
+    Inside |T| < ``zero_band_Nm`` the torque rises at ``zero_rate_Nm_per_s`` instead.
     """
 
     delta_arcmin: float
@@ -117,6 +118,8 @@ class StepTwist:
     sample_s: float = 0.0
     expected_steps: int = 10
     update_s: float = 0.02
+    zero_band_Nm: float = 0.0
+    zero_rate_Nm_per_s: float | None = None
 
 
 @dataclass(frozen=True)

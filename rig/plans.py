@@ -185,6 +185,9 @@ def _quarter(p: LoopParams, start: float, end: float) -> Iterator[Step]:
     """One quarter cycle from ``start`` to ``end`` N*m in the plan's loading mode."""
     if p.mode == "constant_rate":
         yield from ramp_segments(p, start, end)
+        # hold at the quarter's end (the peaks and zero): the drive lags a ramp by its time
+        # constant, and the loop analysis needs the torque to reach +-T
+        yield Settle(p.settle_rate_arcmin_per_s, p.settle_hold_s, 0.0, p.settle_timeout_s)
     elif p.mode == "equal_torque":
         here = start
         for level in _quarter_levels(p, start, end):
@@ -198,7 +201,9 @@ def _quarter(p: LoopParams, start: float, end: float) -> Iterator[Step]:
     else:
         settle = Settle(p.settle_rate_arcmin_per_s, p.settle_hold_s, 0.0, p.settle_timeout_s)
         yield StepTwist(p.twist_step_arcmin, end, p.rate_Nm_per_s, settle, p.dwell_s,
-                        p.sample_s, p.steps_per_quarter)
+                        p.sample_s, p.steps_per_quarter,
+                        zero_band_Nm=p.zero_band_Nm if p.zero_rate_Nm_per_s else 0.0,
+                        zero_rate_Nm_per_s=p.zero_rate_Nm_per_s)
     yield Checkpoint(f"{start:+g} -> {end:+g} N*m")
 
 

@@ -45,6 +45,7 @@ def test_gbt_order_preload_then_loop_minus_zero_plus_zero_minus() -> None:
     # preload: to -T, then two full cycles, ending at -T, unrecorded
     assert [s.target_Nm for s in before if isinstance(s, Ramp)] == [-10, 10, -10, 10, -10]
     assert [s.target_Nm for s in run if isinstance(s, Ramp)] == [0.0, 10.0, 0.0, -10.0]
+    assert sum(isinstance(s, Settle) for s in run) == 4  # a hold at each quarter's end
     assert isinstance(run[-2], ReadTorqueZero) and run[-2].when == "after"
     assert isinstance(after[-1], Checkpoint)
     # the loading is recorded with the run
@@ -84,13 +85,13 @@ def test_equal_position_mode_steps_in_twist_toward_each_quarter_end() -> None:
 
 def test_estimate_of_a_constant_rate_loop_is_the_closed_form() -> None:
     # zero read (0.1 s settle + 0.2 s), preload 0->-T, 1 pre-cycle (4T), settle 0.1 s,
-    # loop 4T, zero back (ramp T, 0.1 s + 0.2 s)
+    # loop 4T with a 0.1 s hold at the end of each quarter, zero back (ramp T, 0.1 + 0.2 s)
     p = LoopParams(rated_torque_Nm=10.0, mode="constant_rate", rate_Nm_per_s=10.0,
                    settle_hold_s=0.1, zero_window_s=0.2)
     est = estimate(hysteresis_plan(p).steps())
     ramps = (10 + 40 + 40 + 10) / 10.0
-    assert est.total_s == pytest.approx(0.3 + ramps + 0.1 + 0.3)
-    assert est.dwell_s == pytest.approx(0.7)
+    assert est.total_s == pytest.approx(0.3 + ramps + 0.1 + 4 * 0.1 + 0.3)
+    assert est.dwell_s == pytest.approx(1.1)
     assert est.n_runs == 1
     assert est.remaining_s(0) == pytest.approx(est.total_s)
     assert est.remaining_s(est.n_steps) == 0.0

@@ -452,7 +452,9 @@ def analyse_loop(
         branches=branches,
     )
     res = Resolution(twist_resolution_arcmin, torque_resolution_Nm, twist_noise)
-    tol = max(torque_resolution_Nm, REACH_FRACTION * rated_torque_Nm)
+    # a torque counts as reached within its resolution, 0.1 % of rated, or 4 noise
+    # standard deviations (a dwell at +T read by a noisy sensor is at +T)
+    tol = max(torque_resolution_Nm, REACH_FRACTION * rated_torque_Nm, 4.0 * torque_noise)
 
     rated, p = setup.rated, setup.p_Nm
     jobs: list[tuple[tuple[str, ...], Callable, str]] = [

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -20,8 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from rig.errors import RigError
 from rig.plans import CampaignAxes, LoopParams, Plan, campaign_plan
-
-_TOML_POSITION = re.compile(r"\(at line (\d+), column (\d+)\)")
+from rig.toml_files import describe_validation_error, read_toml
 
 
 class CampaignError(RigError):
@@ -125,42 +122,20 @@ class CampaignFile(BaseModel):
         return campaign_plan(self.plan, self.axes)
 
 
-def _describe(exc: ValidationError, source: str) -> str:
-    lines = []
-    for err in exc.errors():
-        key = ".".join(str(p) for p in err["loc"]) or "(top level)"
-        got = err.get("input")
-        shown = "" if isinstance(got, dict) else f" (got {got!r})"
-        lines.append(f"{source}: {key}: {err['msg']}{shown}")
-    return "\n".join(lines)
-
-
 def campaign_from_mapping(data: dict[str, Any], source: str = "<memory>") -> CampaignFile:
     """Validate a parsed TOML mapping; errors name ``source`` and the key."""
     try:
         camp = CampaignFile.model_validate({**data, "source": source})
     except ValidationError as exc:
-        raise CampaignError(_describe(exc, source)) from exc
+        raise CampaignError(describe_validation_error(exc, source)) from exc
     camp.unit_data()  # a unit file that cannot be read is an error now, not mid-campaign
     return camp
 
 
 def load_campaign(path: str | Path) -> CampaignFile:
     """Read and validate a campaign TOML (CampaignError naming file and key/line:column)."""
-    file = Path(path)
-    try:
-        text = file.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise CampaignError(f"{file}: cannot read the campaign ({exc.strerror or exc})") from exc
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        message = str(exc)
-        match = _TOML_POSITION.search(message)
-        where = f"{file}:{match.group(1)}:{match.group(2)}" if match else str(file)
-        raise CampaignError(f"{where}: TOML syntax error: "
-                            f"{_TOML_POSITION.sub('', message).strip()}") from exc
-    return campaign_from_mapping(data, str(file))
+    data = read_toml(path, CampaignError, "campaign")
+    return campaign_from_mapping(data, str(Path(path)))
 
 
 # --------------------------------------------------------------------------- results

@@ -23,7 +23,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -35,8 +34,7 @@ from drivers.modbus_torque_sensor import ModbusTorqueSensorConfig
 from drivers.rig_controls import ClimateConfig, InputMotorConfig
 from drivers.transducer_serial import TransducerConfig
 from rig.errors import RigError
-
-_TOML_POSITION = re.compile(r"\(at line (\d+), column (\d+)\)")
+from rig.toml_files import describe_validation_error, read_toml
 
 
 class RigConfigError(RigError):
@@ -86,16 +84,6 @@ class RigConfig(BaseModel):
     def torque_limit_Nm(self) -> float:
         """The most torque (N*m) anything may command: the drive's, within the rig's."""
         return min(self.rig.torque_limit_Nm, self.drive.torque_limit_Nm)
-
-
-def _describe(exc: ValidationError, source: str) -> str:
-    lines = []
-    for err in exc.errors():
-        key = ".".join(str(p) for p in err["loc"]) or "(top level)"
-        got = err.get("input")
-        shown = "" if isinstance(got, dict) else f" (got {got!r})"
-        lines.append(f"{source}: {key}: {err['msg']}{shown}")
-    return "\n".join(lines)
 
 
 def _prepared(data: dict[str, Any], source: str) -> dict[str, Any]:
@@ -161,7 +149,7 @@ def rig_config_from_mapping(data: dict[str, Any], source: str = "<memory>") -> R
     try:
         config = RigConfig.model_validate({**prepared, "source": source})
     except ValidationError as exc:
-        raise RigConfigError(_describe(exc, source)) from exc
+        raise RigConfigError(describe_validation_error(exc, source)) from exc
     for name in ("encoder", "input_encoder"):
         enc = getattr(config, name)
         if enc is not None:
@@ -172,24 +160,8 @@ def rig_config_from_mapping(data: dict[str, Any], source: str = "<memory>") -> R
 
 def load_rig_config(path: str | Path) -> RigConfig:
     """Read and validate a rig TOML. Raises RigConfigError naming file and key/line:col."""
-    file = Path(path)
-    try:
-        text = file.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise RigConfigError(f"{file}: cannot read the rig configuration "
-                             f"({exc.strerror or exc})") from exc
-    except UnicodeDecodeError as exc:
-        raise RigConfigError(f"{file}: not UTF-8 text ({exc.reason} at byte "
-                             f"{exc.start})") from exc
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        message = str(exc)
-        match = _TOML_POSITION.search(message)
-        where = f"{file}:{match.group(1)}:{match.group(2)}" if match else str(file)
-        reason = _TOML_POSITION.sub("", message).strip()
-        raise RigConfigError(f"{where}: TOML syntax error: {reason}") from exc
-    return rig_config_from_mapping(data, str(file))
+    data = read_toml(path, RigConfigError, "rig configuration")
+    return rig_config_from_mapping(data, str(Path(path)))
 
 
 # -- writing (the simulated rig writes the configuration that connects to it) -------------

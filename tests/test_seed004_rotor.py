@@ -234,7 +234,7 @@ def test_campbell_crossings_agree_with_synchronous_eigenproblem() -> None:
     a = Assumptions(elements=6)
     for name, system in (("rotor 1", single_rotor(0, a)), ("coupled", coupled_rotor(a))):
         sync = [c.speed_rpm for c in critical_speeds(system, max_rpm=1500.0)]
-        grid = np.linspace(0.0, 1500.0, 61)
+        grid = np.linspace(0.0, 1500.0, 31)
         camp = campbell_crossings_rpm(system, grid)
         print(f"{name}: synchronous {np.round(sync, 2)}  Campbell {np.round(camp, 2)} r/min")
         assert len(camp) == len(sync)
@@ -432,9 +432,9 @@ def test_mode_pattern_matches_paper(result) -> None:
 
 def test_results_converge_with_mesh_refinement() -> None:
     coarse = standstill_modes(coupled_rotor(Assumptions(elements=12)))[0][:10]
-    fine = standstill_modes(coupled_rotor(Assumptions(elements=48)))[0][:10]
+    fine = standstill_modes(coupled_rotor(Assumptions(elements=36)))[0][:10]
     default = standstill_modes(coupled_rotor())[0][:10]
-    print("12 / 24 / 48 elements:", np.round(coarse, 2), np.round(default, 2), np.round(fine, 2))
+    print("12 / 24 / 36 elements:", np.round(coarse, 2), np.round(default, 2), np.round(fine, 2))
     np.testing.assert_allclose(default, fine, rtol=2e-3)
 
 
@@ -453,7 +453,7 @@ def test_bad_input_names_the_problem() -> None:
 def test_rig_rotor_command_writes_json(tmp_path) -> None:
     out = tmp_path / "crit.json"
     proc = subprocess.run(
-        [sys.executable, "-m", "rig", "rotor", "--json", str(out)],
+        [sys.executable, "-m", "rig", "rotor", "--elements", "8", "--json", str(out)],
         capture_output=True, text=True, timeout=300,
     )
     assert proc.returncode == 0, proc.stderr

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import socket
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -36,8 +35,6 @@ def register(app: typer.Typer) -> None:
         Prints the page's address and the operator token; stops on Ctrl-C (the rig is left
         in its safe state).
         """
-        import uvicorn
-
         from rig.campaign import SimulationSection
         from rig.errors import RigError
         from rig.measure import open_session, plant_config_for
@@ -45,6 +42,7 @@ def register(app: typer.Typer) -> None:
         from rig.web.app import create_app
         from rig.web.controller import RigController
         from rig.web.live import LiveHub
+        from rig.web.server import bind, uvicorn_server
         from rig.web.settings import resolve_settings
 
         if simulated == (rig is not None):
@@ -74,14 +72,10 @@ def register(app: typer.Typer) -> None:
                                    description=description)
         web_app = create_app(settings, controller)
 
-        family = socket.AF_INET6 if ":" in host else socket.AF_INET
-        sock = socket.socket(family, socket.SOCK_STREAM)
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
-            sock.bind((host, port))
+            sock = bind(host, port)
         except OSError as exc:
             raise RigError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from exc
-        sock.listen(128)
         bound = sock.getsockname()[1]
         url = settings.url.replace(f":{port}/", f":{bound}/")
         where = {"option": "from --token", "environment": "from $RIG_WEB_TOKEN",
@@ -92,9 +86,7 @@ def register(app: typer.Typer) -> None:
         print(f"operator link: {url}#token={settings.token}", flush=True)
         print(f"store: {the_store.root}; {description}; Ctrl-C stops (the rig is left safe)",
               file=sys.stderr, flush=True)
-        config = uvicorn.Config(web_app, log_level="warning", lifespan="on",
-                                timeout_graceful_shutdown=5)
-        uvicorn.Server(config).run(sockets=[sock])
+        uvicorn_server(web_app).run(sockets=[sock])
 
 
 SIMULATED_EFFECTS = {"effects": {

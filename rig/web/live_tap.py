@@ -42,6 +42,13 @@ class TapRecorder:
     def __getattr__(self, name: str) -> Any:
         return getattr(self._recorder, name)
 
+    def __enter__(self) -> TapRecorder:
+        self._recorder.__enter__()
+        return self
+
+    def __exit__(self, *exc: Any) -> Any:
+        return self._recorder.__exit__(*exc)
+
     def append(self, row: Sequence[float | str | None] | Mapping[str, float | str | None]
                ) -> None:
         """Append to the store, then hand (t_s, torque, twist, t_wall) to the hub."""

@@ -8,7 +8,7 @@ and :class:`rig.campaign.Limits`.
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -20,7 +20,13 @@ NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,79}$"
 MAX_PLAN_STEPS = 200_000
 """A plan longer than this is refused (its preview alone would take seconds)."""
 
-_strict = ConfigDict(extra="forbid")
+_strict = ConfigDict(extra="forbid", strict=True)
+
+
+Positive_mm = Annotated[float, Field(ge=0, le=100_000, allow_inf_nan=False)]
+Angle_deg = Annotated[float, Field(ge=-3600, le=3600, allow_inf_nan=False)]
+Percent = Annotated[float, Field(gt=0, le=100, allow_inf_nan=False)]
+Celsius = Annotated[float, Field(ge=-60, le=200, allow_inf_nan=False)]
 
 
 def _length(min_value: float, max_value: float, **kw: Any) -> Any:
@@ -47,21 +53,17 @@ class UnitData(BaseModel):
     face_width_mm: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
     center_distance_mm: float | None = _length(0.0, 10_000.0, default=None)
     pin_diameter_mm: float | None = Field(None, gt=0, le=1000, allow_inf_nan=False)
-    m_value_internal_mm: list[float] | None = Field(None, min_length=1, max_length=64)
-    m_value_external_mm: list[float] | None = Field(None, min_length=1, max_length=64)
+    m_value_internal_mm: list[Positive_mm] | None = Field(None, min_length=1, max_length=64)
+    m_value_external_mm: list[Positive_mm] | None = Field(None, min_length=1, max_length=64)
     runout_internal_mm: float | None = _length(0.0, 10.0, default=None)
     runout_external_mm: float | None = _length(0.0, 10.0, default=None)
-    bearing_clearance_mm: list[float] | None = Field(None, min_length=1, max_length=8)
+    bearing_clearance_mm: list[Positive_mm] | None = Field(None, min_length=1, max_length=8)
 
     @model_validator(mode="after")
     def _consistent(self) -> UnitData:
         if self.z_internal <= self.z_external:
             raise ValueError(f"z_internal ({self.z_internal}) must exceed z_external "
                              f"({self.z_external})")
-        for key in ("m_value_internal_mm", "m_value_external_mm", "bearing_clearance_mm"):
-            values = getattr(self, key)
-            if values is not None and not all(0 <= v <= 100_000 for v in values):
-                raise ValueError(f"{key}: every value must be in [0, 100000] mm")
         return self
 
     def mapping(self) -> dict[str, Any]:
@@ -90,16 +92,10 @@ class PlanSettings(BaseModel):
     settle_hold_s: float = Field(0.1, ge=0.001, le=60, allow_inf_nan=False)
     settle_timeout_s: float = Field(2.0, ge=0.01, le=600, allow_inf_nan=False)
     sample_s: float = _length(0.0, 60.0, default=0.05)
-    extra_levels_pct: list[float] = Field(default_factory=lambda: [3.0], max_length=10)
+    extra_levels_pct: list[Annotated[float, Field(gt=0, lt=100, allow_inf_nan=False)]] = Field(
+        default_factory=lambda: [3.0], max_length=10)
     zero_band_Nm: float = _length(0.0, 100_000.0, default=0.3)
     zero_rate_Nm_per_s: float | None = Field(0.3, ge=0.001, le=100_000, allow_inf_nan=False)
-
-    @model_validator(mode="after")
-    def _levels(self) -> PlanSettings:
-        bad = [v for v in self.extra_levels_pct if not 0 < v < 100]
-        if bad:
-            raise ValueError(f"extra_levels_pct: values must be in (0, 100), got {bad}")
-        return self
 
     def loop_params(self) -> LoopParams:
         return LoopParams(**self.model_dump())
@@ -125,23 +121,12 @@ class AxesSettings(BaseModel):
 
     model_config = _strict
 
-    positions_deg: list[float] = Field(default_factory=lambda: [0.0], min_length=1,
-                                       max_length=360)
-    amplitudes_pct: list[float] = Field(default_factory=lambda: [100.0], min_length=1,
-                                        max_length=20)
-    temperatures_C: list[float] = Field(default_factory=list, max_length=20)
+    positions_deg: list[Angle_deg] = Field(default_factory=lambda: [0.0], min_length=1,
+                                           max_length=360)
+    amplitudes_pct: list[Percent] = Field(default_factory=lambda: [100.0], min_length=1,
+                                          max_length=20)
+    temperatures_C: list[Celsius] = Field(default_factory=list, max_length=20)
     repeats: int = Field(1, ge=1, le=50)
-
-    @model_validator(mode="after")
-    def _ranges(self) -> AxesSettings:
-        for key, lo, hi in (("positions_deg", -3600.0, 3600.0), ("amplitudes_pct", 0.0, 100.0),
-                            ("temperatures_C", -60.0, 200.0)):
-            bad = [v for v in getattr(self, key) if not lo <= v <= hi or
-                   (key == "amplitudes_pct" and v == 0)]
-            if bad:
-                raise ValueError(f"{key}: values must be in [{lo:g}, {hi:g}]"
-                                 f"{' and > 0' if key == 'amplitudes_pct' else ''}, got {bad}")
-        return self
 
     def axes(self) -> CampaignAxes:
         return CampaignAxes(**self.model_dump())

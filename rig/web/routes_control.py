@@ -31,6 +31,8 @@ router = APIRouter(prefix="/api", tags=["control"])
 AUTH = {401: {"model": ErrorBody, "description": "No operator token: the page can only watch."},
         403: {"model": ErrorBody, "description": "Wrong operator token."}}
 CONFLICT = {409: {"model": ErrorBody, "description": "Not possible now (the message says why)."}}
+BAD_BODY = {400: {"model": ErrorBody, "description": "The body could not be parsed (not UTF-8 "
+                                                     "JSON)."}}
 
 
 def _controller(request: Request) -> RigController:
@@ -50,13 +52,14 @@ def status(request: Request) -> dict[str, Any]:
     return _controller(request).status(is_operator(request))
 
 
-@router.post("/plan/preview", response_model=PlanPreview,
+@router.post("/plan/preview", response_model=PlanPreview, responses=BAD_BODY,
              summary="Preview a run or campaign: steps, estimated duration, fits the rig")
 def preview(request: Request, body: RunRequest) -> dict[str, Any]:
     return _controller(request).preview(body)
 
 
-@router.post("/control/start", response_model=Message, responses={**AUTH, **CONFLICT},
+@router.post("/control/start", response_model=Message,
+             responses={**AUTH, **CONFLICT, **BAD_BODY},
              summary="Start a run or a campaign (needs the input lock confirmed)")
 def start(request: Request, body: RunRequest,
           _token: Operator) -> dict[str, Any]:
@@ -95,7 +98,8 @@ def tare(request: Request, _token: Operator) -> dict[str, Any]:
             "message": f"torque transducer tared (offset {offset:+.4f} N*m)"}
 
 
-@router.post("/devices/input-lock", response_model=Message, responses={**AUTH, **CONFLICT},
+@router.post("/devices/input-lock", response_model=Message,
+             responses={**AUTH, **CONFLICT, **BAD_BODY},
              summary="Lock the input (motor) and confirm it, or withdraw the confirmation")
 def input_lock(request: Request, body: InputLockRequest,
                _token: Operator) -> dict[str, Any]:

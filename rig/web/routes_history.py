@@ -30,9 +30,12 @@ router = APIRouter(prefix="/api", tags=["history"])
 RunId = Annotated[str, PathParam(pattern=ID_PATTERN, description="A run id of the store.")]
 CampaignId = Annotated[str, PathParam(pattern=ID_PATTERN,
                                       description="A campaign id of the store.")]
-NOT_FOUND = {404: {"model": ErrorBody, "description": "No such run or campaign."}}
-UNPROCESSABLE = {409: {"model": ErrorBody, "description": "The data cannot be processed "
-                                                         "(the message says why)."}}
+ERROR_JSON = {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorBody"}}}
+NOT_FOUND: dict[int | str, dict[str, Any]] = {
+    404: {"model": ErrorBody, "content": ERROR_JSON, "description": "No such run or campaign."}}
+UNPROCESSABLE: dict[int | str, dict[str, Any]] = {
+    409: {"model": ErrorBody, "content": ERROR_JSON,
+          "description": "The data cannot be processed (the message says why)."}}
 
 
 def _store(request: Request) -> Store:

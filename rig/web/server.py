@@ -1,0 +1,76 @@
+"""Running the page's app with uvicorn on a socket bound first (so port 0 gives a free port
+whose number is known before the first request): :func:`bind` and :class:`BackgroundServer`
+(a server on a thread, for tests and benchmarks)."""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+
+import uvicorn
+from fastapi import FastAPI
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """A listening TCP socket on ``host``:``port`` (port 0: a free one)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError:
+        sock.close()
+        raise
+    sock.listen(128)
+    return sock
+
+
+def uvicorn_server(app: FastAPI) -> uvicorn.Server:
+    """A uvicorn server for ``app`` (warnings only, lifespan on, 5 s graceful shutdown)."""
+    config = uvicorn.Config(app, log_level="warning", lifespan="on",
+                            timeout_graceful_shutdown=5)
+    return uvicorn.Server(config)
+
+
+class BackgroundServer:
+    """``app`` served on 127.0.0.1 (a free port) by a thread; a context manager.
+
+    ``url`` is ``http://127.0.0.1:<port>/``. Entering waits until the lifespan has started
+    (``start_timeout_s``); leaving shuts the server down (the lifespan's end runs).
+    """
+
+    def __init__(self, app: FastAPI, host: str = "127.0.0.1", start_timeout_s: float = 60.0
+                 ) -> None:
+        self.app = app
+        self.sock = bind(host, 0)
+        self.port = self.sock.getsockname()[1]
+        self.url = f"http://{host}:{self.port}/"
+        self.server = uvicorn_server(app)
+        self._thread = threading.Thread(target=self._run, name="rig web test server",
+                                        daemon=True)
+        self.start_timeout_s = start_timeout_s
+        self.error: BaseException | None = None
+
+    def _run(self) -> None:
+        try:
+            self.server.run(sockets=[self.sock])
+        except BaseException as exc:  # reported by __enter__/__exit__
+            self.error = exc
+
+    def __enter__(self) -> BackgroundServer:
+        self._thread.start()
+        deadline = time.monotonic() + self.start_timeout_s
+        while not self.server.started:
+            if self.error is not None or not self._thread.is_alive():
+                raise RuntimeError(f"the page's server did not start: {self.error!r}")
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"the page's server did not start in "
+                                   f"{self.start_timeout_s:g} s")
+            time.sleep(0.02)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.server.should_exit = True
+        self._thread.join(timeout=60.0)
+        self.sock.close()

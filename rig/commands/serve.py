@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -35,36 +34,30 @@ def register(app: typer.Typer) -> None:
         Prints the page's address and the operator token; stops on Ctrl-C (the rig is left
         in its safe state).
         """
-        from rig.campaign import SimulationSection
         from rig.errors import RigError
-        from rig.measure import open_session, plant_config_for
+        from rig.measure import open_session
         from rig.store import Store, default_store_root
         from rig.web.app import create_app
         from rig.web.controller import RigController
         from rig.web.live import LiveHub
         from rig.web.server import bind, uvicorn_server
         from rig.web.settings import resolve_settings
+        from rig.web.simulated import simulated_session_factory
 
         if simulated == (rig is not None):
             raise RigError("say which rig: --simulated (start the simulated rig) or --rig FILE "
                            "(a rig configuration)")
-        sim_plant = SimulationSection(seed=1, plant=SIMULATED_EFFECTS)
         root = store if store is not None else default_store_root()
         settings = resolve_settings(host, port, store_root=root, token=token)
         the_store = Store(root)
         hub = LiveHub()
         if simulated:
-            unit_data = _example_unit(unit)
-            plant = plant_config_for(unit_data, sim_plant)
-
-            def factory():  # noqa: ANN202 - a context manager of the rig session
-                return open_session(simulated=True, plant=plant)
-
+            factory = simulated_session_factory(unit)
             description = f"simulated rig (plant: example unit {unit})"
         else:
             rig_path = rig
 
-            def factory():  # noqa: ANN202
+            def factory():  # noqa: ANN202 - a context manager of the rig session
                 return open_session(rig=rig_path)
 
             description = f"rig {rig}"
@@ -87,25 +80,3 @@ def register(app: typer.Typer) -> None:
         print(f"store: {the_store.root}; {description}; Ctrl-C stops (the rig is left safe)",
               file=sys.stderr, flush=True)
         uvicorn_server(web_app).run(sockets=[sock])
-
-
-SIMULATED_EFFECTS = {"effects": {
-    "runout": {"enabled": True},
-    "friction": {"enabled": True, "model": "lugre", "coulomb_torque_Nm": 0.02,
-                 "static_torque_Nm": 0.03, "viscous_Nms_per_arcmin": 0.002},
-}}
-"""The simulated plant around the unit (docs/plant.md), as examples/campaigns/seed000-pair1.toml:
-the unit's runout (seed 000 eq. 4) and a little seal and oil drag."""
-
-
-def _example_unit(name: str) -> dict:
-    """An example unit of the package by name (``seed000-pair1`` ...)."""
-    from importlib import resources
-
-    from rig.errors import RigError
-
-    folder = resources.files("rig.examples") / "units"
-    names = sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".json"))
-    if name not in names:
-        raise RigError(f"--unit {name!r}: no such example unit; known: {', '.join(names)}")
-    return json.loads((folder / f"{name}.json").read_text(encoding="utf-8"))

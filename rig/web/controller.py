@@ -109,6 +109,8 @@ class RigController:
         self._lock_angle: float | None = None
         self._lock_by_motor = False
         self._profile: str | None = None
+        self._measuring = False
+        self._monitor_lock = threading.Lock()
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -163,11 +165,15 @@ class RigController:
     # ------------------------------------------------------------------ monitor
 
     def _monitor_once(self) -> None:
+        with self._monitor_lock:
+            self._monitor_locked()
+
+    def _monitor_locked(self) -> None:
         session = self.session
         if session is None:
             return
         devices = session.devices
-        busy = self._run_thread is not None and self._run_thread.is_alive()
+        busy = self._measuring
         rows: list[dict[str, Any]] = []
         live: dict[str, Any] = {}
         for name in ("encoder", "input_encoder"):
@@ -178,7 +184,7 @@ class RigController:
             rows.append({"name": name.replace("_", " "), "connected": h.ok or h.samples > 0,
                          "ok": h.ok, "heartbeat_age_s": h.heartbeat_age_s,
                          "detail": h.last_error or f"NMT {h.nmt_state}, {h.samples} samples"})
-        if not busy and self._device_lock.acquire(blocking=False):
+        if not busy and self._device_lock.acquire(timeout=1.0):
             try:
                 devices.alive()
                 live.update(self._idle_values(devices, rows))
@@ -189,6 +195,8 @@ class RigController:
             latest = tap.recorder.latest if tap is not None and tap.recorder else None
             if latest is not None:
                 live.update(torque_Nm=latest[1], twist_arcmin=latest[2])
+                if len(latest) > 4:
+                    live["temperature_C"] = latest[4]
             rows.append({"name": "torque transducer", "connected": True, "ok": True,
                          "detail": "streaming to the measurement"})
         drive = devices.drive
@@ -311,7 +319,7 @@ class RigController:
         return session
 
     def _busy(self) -> bool:
-        return self._run_thread is not None and self._run_thread.is_alive()
+        return self._measuring
 
     # ------------------------------------------------------------------ preview
 
@@ -375,6 +383,7 @@ class RigController:
                              "estimated_s": estimate(steps).total_s}
             self._tap = TapStore(self.store, self.hub)
             self._profile = req.profile
+            self._measuring = True
             thread = threading.Thread(target=self._measure, args=(req, session),
                                       name="rig web measurement", daemon=True)
             self._run_thread = thread
@@ -410,6 +419,8 @@ class RigController:
             self.message = f"{req.kind} {state}" + (f": {reason}" if reason else "")
             if self._lock_by_motor:
                 self._lock_confirmed = False  # the plan moved the input: confirm it again
+            self._measuring = False
+        self._monitor_once()  # the devices as the end left them (safe state), at once
         self.hub.add_event({"type": "state", "state": state, "result": self._last_result})
 
     def _options(self, req: RunRequest) -> EngineOptions:

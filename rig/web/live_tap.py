@@ -35,8 +35,10 @@ class TapRecorder:
         self._i_t = cols.index("t_s")
         self._i_torque = cols.index("torque_Nm")
         self._i_angle = cols.index("output_angle_deg")
+        self._i_temp = cols.index("temperature_C") if "temperature_C" in cols else None
         self._t0_wall = time.time()
         self.latest: tuple[float, ...] | None = None
+        """The newest row: (t_s, torque_Nm, twist_arcmin, t_wall_s[, temperature_C])."""
         hub.begin_run(recorder.run_id)
 
     def __getattr__(self, name: str) -> Any:
@@ -63,7 +65,8 @@ class TapRecorder:
         item = (float(t), float(torque), float(angle) * ARCMIN_PER_DEG,
                 self._t0_wall + float(t))
         if math.isfinite(item[2]):
-            self.latest = item
+            temp = values[self._i_temp] if self._i_temp is not None else None
+            self.latest = item if not isinstance(temp, int | float) else (*item, float(temp))
             self._hub.add_rows([item])
 
 

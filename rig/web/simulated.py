@@ -1,0 +1,51 @@
+"""The simulated rig behind ``rig serve --simulated``: the plant built around an example unit
+(rig/examples/units) with the effects of examples/campaigns/seed000-pair1.toml, started as its
+own process (``rig sim``) by :func:`rig.measure.open_session`."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from contextlib import AbstractContextManager
+from importlib import resources
+from typing import Any
+
+from rig.errors import RigError
+
+SIMULATED_EFFECTS: dict[str, Any] = {"effects": {
+    "runout": {"enabled": True},
+    "friction": {"enabled": True, "model": "lugre", "coulomb_torque_Nm": 0.02,
+                 "static_torque_Nm": 0.03, "viscous_Nms_per_arcmin": 0.002},
+}}
+"""The plant around the unit (docs/plant.md): the unit's runout (seed 000 eq. 4, sized by
+``unit.runout_*_mm``) and a little seal and oil drag, noise seed 1."""
+DEFAULT_UNIT = "seed000-pair1"
+
+
+def example_unit_names() -> list[str]:
+    folder = resources.files("rig.examples") / "units"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".json"))
+
+
+def example_unit(name: str) -> dict[str, Any]:
+    """An example unit of the package by name (``seed000-pair1`` ...); RigError if unknown."""
+    names = example_unit_names()
+    if name not in names:
+        raise RigError(f"--unit {name!r}: no such example unit; known: {', '.join(names)}")
+    folder = resources.files("rig.examples") / "units"
+    return json.loads((folder / f"{name}.json").read_text(encoding="utf-8"))
+
+
+def simulated_session_factory(unit_name: str = DEFAULT_UNIT
+                              ) -> Callable[[], AbstractContextManager[Any]]:
+    """A factory of rig sessions on a new simulated rig whose plant is ``unit_name``."""
+    from rig.campaign import SimulationSection
+    from rig.measure import open_session, plant_config_for
+
+    plant = plant_config_for(example_unit(unit_name),
+                             SimulationSection(seed=1, plant=SIMULATED_EFFECTS))
+
+    def factory() -> AbstractContextManager[Any]:
+        return open_session(simulated=True, plant=plant)
+
+    return factory

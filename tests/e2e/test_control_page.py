@@ -1,0 +1,132 @@
+"""End to end in a real headless Chromium (Debian's package, driven by Playwright through
+``executable_path``; no browser download): ``rig serve --simulated`` is started as a process,
+the page measures a run on the simulated rig (the loop drawn live, the lost motion shown),
+then a second run is aborted and the page shows the safe state. Screenshots are kept in
+``artifacts/e2e/`` (gitignored)."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+CHROMIUM = Path("/usr/bin/chromium")
+REPO = Path(__file__).resolve().parents[2]
+ARTIFACTS = REPO / "artifacts" / "e2e"
+TOKEN = "e2e-operator-token"
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--no-first-run", "--disable-sync"]
+
+pytestmark = [
+    pytest.mark.skipif(not CHROMIUM.exists(),
+                       reason="Debian's chromium is not installed (/usr/bin/chromium missing; "
+                              ".ci/install installs it)"),
+    pytest.mark.timeout(240),
+]
+
+
+def launch_browser(playwright):
+    """Debian's chromium, headless, driven by Playwright (never a downloaded browser)."""
+    return playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True,
+                                      args=CHROMIUM_ARGS)
+
+
+@contextlib.contextmanager
+def rig_serve(store: Path):
+    """``rig serve --simulated`` on a free port; yields (url, operator link)."""
+    cmd = [sys.executable, "-c", "from rig.cli import main; main()", "serve", "--simulated",
+           "--port", "0", "--store", str(store), "--token", TOKEN]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=store.parent, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    stderr: list[str] = []
+    threading.Thread(target=lambda: stderr.extend(proc.stderr), daemon=True).start()
+    try:
+        lines = {}
+        for line in proc.stdout:
+            key, _, value = line.partition(": ")
+            lines[key] = value.strip()
+            if key == "operator link":
+                break
+        assert "operator link" in lines, f"rig serve did not start: {''.join(stderr)}"
+        assert lines["operator token"].startswith(TOKEN)
+        yield lines["control page"], lines["operator link"]
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=10)
+
+
+def get_json(url: str):
+    with urllib.request.urlopen(url, timeout=30) as r:
+        return json.loads(r.read())
+
+
+def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
+    playwright_api = pytest.importorskip("playwright.sync_api")
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    with rig_serve(tmp_path / "store") as (url, link), \
+            playwright_api.sync_playwright() as pw:
+        browser = launch_browser(pw)
+        page = browser.new_page(viewport={"width": 1400, "height": 1500})
+        errors: list[str] = []
+        page.on("pageerror", lambda exc: errors.append(str(exc)))
+        page.goto(link)
+        expect = playwright_api.expect
+        expect(page.locator("#role")).to_have_text("operator")
+        expect(page.locator("#estop")).to_be_visible()
+        expect(page.locator("#state")).to_have_text("idle", timeout=90_000)
+
+        # first run: confirm the input lock, start, watch the loop drawn and the metrics
+        page.click("#lock")
+        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        expect(page.locator("#start")).to_be_enabled()
+        page.click("#start")
+        page.wait_for_function("window.rigStats.points > 500", timeout=60_000)
+        expect(page.locator("#state")).to_have_text("completed", timeout=90_000)
+        expect(page.locator("#m-lost")).not_to_have_text("–", timeout=10_000)
+        shown = float(page.locator("#m-lost").inner_text())
+        page.screenshot(path=str(ARTIFACTS / "control-page-run.png"), full_page=True)
+
+        runs = get_json(url + "api/runs")
+        assert runs[0]["status"] == "completed"
+        stored = runs[0]["metrics"]["lost_motion_arcmin"]
+        assert shown == pytest.approx(stored, abs=0.0005)  # shown with 3 decimals
+        assert 0.5 < stored < 10.0  # a seed 000 pair: a few arcmin
+        assert page.locator("#m-verdict").inner_text() == "PASS"
+        drawn = page.evaluate("window.rigStats")
+        assert drawn["batches"] > 10 and len(drawn["latency_s"]) > 10
+
+        # second run: abort it while it runs; the page shows the safe state
+        page.click("#lock")
+        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        first_run = runs[0]["run_id"]
+        page.click("#start")
+        page.wait_for_function(
+            f"window.rigPage.live.runId && window.rigPage.live.runId !== '{first_run}' "
+            "&& window.rigStats.points > 200", timeout=60_000)
+        expect(page.locator("#abort")).to_be_enabled()
+        page.click("#abort")
+        expect(page.locator("#state")).to_have_text("aborted", timeout=30_000)
+        expect(page.locator("#fault-title")).to_contain_text("Stopped by the operator")
+        expect(page.locator("#v-safe")).to_have_text("yes", timeout=10_000)
+        expect(page.locator("#v-drive")).to_have_text("disabled")
+        page.screenshot(path=str(ARTIFACTS / "control-page-aborted.png"), full_page=True)
+
+        runs = get_json(url + "api/runs")
+        assert runs[0]["status"] == "aborted"
+        assert runs[0]["reason"] == "aborted by the operator"
+        status = get_json(url + "api/status")
+        assert status["safe"] is True and status["live"]["setpoint_Nm"] == 0.0
+        assert not errors, errors
+        browser.close()

@@ -235,4 +235,5 @@ def test_campaign_results_and_diagnosis(client: TestClient, store: Store):
     page = client.get(f"/api/campaigns/{cid}/diagnosis.html")
     assert page.status_code == 200 and "<html" in page.text.lower()
     assert report["verdict"] in page.text
+    assert "data:image/png;base64," in page.text and "http" not in page.text  # works offline
     assert client.get("/api/campaigns/no-such-campaign").status_code == 404

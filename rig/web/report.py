@@ -1,30 +1,36 @@
 """The diagnosis report of a campaign as an HTML page.
 
-Uses the project's report writer (:mod:`rig.report_html`) when it is installed; otherwise
-renders the rig-diagnosis/1 keys as plain tables (verdict, gaps, ranking, localisation).
+The project's report writer (:mod:`rig.report_html`) draws it; :func:`plain_report_html` is
+the fallback for a report that page cannot draw (plain tables of the rig-diagnosis/1 keys).
 """
 
 from __future__ import annotations
 
 import html
 import json
+import logging
 from pathlib import Path
 from typing import Any
 
+log = logging.getLogger(__name__)
 
-def diagnosis_html(campaign_path: Path, report: dict[str, Any]) -> str:
-    """An HTML page for ``report`` (rig-diagnosis/1) of the campaign at ``campaign_path``."""
+
+def diagnose_campaign_folder(campaign_path: Path) -> tuple[dict[str, Any], str]:
+    """Diagnose the campaign folder: its rig-diagnosis/1 report (JSON-safe) and the HTML page
+    of :func:`rig.report_html.render_html` (figures inline); the plain tables of
+    :func:`plain_report_html` if that page cannot be drawn for this report."""
+    from rig.diagnose import diagnose_path, report_dict
+    from rig.engine_record import json_safe
+    from rig.report_html import render_html
+
+    campaign, diagnosis = diagnose_path(campaign_path)
+    report = json_safe(report_dict(campaign, diagnosis))
     try:
-        from rig import report_html
-    except ImportError:
-        report_html = None
-    render = getattr(report_html, "report_html", None) if report_html else None
-    if callable(render):
-        try:
-            return str(render(campaign_path, report))
-        except TypeError:
-            pass
-    return plain_report_html(report)
+        page = render_html(report, diagnosis)
+    except (KeyError, TypeError, ValueError) as exc:
+        log.warning("diagnosis page of %s drawn as plain tables: %s", campaign_path, exc)
+        page = plain_report_html(report)
+    return report, page
 
 
 def _cell(value: Any) -> str:

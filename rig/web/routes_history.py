@@ -189,9 +189,10 @@ def get_campaign(request: Request, campaign_id: CampaignId) -> dict[str, Any]:
     return _campaign(_store(request), campaign_id)
 
 
-def _diagnosis(store: Store, campaign_id: str) -> dict[str, Any]:
-    """The campaign's rig-diagnosis/1 report (computed once, cached beside the store)."""
-    from rig.diagnose import diagnose_path, report_dict
+def _diagnosis(store: Store, campaign_id: str, suffix: str) -> str:
+    """The campaign's diagnosis as ``suffix`` ("json" or "html"), computed once and cached
+    beside the store (``<store>/web/diagnosis/``)."""
+    from rig.web.report import diagnose_campaign_folder
 
     try:
         info = store.get_campaign(campaign_id)
@@ -199,17 +200,19 @@ def _diagnosis(store: Store, campaign_id: str) -> dict[str, Any]:
         raise HTTPException(404, str(exc)) from exc
     if info.status == "running":
         raise HTTPException(409, f"campaign {campaign_id} is still running")
-    cache = store.root / "web" / "diagnosis" / f"{campaign_id}.json"
-    if cache.is_file():
-        return json.loads(cache.read_text(encoding="utf-8"))
-    try:
-        campaign, diagnosis = diagnose_path(info.path)
-        report = json_safe(report_dict(campaign, diagnosis))
-    except Exception as exc:  # too few runs, unreadable runs: said, not a 500
-        raise HTTPException(409, f"campaign {campaign_id} cannot be diagnosed: {exc}") from exc
-    cache.parent.mkdir(parents=True, exist_ok=True)
-    cache.write_text(json.dumps(report, indent=2), encoding="utf-8")
-    return report
+    folder = store.root / "web" / "diagnosis"
+    cache = folder / f"{campaign_id}.{suffix}"
+    if not cache.is_file():
+        try:
+            report, page = diagnose_campaign_folder(info.path)
+        except Exception as exc:  # too few runs, unreadable runs: said, not a 500
+            raise HTTPException(409, f"campaign {campaign_id} cannot be diagnosed: "
+                                     f"{exc}") from exc
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / f"{campaign_id}.json").write_text(json.dumps(report, indent=2),
+                                                    encoding="utf-8")
+        (folder / f"{campaign_id}.html").write_text(page, encoding="utf-8")
+    return cache.read_text(encoding="utf-8")
 
 
 @router.get("/campaigns/{campaign_id}/diagnosis.json",
@@ -218,18 +221,14 @@ def _diagnosis(store: Store, campaign_id: str) -> dict[str, Any]:
                              "description": "The rig-diagnosis/1 report"}},
             summary="The diagnosis report of a campaign (rig-diagnosis/1 JSON)")
 def campaign_diagnosis(request: Request, campaign_id: CampaignId) -> JSONResponse:
-    return JSONResponse(_diagnosis(_store(request), campaign_id))
+    return JSONResponse(json.loads(_diagnosis(_store(request), campaign_id, "json")))
 
 
 @router.get("/campaigns/{campaign_id}/diagnosis.html", response_class=HTMLResponse,
             responses={**NOT_FOUND, **UNPROCESSABLE},
             summary="The diagnosis report of a campaign as an HTML page")
 def campaign_diagnosis_html(request: Request, campaign_id: CampaignId) -> HTMLResponse:
-    from rig.web.report import diagnosis_html
-
-    store = _store(request)
-    report = _diagnosis(store, campaign_id)
-    return HTMLResponse(diagnosis_html(store.get_campaign(campaign_id).path, report))
+    return HTMLResponse(_diagnosis(_store(request), campaign_id, "html"))
 
 
 def _read_json(path: Path) -> dict[str, Any]:

@@ -46,7 +46,7 @@ const fmt = (v, digits = 3) => (v === null || v === undefined || !isFinite(v)) ?
 
 // ---------------------------------------------------------------- the loop plot (uPlot)
 const live = { T: [], W: [], runId: null, model: null, bandNm: null, stored: null };
-window.rigStats = { latency_s: [], batches: 0, points: 0, drawn: 0 };
+window.rigStats = { latency_s: [], latency_oldest_s: [], batches: 0, points: 0, drawn: 0 };
 
 function bandHook(u) {
   const b = live.bandNm;
@@ -97,25 +97,26 @@ function modelPolyline() {
   return [[-A, 0, 0, A], [-p / 2 - A / K, -p / 2, p / 2, p / 2 + A / K]];
 }
 
+// Batches waiting to be drawn: [wall time of the newest sample, of the oldest] (s).
 let drawPending = null;
-function scheduleDraw(tWall) {
-  if (tWall !== undefined) drawPending = Math.max(drawPending || 0, tWall);
-  else if (drawPending === null) drawPending = 0;
-  requestAnimationFrame(drawNow);
+let pendingStamps = [];
+function scheduleDraw(tWall, tWallOldest) {
+  if (tWall !== undefined) pendingStamps.push([tWall, tWallOldest]);
+  if (drawPending === null) { drawPending = true; requestAnimationFrame(drawNow); }
 }
 function drawNow() {
-  if (drawPending === null) return;
-  const tWall = drawPending;
   drawPending = null;
+  const stamps = pendingStamps;
+  pendingStamps = [];
   const src = live.stored || { T: live.T, W: centred(live.W), M: null };
   const model = src.M ? [src.T, src.M] : modelPolyline();
   plot.setData([null, [src.T, src.W], model]);
   window.rigStats.drawn = src.T.length;
-  if (tWall > 0) {
-    const lat = Date.now() / 1000 - tWall;
-    const arr = window.rigStats.latency_s;
-    arr.push(lat);
-    if (arr.length > 5000) arr.shift();
+  const now = Date.now() / 1000;
+  for (const [newest, oldest] of stamps) {   // measured -> drawn, per batch
+    const a = window.rigStats.latency_s, b = window.rigStats.latency_oldest_s;
+    a.push(now - newest); b.push(now - oldest);
+    if (a.length > 5000) { a.shift(); b.shift(); }
   }
 }
 
@@ -134,7 +135,10 @@ function addRows(msg) {
   window.rigStats.batches += 1;
   window.rigStats.points = live.T.length;
   $("loop-title").textContent = live.runId ? "live: " + live.runId : "";
-  scheduleDraw(msg.type === "rows" ? msg.t_wall_s : undefined);
+  if (msg.type === "rows" && msg.t_s.length) {
+    const span = msg.t_s[msg.t_s.length - 1] - msg.t_s[0];
+    scheduleDraw(msg.t_wall_s, msg.t_wall_s - span);
+  } else scheduleDraw();
 }
 
 function showMetrics(m, model) {

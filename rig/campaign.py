@@ -166,6 +166,32 @@ def runout_signature(angles_deg: list[float], values: list[float]) -> dict[str, 
     }
 
 
+def batch_band(
+    unit: dict[str, Any], rated_torque_Nm: float, pct: float, *, samples: int = 5000
+) -> dict[str, Any] | None:
+    """Where this design's production batch lies: the Monte Carlo lost motion over seed 000
+    Table 1's tolerances (:mod:`analysis.models.seed000_batch`), worst eccentric-shaft
+    position, as the central 95 % band (arcmin). None for a unit the batch model cannot use
+    (another kind, or design data missing), with no error: the measurement stands alone."""
+    from analysis.errors import AnalysisError
+    from analysis.models.seed000_batch import lost_motion_batch
+    from analysis.models.seed000_unit import InternalPairUnit
+
+    if unit.get("kind", "internal_involute") != "internal_involute":
+        return None
+    try:
+        parsed, _ = InternalPairUnit.from_mapping(unit)
+        batch = lost_motion_batch(parsed, samples=samples, seed=0,
+                                  rated_torque_Nm=rated_torque_Nm, lost_motion_pct=pct)
+    except AnalysisError:
+        return None
+    low, high = batch.band_arcmin(0.95)
+    worst = batch.to_dict()["worst_position_arcmin"]
+    return {"band_95_arcmin": [low, high], "median_arcmin": worst["median"],
+            "samples": samples, "what": "seed 000 Table 1 tolerances, worst position "
+            "(seed 003's Monte Carlo method); `rig batch` for the whole distribution"}
+
+
 def summarise(runs: list[dict[str, Any]], limits: Limits) -> dict[str, Any]:
     """Campaign results from the per-run dicts (``RunOutcome.to_dict()``): lost motion
     {mean, min, max, std} (arcmin) over completed runs, by position, its runout signature,

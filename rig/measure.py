@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rig.campaign import CampaignFile, Limits, SimulationSection, summarise
+from analysis.loop import PROFILES
+from rig.campaign import CampaignFile, Limits, SimulationSection, batch_band, summarise
 from rig.config import RigConfig, dump_rig_toml, load_rig_config
 from rig.devices import RigDevices, open_rig
 from rig.engine import Engine, EngineOptions
@@ -197,6 +198,8 @@ def run_campaign(camp: CampaignFile, session: RigSession, store: Store, *,
         raise
     runs = [o.to_dict() for o in outcomes]
     summary = summarise(runs, camp.limits)
+    summary["batch"] = batch_band(unit, camp.plan.rated_torque_Nm,
+                                  PROFILES.get(camp.profile, 3.0))
     status = "completed" if engine.state == "completed" else "aborted"
     reason = engine.stopping_reason
     if status == "aborted":

@@ -53,6 +53,8 @@ def test_campaign_json_and_exit_codes_pass_and_fail(tmp_path: Path) -> None:
     assert doc["passed"] is False and "above the limit 1" in doc["failures"][0]
     assert results[0]["passed"] is True and results[0]["failures"] == []
     assert set(doc["lost_motion_arcmin"]) >= {"mean", "min", "max"}
+    low, high = doc["batch"]["band_95_arcmin"]  # the production-batch band of the design
+    assert 0 < low < doc["batch"]["median_arcmin"] < high
     (run,) = doc["runs"]
     for key in ("run_id", "lost_motion_arcmin", "backlash_arcmin", "stiffness_Nm_per_arcmin",
                 "loop_area_J", "torque_offset_Nm", "model", "uncertainty", "status", "reason"):

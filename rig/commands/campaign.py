@@ -105,6 +105,10 @@ def register(app: typer.Typer) -> None:
         if model.get("lost_motion_arcmin") is not None:
             out.print(f"model (reference nominal, no runout): lost motion "
                       f"{model['lost_motion_arcmin']:.3f} arcmin")
+        band = (result.get("batch") or {}).get("band_95_arcmin")
+        if band:
+            out.print(f"production batch of this design (seed 000 tolerances, 95 %): "
+                      f"{band[0]:.3f} .. {band[1]:.3f} arcmin")
         out.print(f"campaign folder: {result['path']}")
         if result["status"] != "completed":
             out.print(f"[red]campaign aborted: {result['reason']}[/red]")

@@ -17,6 +17,7 @@ import urllib.request
 from pathlib import Path
 
 import pytest
+from playwright.sync_api import expect, sync_playwright
 
 CHROMIUM = Path("/usr/bin/chromium")
 REPO = Path(__file__).resolve().parents[2]
@@ -73,16 +74,13 @@ def get_json(url: str):
 
 
 def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
-    playwright_api = pytest.importorskip("playwright.sync_api")
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    with rig_serve(tmp_path / "store") as (url, link), \
-            playwright_api.sync_playwright() as pw:
+    with rig_serve(tmp_path / "store") as (url, link), sync_playwright() as pw:
         browser = launch_browser(pw)
         page = browser.new_page(viewport={"width": 1400, "height": 1500})
         errors: list[str] = []
         page.on("pageerror", lambda exc: errors.append(str(exc)))
         page.goto(link)
-        expect = playwright_api.expect
         expect(page.locator("#role")).to_have_text("operator")
         expect(page.locator("#estop")).to_be_visible()
         expect(page.locator("#state")).to_have_text("idle", timeout=90_000)

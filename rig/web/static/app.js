@@ -149,6 +149,40 @@ function showMetrics(m, model) {
   $("m-model").textContent = fmt(mm && mm.lost_motion_arcmin);
 }
 
+// ---------------------------------------------------------------- campaign: lost motion vs position
+let campaignPlot = null;
+function showCampaign(title, summary) {
+  const pts = (summary && summary.lost_motion_by_position) || [];
+  const box = $("campaign-box");
+  box.hidden = pts.length === 0;
+  if (!pts.length) return;
+  $("campaign-title").textContent = title;
+  const x = pts.map((p) => p.input_angle_deg);
+  const y = pts.map((p) => p.lost_motion_arcmin);
+  // the runout signature (seed 000 eq. 4): mean + amplitude cos(theta - phase), over one turn
+  const sig = summary.runout_signature;
+  const xs = [], fit = [], meas = [];
+  const grid = new Set(x);
+  for (let a = 0; a <= 360; a += 5) grid.add(a);
+  for (const a of [...grid].sort((p, q) => p - q)) {
+    xs.push(a);
+    const i = x.indexOf(a);
+    meas.push(i >= 0 ? y[i] : null);
+    fit.push(sig ? sig.mean + sig.amplitude * Math.cos((a - sig.phase_deg) * Math.PI / 180) : null);
+  }
+  const data = [xs, meas, fit];
+  if (!campaignPlot) {
+    campaignPlot = new uPlot({
+      width: Math.max(400, $("loop-plot").clientWidth || 800), height: 240,
+      scales: { x: { time: false } },
+      axes: [{ label: "input angle (deg)" }, { label: "lost motion (arcmin)" }],
+      series: [{}, { label: "measured", stroke: "#1f5fbf", paths: () => null,
+                     points: { show: true, size: 9, fill: "#1f5fbf" } },
+               { label: "runout signature", stroke: "#c62828", dash: [6, 4], points: { show: false } }],
+    }, data, $("campaign-plot"));
+  } else campaignPlot.setData(data);
+}
+
 // ---------------------------------------------------------------- status
 let lastStatus = null;
 function renderStatus(s) {
@@ -229,6 +263,7 @@ function renderResult(r) {
       .map((x) => `${fmt(x.input_angle_deg, 0)}°: ${fmt(x.lost_motion_arcmin)}`).join(", ");
   }
   el.innerHTML = html;
+  if (r.kind === "campaign") showCampaign(r.campaign_id || "", r);
   const last = r.runs && r.runs.length ? r.runs[r.runs.length - 1] : null;
   if (last && last.status === "completed") showMetrics(last, null);
 }
@@ -375,7 +410,7 @@ async function refreshHistory() {
       const byPos = (s.lost_motion_by_position || [])
         .map((x) => `${fmt(x.input_angle_deg, 0)}°: ${fmt(x.lost_motion_arcmin)}`).join(", ");
       const tr = document.createElement("tr");
-      tr.innerHTML = `<td>${esc(c.campaign_id)}</td><td>${esc(c.status)}</td><td>${verdict}</td>` +
+      tr.innerHTML = `<td><a href="#" data-campaign="${esc(c.campaign_id)}">${esc(c.campaign_id)}</a></td><td>${esc(c.status)}</td><td>${verdict}</td>` +
         `<td>${byPos}</td><td><a href="/api/campaigns/${id}/diagnosis.html" target="_blank">diagnosis</a>` +
         ` · <a href="/api/campaigns/${id}/diagnosis.json">json</a></td>`;
       cb.appendChild(tr);
@@ -422,6 +457,15 @@ function wire() {
   $("unit-example").addEventListener("change", (e) => {
     const u = units.find((x) => x.name === e.target.value);
     if (u) fillUnit(u.unit);
+  });
+  $("campaigns").addEventListener("click", async (e) => {
+    const a = e.target.closest("a[data-campaign]");
+    if (!a) return;
+    e.preventDefault();
+    try {
+      const c = await api("GET", `/api/campaigns/${encodeURIComponent(a.dataset.campaign)}`);
+      showCampaign(c.campaign_id, c.summary);
+    } catch (err) { notice(err.message, true); }
   });
   $("runs").addEventListener("click", (e) => {
     const a = e.target.closest("a[data-run]");

@@ -113,3 +113,18 @@ def test_pause_resume_then_estop_leaves_the_rig_safe(page):
     assert info.status == "aborted" and "E-stop" in info.reason
     assert store.load_run(run_id).n_samples > 100  # every sample so far is kept
     assert safe["input_lock"]["confirmed"] is False  # confirm again before the next test
+
+
+def test_estop_pressed_as_a_run_starts_stops_it(page):
+    client, store = page
+    before = {r.run_id for r in store.list_runs()}
+    client.post("/api/devices/input-lock", json={"confirm": True}, headers=AUTH)
+    assert client.post("/api/control/start", json=short_run(), headers=AUTH).status_code == 200
+    stop = client.post("/api/control/estop")  # before or just after the engine exists
+    assert stop.status_code == 200 and "measurement stopped" in stop.json()["message"]
+    done = wait_for(client, lambda s: s["state"] in ("aborted", "completed"), 60.0)
+    assert done["state"] == "aborted" and "E-stop" in done["fault"]["detail"]
+    safe = wait_for(client, lambda s: s["safe"] is not None, 10.0)
+    assert safe["safe"] is True
+    new = [r for r in store.list_runs() if r.run_id not in before]
+    assert all(r.status == "aborted" for r in new)  # the loop never completed

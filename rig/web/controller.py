@@ -111,6 +111,7 @@ class RigController:
         self._profile: str | None = None
         self._measuring = False
         self._monitor_lock = threading.Lock()
+        self._estop_pending: str | None = None
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -384,6 +385,7 @@ class RigController:
             self._tap = TapStore(self.store, self.hub)
             self._profile = req.profile
             self._measuring = True
+            self._estop_pending = None
             thread = threading.Thread(target=self._measure, args=(req, session),
                                       name="rig web measurement", daemon=True)
             self._run_thread = thread
@@ -420,6 +422,7 @@ class RigController:
             if self._lock_by_motor:
                 self._lock_confirmed = False  # the plan moved the input: confirm it again
             self._measuring = False
+            self._estop_pending = None
         self._monitor_once()  # the devices as the end left them (safe state), at once
         self.hub.add_event({"type": "state", "state": state, "result": self._last_result})
 
@@ -465,7 +468,10 @@ class RigController:
         with self._lock:
             self._engine = engine
             stop = self._stop.is_set()
-        if stop:
+            estop, self._estop_pending = self._estop_pending, None
+        if estop:  # pressed while the measurement was being set up: it never moves
+            engine.estop(estop)
+        elif stop:
             engine.abort("the control page was shut down")
 
     def _on_event(self, event: ProgressEvent) -> None:
@@ -509,10 +515,15 @@ class RigController:
     def estop(self) -> str:
         """Safe state now, whatever the state: the engine's E-stop if a measurement runs,
         else zero torque and the drive disabled directly. Never refused."""
-        engine = self._engine
+        reason = "E-stop pressed on the control page"
+        with self._lock:
+            engine = self._engine
+            if engine is None and self._measuring:
+                self._estop_pending = reason  # the engine being set up stops at once
         done = []
-        if engine is not None:
-            engine.estop("E-stop pressed on the control page")
+        if engine is not None or self._estop_pending:
+            if engine is not None:
+                engine.estop(reason)
             done.append("measurement stopped")
         session = self.session
         if session is not None:
@@ -520,7 +531,7 @@ class RigController:
             done.append("drive disabled, torque zero" if ok else
                         "drive not reachable: its watchdog disables it")
             with self._lock:
-                self._fault_reason = "E-stop pressed on the control page"
+                self._fault_reason = reason
                 if not self._busy():
                     self.state = "idle"
                 self._lock_confirmed = False

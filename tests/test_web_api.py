@@ -237,3 +237,36 @@ def test_campaign_results_and_diagnosis(client: TestClient, store: Store):
     assert report["verdict"] in page.text
     assert "data:image/png;base64," in page.text and "http" not in page.text  # works offline
     assert client.get("/api/campaigns/no-such-campaign").status_code == 404
+
+
+# --------------------------------------------------------------------------- faults
+
+
+def test_faults_in_plain_words_keep_the_device_message():
+    from drivers.errors import DeviceDisconnected, DeviceFault, DeviceTimeout
+    from rig.engine_safety import TorqueLimitExceeded, check_command, check_measured
+    from rig.web.faults import explain
+
+    watchdog = DeviceFault("loading drive (Modbus unit 2 on tcp 127.0.0.1:5020)",
+                           "a normal reply", "drive fault code 2 WATCHDOG_TIMEOUT")
+    heartbeat = DeviceDisconnected("encoder node 1 on slcan socket://127.0.0.1:9",
+                                   "a heartbeat within 0.6 s", "none for 1.2 s (heartbeat lost)")
+    trip = check_measured(25.0, 20.0, "torque transducer")
+    with pytest.raises(TorqueLimitExceeded) as refused:
+        check_command(30.0, 20.0)
+    silent = DeviceTimeout("torque transducer on /dev/pts/3", "a sample within 0.5 s", "none")
+    cases = [
+        ("E-stop: E-stop pressed on the control page", "E-stop pressed"),
+        ("aborted by the operator", "Stopped by the operator"),
+        (str(watchdog), "communication watchdog"),
+        (str(heartbeat), "heartbeat lost"),
+        (trip, "Torque beyond the limit"),
+        (str(refused.value), "was refused"),
+        (str(silent), "torque transducer did not answer"),
+        ("something nobody foresaw", "The measurement stopped"),
+    ]
+    for reason, title in cases:
+        fault = explain(reason)
+        assert title in fault.title, (reason, fault)
+        assert fault.detail == reason and fault.action  # the device's own words are kept
+    assert explain(None) is None

@@ -36,6 +36,8 @@ RULES: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("torque limit",), "Torque beyond the limit: stopped to protect the unit",
      "Lower the amplitude or the rated torque of the plan, or check the torque sensor's "
      "zero (tare) before starting again."),
+    (("refused", "the limit is"), "A torque beyond the limit was refused: nothing moved there",
+     "Lower the amplitude or the rated torque of the plan."),
     (("beyond",), "A reading went beyond its allowed range",
      "Check the sensor named below and the plan's limits, then start again."),
     (("torque transducer",), "The torque transducer did not answer as expected",

@@ -63,7 +63,7 @@ def _simdata(register_map: dict[str, Register], table: str) -> list[SimData]:
 
 
 def _sim_device(unit: int, register_map: dict[str, Register], action) -> SimDevice:
-    # Coils and discrete inputs are not used: one placeholder block each (the action
+    # Coils and discrete inputs are not used: SimDevice still wants one block each (the action
     # answers their function codes with ILLEGAL FUNCTION).
     unused = [SimData(0, values=[False] * 16, datatype=DataType.BITS)]
     return SimDevice(

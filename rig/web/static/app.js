@@ -412,7 +412,8 @@ async function refreshHistory() {
       const tr = document.createElement("tr");
       tr.innerHTML = `<td><a href="#" data-campaign="${esc(c.campaign_id)}">${esc(c.campaign_id)}</a></td><td>${esc(c.status)}</td><td>${verdict}</td>` +
         `<td>${byPos}</td><td><a href="/api/campaigns/${id}/diagnosis.html" target="_blank">diagnosis</a>` +
-        ` · <a href="/api/campaigns/${id}/diagnosis.json">json</a></td>`;
+        ` · <a href="/api/campaigns/${id}/diagnosis.html" download="${esc(c.campaign_id)}-diagnosis.html">html</a>` +
+        ` · <a href="/api/campaigns/${id}/diagnosis.json" download>json</a></td>`;
       cb.appendChild(tr);
     }
   } catch (e) { notice("history: " + e.message, true); }

@@ -34,11 +34,14 @@ async function api(method, path, body) {
   return data;
 }
 
-function notice(text, isError) {
+let noticeTimer = null;
+function notice(text, isError) {   // an answer to the last command; errors stay until the next
   const el = $("notice");
   el.textContent = text;
   el.className = "notice" + (isError ? " error" : "");
   el.hidden = !text;
+  clearTimeout(noticeTimer);
+  if (!isError) noticeTimer = setTimeout(() => { el.hidden = true; }, 8000);
 }
 
 const fmt = (v, digits = 3) => (v === null || v === undefined || !isFinite(v)) ? "–"

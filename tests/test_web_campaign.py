@@ -62,6 +62,8 @@ def test_campaign_from_the_page(tmp_path):
     assert [p["input_angle_deg"] for p in by_position] == [0.0, 180.0]
     assert all(0.5 < p["lost_motion_arcmin"] < 10.0 for p in by_position)
     assert result["passed"] is False
+    low, high = result["batch"]["band_95_arcmin"]  # the design's production-batch band
+    assert 0 < low < high
     assert all("lost_motion_arcmin" in f and "above the limit 0.01" in f
                for f in result["failures"])
     assert campaigns[0]["campaign_id"] == result["campaign_id"]

@@ -173,7 +173,11 @@ function showCampaign(title, summary) {
     meas.push(i >= 0 ? y[i] : null);
     fit.push(sig ? sig.mean + sig.amplitude * Math.cos((a - sig.phase_deg) * Math.PI / 180) : null);
   }
-  const data = [xs, meas, fit];
+  // where a production batch of this design lies (seed 000 tolerances, worst position, 95 %)
+  const band = (summary.batch && summary.batch.band_95_arcmin) || null;
+  const low = xs.map(() => (band ? band[0] : null));
+  const high = xs.map(() => (band ? band[1] : null));
+  const data = [xs, meas, fit, low, high];
   if (!campaignPlot) {
     campaignPlot = new uPlot({
       width: Math.max(400, $("loop-plot").clientWidth || 800), height: 240,
@@ -181,7 +185,9 @@ function showCampaign(title, summary) {
       axes: [{ label: "input angle (deg)" }, { label: "lost motion (arcmin)" }],
       series: [{}, { label: "measured", stroke: "#1f5fbf", paths: () => null,
                      points: { show: true, size: 9, fill: "#1f5fbf" } },
-               { label: "runout signature", stroke: "#c62828", dash: [6, 4], points: { show: false } }],
+               { label: "runout signature", stroke: "#c62828", dash: [6, 4], points: { show: false } },
+               { label: "batch 2.5 %", stroke: "#888", dash: [2, 3], points: { show: false } },
+               { label: "batch 97.5 %", stroke: "#888", dash: [2, 3], points: { show: false } }],
     }, data, $("campaign-plot"));
   } else campaignPlot.setData(data);
 }
@@ -264,6 +270,11 @@ function renderResult(r) {
   if (r.lost_motion_by_position && r.lost_motion_by_position.length) {
     html += "<br>lost motion against position: " + r.lost_motion_by_position
       .map((x) => `${fmt(x.input_angle_deg, 0)}°: ${fmt(x.lost_motion_arcmin)}`).join(", ");
+  }
+  const band = r.batch && r.batch.band_95_arcmin;
+  if (band) {
+    html += `<br>production batch of this design (seed 000 tolerances, 95 %): ` +
+      `${fmt(band[0])} .. ${fmt(band[1])} arcmin`;
   }
   el.innerHTML = html;
   if (r.kind === "campaign") showCampaign(r.campaign_id || "", r);

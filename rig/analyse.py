@@ -8,14 +8,14 @@ the pure numerics of :mod:`analysis.loop` and :mod:`analysis.models.nominal`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
 from analysis.errors import AnalysisError
 from analysis.loop import PROFILES, LoopResult, analyse_loop, twist_arcmin
-from analysis.models.nominal import reference_nominal_model
-from analysis.models.seed000 import InternalPairUnit
+from analysis.models.by_kind import LoopModel
+from analysis.models.by_kind import nominal_model_for_unit as model_by_kind
 from rig.errors import RigError
 from rig.runformat import Run
 
@@ -46,20 +46,6 @@ def _finite_or_none(value: float | None) -> float | None:
     if value is None or not np.isfinite(value):
         return None
     return float(value)
-
-
-class LoopModel(Protocol):
-    """What a nominal loop model offers (NominalModel, CycloidNominalModel, ...)."""
-
-    play_arcmin: float
-    stiffness_Nm_per_arcmin: float
-
-    @property
-    def backlash_arcmin(self) -> float: ...
-
-    def twist_arcmin(self, torque_Nm: np.ndarray, start_flank: int = -1) -> np.ndarray: ...
-
-    def lost_motion_arcmin(self, rated_torque_Nm: float, pct: float) -> float: ...
 
 
 @dataclass
@@ -124,34 +110,16 @@ class RunAnalysis:
 def nominal_model_for_unit(
     unit: dict[str, Any], rated_torque_Nm: float | None = None
 ) -> tuple[LoopModel | None, list[str]]:
-    """The nominal loop model for a run's ``unit`` object, by ``unit.kind``.
-
-    ``internal_involute`` (the default kind): the reference nominal model of run-format.md.
-    ``cycloid``: the seed 002 compound cycloid pair (:mod:`analysis.models.cycloid_nominal`).
-    ``beveloid``: the seed 001 beveloid pair (:mod:`analysis.models.beveloid_nominal`).
-    A unit the model cannot use gives no model and says why; it is never an error, because the
-    measured metrics stand on their own.
+    """The nominal loop model for a run's ``unit`` object, by ``unit.kind``
+    (:func:`analysis.models.by_kind.nominal_model_for_unit`). A unit the model cannot use gives
+    no model and says why; never an error, because the measured metrics stand on their own.
     """
     if not unit:
         return None, ["run.json has no unit data: no model prediction"]
-    kind = unit.get("kind", "internal_involute")
     try:
-        if kind == "internal_involute":
-            parsed, assumptions = InternalPairUnit.from_mapping(unit)
-            return reference_nominal_model(parsed), list(assumptions)
-        if kind == "cycloid":
-            from analysis.models.cycloid_nominal import cycloid_nominal_model
-
-            model, assumptions = cycloid_nominal_model(unit, reference_torque_Nm=rated_torque_Nm)
-            return model, list(assumptions)
-        if kind == "beveloid":
-            from analysis.models.beveloid_nominal import beveloid_nominal_model
-
-            model, assumptions = beveloid_nominal_model(unit)
-            return model, list(assumptions)
+        return model_by_kind(unit, rated_torque_Nm)
     except AnalysisError as exc:
         return None, [f"no model prediction: {exc}"]
-    return None, [f"unit kind {kind!r} has no nominal model yet"]
 
 
 def resolve_profile(profile: str | None, percent: float | None) -> tuple[str, float]:

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from analysis.models.nominal import reference_nominal_model
+from analysis.models.by_kind import nominal_model_for_unit
 from analysis.models.seed000_unit import InternalPairUnit
 from rig.examples import RUNS_DIR, UNITS_DIR
 from rig.runformat import Campaign, Run, write_campaign, write_run
@@ -80,15 +80,18 @@ def make_run(
     torque_noise_Nm: float = 0.004,
     seed: int = 0,
 ) -> Run:
-    """One run of the example loop model (see the module docstring)."""
+    """One run of the example loop model (see the module docstring); any unit kind of
+    :mod:`analysis.models.by_kind`, the runout term for the seed 000 pair only."""
     rng = np.random.default_rng(seed)
-    parsed, _ = InternalPairUnit.from_mapping(unit)
-    model = reference_nominal_model(parsed)
-    alpha = math.radians(parsed.pressure_angle_deg)
-    runout_mm = ((parsed.runout_internal_mm or 0.0) + (parsed.runout_external_mm or 0.0)) / 2.0
-    # seed 000 eqs. (3) and (7): the center distance error of the runout, once per revolution
-    runout_um = 2.0 * math.tan(alpha) * 1000.0 * runout_mm / 2.0
-    runout_arcmin = 6.876 * runout_um / (parsed.module_mm * parsed.z_internal)
+    model, _ = nominal_model_for_unit(unit, rated_torque_Nm)
+    runout_arcmin = 0.0
+    if unit.get("kind", "internal_involute") == "internal_involute":
+        parsed, _ = InternalPairUnit.from_mapping(unit)
+        alpha = math.radians(parsed.pressure_angle_deg)
+        runout_mm = ((parsed.runout_internal_mm or 0.0) + (parsed.runout_external_mm or 0.0)) / 2
+        # seed 000 eqs. (3) and (7): the center distance error of the runout, once per turn
+        runout_um = 2.0 * math.tan(alpha) * 1000.0 * runout_mm / 2.0
+        runout_arcmin = 6.876 * runout_um / (parsed.module_mm * parsed.z_internal)
     play_arcmin = model.play_arcmin + runout_arcmin * math.cos(
         math.radians(input_angle_deg - runout_phase_deg)
     )

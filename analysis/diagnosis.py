@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.stats import binomtest
 
 from analysis.diagnosis_data import PreparedRun, RunInput, prepare_run
 from analysis.diagnosis_fit import (
@@ -57,6 +58,22 @@ GREEDY_GAIN = 0.3
 #: Two explaining candidates tie when the systematic gap the second leaves is within the
 #: noise threshold or at most this factor of the best one's.
 TIE_FACTOR = 2.0
+#: A tied candidate is separated (the best is called) when its held-out mean squared
+#: standardised residual is at least this factor of the best one's, the best wins on at least
+#: SEPARATION_WINS of the held-out runs, and its in-sample BIC is lower by SEPARATION_BIC.
+SEPARATION_RATIO = 1.5
+SEPARATION_WINS = 0.75
+SEPARATION_BIC = 10.0
+#: With enough held-out runs a smaller but consistent difference separates too: the ratio at
+#: least SEPARATION_RATIO_CONSISTENT and a one-sided sign test over the held-out runs at
+#: SEPARATION_P.
+SEPARATION_RATIO_CONSISTENT = 1.1
+SEPARATION_P = 0.05
+#: Bearing clearance adds free play (seed 000 eqs. 3 + 7) that contact stiffening does not:
+#: a calibrated play above the nominal by at least PLAY_PRESENT of the inspected clearances'
+#: play calls bearing clearance, by at most PLAY_ABSENT of it calls stiffening.
+PLAY_PRESENT = 0.5
+PLAY_ABSENT = 0.25
 #: Stiffness deviation from seed 004 eq. (8) taken as a finding (relative).
 STIFFNESS_TOLERANCE = 0.10
 MAX_FOLDS = 5
@@ -100,6 +117,7 @@ class Candidate:
     plausible: bool = True
     notes: list[str] = field(default_factory=list)
     screened_out: bool = False
+    heldout_resid: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
 
 @dataclass
@@ -366,11 +384,13 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
         folds, scheme = cfolds, "leave-one-condition-out"
         if "tooth_spacing_error" in effects:
             folds, scheme = rfolds, "leave-one-repeat-out"
+        resid: dict[str, np.ndarray] = {}
         if folds:
-            h, lm, nh, _ = _heldout(stack, effects, folds, full)
+            h, lm, nh, resid = _heldout(stack, effects, folds, full)
         else:
             (h, lm), nh, scheme = _insample(stack, full), 0, "in-sample (no held-out design)"
-        cand = Candidate(effects, full, h, lm, nh, scheme, delta_bic=_bic(full) - _bic(base))
+        cand = Candidate(effects, full, h, lm, nh, scheme, delta_bic=_bic(full) - _bic(base),
+                         heldout_resid=resid)
         cand.params, cand.plausible, cand.notes = describe_params(stack, effects, full)
         return cand
 
@@ -447,7 +467,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
                       f"{noise * ARCSEC:.2f} arcsec: within the measurement noise")
     else:
         verdict, candidates, next_experiment, chosen, reason = _attribute(
-            stack, models, sys0, threshold, noise, evaluate, before)
+            stack, models, sys0, threshold, noise, evaluate, before, nom.play_arcmin)
 
     ranking = []
     for c in sorted(models.values(),
@@ -527,7 +547,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
     return Diagnosis(report=report, stack=stack, base=base, models=models)
 
 
-def _attribute(stack, models, sys0, threshold, noise, evaluate, before):
+def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_play):
     """Pick the verdict among candidates, greedily adding effects (see module docstring)."""
     def sysh(c: Candidate) -> float:
         return _sys(c.heldout_rms_arcmin, noise)
@@ -544,9 +564,13 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before):
         best = explaining[0]
         ties = [c for c in explaining[1:]
                 if sysh(c) <= max(threshold, TIE_FACTOR * sysh(best))
-                and c.scheme == best.scheme]
+                and c.scheme == best.scheme and not separated(stack, best, c)]
         if ties:
             names = [best.effects[0]] + [c.effects[0] for c in ties]
+            winner, why = play_tiebreak(names, models, nominal_play)
+            if winner is not None:
+                return (winner, [], None, [models[winner]],
+                        "held-out fits tie; decided by the free play: " + why)
             return ("ambiguous", names, _next(names), [best],
                     "several effects explain the gap equally well under this design")
         return best.effects[0], [], None, [best], "one effect explains the held-out gap"
@@ -582,6 +606,60 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before):
                     "repeat to test it")
     return ("unexplained", names, None, chosen,
             "a systematic gap remains on held-out runs that no candidate closes")
+
+
+def heldout_separation(stack: Stack, a: Candidate, b: Candidate) -> tuple[float, float]:
+    """Held-out evidence that ``a`` fits better than ``b`` on the same folds: the ratio of their
+    pooled held-out mean squared standardised residuals (b over a; each run's residual over its
+    block-mean noise) and the share of held-out runs on which ``a``'s is the smaller."""
+    sig = {r.run_id: r.sigma_arcmin for r in stack.runs}
+    ids = [k for k in a.heldout_resid if k in b.heldout_resid]
+    if not ids:
+        return 1.0, 0.0
+    za = np.array([float(np.sum((a.heldout_resid[k] / sig[k]) ** 2)) for k in ids])
+    zb = np.array([float(np.sum((b.heldout_resid[k] / sig[k]) ** 2)) for k in ids])
+    ratio = float(zb.sum() / za.sum()) if za.sum() > 0 else math.inf
+    return ratio, float(np.mean(za < zb))
+
+
+def separated(stack: Stack, best: Candidate, other: Candidate) -> bool:
+    """True when ``best`` is clearly better than ``other`` on held-out data (ratio of mean
+    squared standardised residuals >= SEPARATION_RATIO, consistently over the held-out runs)
+    and on the information criterion (BIC lower by SEPARATION_BIC): then the design separates
+    them and the verdict is ``best``, not ``ambiguous``."""
+    ratio, wins = heldout_separation(stack, best, other)
+    if other.delta_bic - best.delta_bic < SEPARATION_BIC:
+        return False
+    n = len([k for k in best.heldout_resid if k in other.heldout_resid])
+    if ratio >= SEPARATION_RATIO and wins >= SEPARATION_WINS:
+        return True
+    k = int(round(wins * n))
+    return (n > 0 and ratio >= SEPARATION_RATIO_CONSISTENT
+            and binomtest(k, n, 0.5, alternative="greater").pvalue <= SEPARATION_P)
+
+
+def play_tiebreak(names: Sequence[str], models: dict[str, Candidate],
+                  nominal_play_arcmin: float) -> tuple[str | None, str]:
+    """Settle a bearing_clearance / stiffness_nonlinearity tie by the free play: the bearings'
+    radial clearances add play (seed 000 eqs. 3 + 7, budget from the inspected
+    ``bearing_clearance_mm``), contact stiffening adds none. Returns (effect or None, why)."""
+    pair = {"bearing_clearance", "stiffness_nonlinearity"}
+    if set(names) != pair or not math.isfinite(nominal_play_arcmin):
+        return None, ""
+    bearing = models["bearing_clearance"]
+    budget = bearing.params.get("budget_extra_play_arcmin")
+    if not budget or budget <= 0:
+        return None, ""
+    excess = [models[n].fit.coef("play") - nominal_play_arcmin for n in pair]
+    if min(excess) >= PLAY_PRESENT * budget:
+        return "bearing_clearance", (
+            f"calibrated free play {min(excess):+.3f} arcmin above the nominal, as the inspected "
+            f"bearing clearances add ({budget:.3f} arcmin, seed 000 eqs. 3 + 7)")
+    if max(excess) <= PLAY_ABSENT * budget:
+        return "stiffness_nonlinearity", (
+            f"calibrated free play within {max(excess):+.3f} arcmin of the nominal: no extra "
+            f"play of bearing clearances ({budget:.3f} arcmin expected)")
+    return None, ""
 
 
 def _next(names: Sequence[str]) -> str:

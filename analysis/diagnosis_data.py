@@ -23,6 +23,10 @@ from analysis.models.nominal import NominalModel, reference_nominal_model
 
 #: Decimated points per run kept for fitting.
 TARGET_POINTS = 240
+#: Blocks whose mean torque is within this many block-mean torque sigmas (+ 2e-4 of the
+#: amplitude) of zero are left out: with no torque on it the unit floats in the free play
+#: (a slow drift before the crossing becomes a jump), so its flank is undetermined there.
+FLOAT_BAND_SIGMAS = 6.0
 
 
 @dataclass(frozen=True)
@@ -106,14 +110,16 @@ def transit_mask(twist_arcmin: np.ndarray, torque_Nm: np.ndarray, sigma_arcmin: 
                  soft_compliance_arcmin_per_Nm: float) -> tuple[np.ndarray, np.ndarray]:
     """(keep, jump): ``jump[k]`` marks a step k -> k+1 whose twist change exceeds what the
     softest plausible flank and the noise allow (crossing the free play, impacts);
-    ``keep`` is False for samples with a jump on both sides (in flight across the play)."""
+    ``keep`` is False for samples next to a jump (in flight across the play, or at its start
+    or end, where a sample is partly in flight and its torque already past the switch while
+    its twist is not: with inertia the crossing starts late)."""
     d_twist = np.abs(np.diff(twist_arcmin))
     d_torque = np.abs(np.diff(torque_Nm))
     jump = d_twist > d_torque * soft_compliance_arcmin_per_Nm + 6.0 * math.sqrt(2.0) * max(
         sigma_arcmin, 1e-6)
     keep = np.ones(twist_arcmin.size, dtype=bool)
-    if twist_arcmin.size > 2:
-        keep[1:-1] = ~(jump[:-1] & jump[1:])
+    keep[:-1] &= ~jump
+    keep[1:] &= ~jump
     return keep, jump
 
 
@@ -221,6 +227,12 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRu
         sigma_b = max(sigma_b, 0.5 * sigma / math.sqrt(block))
     else:
         sigma_b = sigma / math.sqrt(block)
+    # leave out the blocks floating in the play at zero torque (noise estimated with them)
+    held = np.abs(tb) >= FLOAT_BAND_SIGMAS * sigma_tb + 2e-4 * amplitude
+    if held.sum() >= 10:
+        tb, yb = tb[held], yb[held]
+    else:
+        held = np.ones(tb.size, dtype=bool)
     lost_motion = math.nan
     try:
         res = analyse_loop(t, torque, twist, rated_torque_Nm=run.rated_torque_Nm)
@@ -233,10 +245,10 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRu
                                                max(3.0 * sigma_t, 0.01 * run.rated_torque_Nm))
     return PreparedRun(
         run_id=run.run_id, torque_Nm=tb, twist_arcmin=yb,
-        temperature_C=None if temp is None else _block_means(temp, segments, block),
-        t_s=_block_means(t, segments, block),
-        branch=np.sign(_block_means(direction, segments, block)),
-        since_reversal_s=_block_means(since, segments, block),
+        temperature_C=None if temp is None else _block_means(temp, segments, block)[held],
+        t_s=_block_means(t, segments, block)[held],
+        branch=np.sign(_block_means(direction, segments, block))[held],
+        since_reversal_s=_block_means(since, segments, block)[held],
         sigma_arcmin=max(sigma_b, 1e-7), sigma_torque_Nm=sigma_tb, raw_sigma_arcmin=sigma,
         block=block, n_raw=int(t.size), n_transit=int((~keep).sum()),
         rated_torque_Nm=float(run.rated_torque_Nm), amplitude_Nm=amplitude,

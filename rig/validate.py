@@ -15,18 +15,20 @@ except ``shaft_compliance``, which one loop cannot tell from the mesh stiffness:
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from rig.diagnose import diagnose_campaign
 from rig.runformat import Campaign, Run
-from simulators.offline import simulate_run
+from simulators.offline import quantise_deg, simulate_run
 from simulators.plant_config import PlantConfig, load_plant_config
 
 IN_VOCABULARY = ("friction", "stiffness_nonlinearity", "runout", "bearing_clearance",
@@ -35,6 +37,9 @@ IN_VOCABULARY = ("friction", "stiffness_nonlinearity", "runout", "bearing_cleara
 OUT_OF_VOCABULARY = ("creep", "direction_gain")
 KINDS = (*IN_VOCABULARY, "none", *OUT_OF_VOCABULARY)
 
+#: Inspected unit data the validation units are drawn around (seed 000 Table 2 pairs 1 and 2).
+UNIT_FILES = tuple(Path(__file__).resolve().parent / "examples" / "units" / f"seed000-pair{n}.json"
+                   for n in (1, 2))
 RATE_HZ = 250.0
 DURATION_S = 10.0
 RATED_NM = 10.0
@@ -65,6 +70,9 @@ class Case:
     positions_deg: list[float]
     temperatures_C: list[float]
     truth: dict[str, Any] = field(default_factory=dict)
+    #: Effects added to the plant's output outside the plant (other functional forms than the
+    #: plant's own), applied by :func:`simulate_campaign`.
+    post: dict[str, Any] = field(default_factory=dict)
 
     @property
     def expected(self) -> set[str]:
@@ -77,6 +85,10 @@ class Case:
 
 
 def _unit(rng: np.random.Generator, base: dict[str, Any]) -> dict[str, Any]:
+    """Unit data around seed 000 pair 1 or pair 2 (their inspected M values), with drawn face
+    width, center distance, M value shifts, inspected runouts and bearing clearances."""
+    pair = json.loads(UNIT_FILES[int(rng.integers(len(UNIT_FILES)))].read_text())
+    base = {**base, **{k: pair[k] for k in ("m_value_internal_mm", "m_value_external_mm")}}
     unit = dict(base)
     unit["face_width_mm"] = float(round(rng.uniform(7.0, 14.0), 1))
     unit["center_distance_mm"] = float(round(2.5 + rng.uniform(-0.004, 0.002), 4))
@@ -101,17 +113,29 @@ def make_case(index: int, kind: str, rng: np.random.Generator,
             break
         except ValueError:
             continue
-    noise = {"twist_arcsec_rms": float(rng.uniform(0.15, 0.5)),
-             "torque_Nm_rms": float(rng.uniform(0.002, 0.008)), "seed": int(rng.integers(1e9))}
+    noise = {"twist_arcsec_rms": float(rng.uniform(0.1, 0.8)),
+             "torque_Nm_rms": float(rng.uniform(0.001, 0.01)), "seed": int(rng.integers(1e9))}
     config = config.with_changes(noise=noise)
     start = float(rng.uniform(0, 360))
     positions = [round(start + k * 45.0, 1) for k in range(8)]
     temps = [20.0] * 8
     truth: dict[str, Any] = {}
+    post: dict[str, Any] = {}
     if kind == "friction":
+        law = str(rng.choice(["coulomb", "dahl", "lugre"]))
         truth = {"coulomb_torque_Nm": float(rng.uniform(0.25, 0.8)),
-                 "model": str(rng.choice(["dahl", "lugre"]))}
+                 "model": "lugre" if law == "lugre" else "dahl", "law": law,
+                 # a very stiff bristle is the Coulomb stop; a soft one a smooth Dahl curve
+                 "rest_stiffness_Nm_per_arcmin": 3000.0 if law == "coulomb"
+                 else float(rng.uniform(80.0, 600.0))}
         truth["static_torque_Nm"] = truth["coulomb_torque_Nm"] * float(rng.uniform(1.0, 1.3))
+        if law == "lugre":
+            truth["stribeck_velocity_arcmin_per_s"] = float(rng.uniform(1.0, 10.0))
+    elif kind == "stiffness_nonlinearity" and rng.random() < 0.5:
+        # another stiffening curve than the plant's: a Hertz-like power law (see _power_law)
+        post = {"stiffening_power_law": {
+            "twist_at_rated_arcmin": float(rng.uniform(0.2, 0.5)),
+            "exponent": float(rng.uniform(0.4, 0.67))}}
     elif kind == "stiffness_nonlinearity":
         truth = {"soft_twist_arcmin": float(rng.uniform(0.12, 0.4)),
                  "torque_scale_Nm": float(rng.uniform(0.6, 2.5))}
@@ -120,6 +144,12 @@ def make_case(index: int, kind: str, rng: np.random.Generator,
                  "external_mm": float(rng.uniform(0.0, 0.03)),
                  "beta_deg": float(rng.uniform(-180, 180)),
                  "internal_phase_deg": float(rng.uniform(-180, 180))}
+        # the lab inspected this runout: unit data within +-25 % of the true F_r
+        config = config.with_changes(unit={
+            "runout_internal_mm": round(max(truth["internal_mm"] * rng.uniform(0.8, 1.25),
+                                            0.005), 3),
+            "runout_external_mm": round(max(truth["external_mm"] * rng.uniform(0.8, 1.25),
+                                            0.005), 3)})
     elif kind == "bearing_clearance":
         truth = {"soft_stiffness_Nm_per_arcmin": float(rng.uniform(3.0, 9.0)),
                  "soft_stage_torque_Nm": float(rng.uniform(0.6, 2.0))}
@@ -147,9 +177,19 @@ def make_case(index: int, kind: str, rng: np.random.Generator,
         truth = {"gain_positive": 1.0, "gain_negative": float(rng.uniform(0.6, 0.8))}
     elif kind != "none":
         raise ValueError(f"unknown case kind {kind!r}; known: {', '.join(KINDS)}")
-    if kind != "none":
-        config = config.with_effect(kind, **truth)
-    return Case(index, kind, config, positions, temps, truth)
+    if kind != "none" and not post:
+        config = config.with_effect(kind, **{k: v for k, v in truth.items() if k != "law"})
+    return Case(index, kind, config, positions, temps, truth or dict(post), post)
+
+
+def power_law_twist_arcmin(flange_Nm: np.ndarray, rated_Nm: float, twist_at_rated_arcmin: float,
+                           exponent: float) -> np.ndarray:
+    """A second stiffening law (not the plant's exponential): extra flank twist
+    ``sign(T) d (|T| / T_rated)^p`` (arcmin), concave for p < 1 like a Hertzian contact
+    (deflection ~ load^(2/3)); applied to the flange torque, which is the mesh torque of a
+    frictionless quasi-static unit (zero inside the play, so the term is continuous)."""
+    t = np.asarray(flange_Nm, dtype=float)
+    return np.sign(t) * twist_at_rated_arcmin * (np.abs(t) / rated_Nm) ** exponent
 
 
 def simulate_campaign(case: Case, samples: int = int(DURATION_S * RATE_HZ)) -> Campaign:
@@ -159,6 +199,11 @@ def simulate_campaign(case: Case, samples: int = int(DURATION_S * RATE_HZ)) -> C
     for k, (pos, temp) in enumerate(zip(case.positions_deg, case.temperatures_C, strict=True)):
         cols = simulate_run(case.config, profile, duration_s=samples / RATE_HZ,
                             sample_rate_Hz=RATE_HZ, input_angle_deg=pos, temperature_C=temp)
+        law = case.post.get("stiffening_power_law")
+        if law is not None:
+            extra = power_law_twist_arcmin(cols["true_torque_Nm"], RATED_NM, **law)
+            cols["output_angle_deg"] = quantise_deg(cols["output_angle_deg"] + extra / 60.0,
+                                                    case.config.rig.encoder_counts_per_rev)
         run_id = f"case{case.index:03d}-run{k:02d}"
         runs.append(Run.from_arrays(
             run_id, cols["t_s"], cols["torque_Nm"], cols["output_angle_deg"],

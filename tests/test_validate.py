@@ -7,13 +7,16 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
+from rig.diagnose import diagnose_campaign
 from rig.runformat import write_campaign
 from rig.validate import (
     KINDS,
     cycle_profile,
     make_case,
     meets_targets,
+    power_law_twist_arcmin,
     run_validation,
     simulate_campaign,
     summarise,
@@ -25,6 +28,37 @@ def test_cycle_profile_closes_the_loop_and_visits_3_percent() -> None:
     p = cycle_profile(10.0, 3000)
     assert p[0] == 0.0 and p.max() == 10.0 and p.min() == -10.0
     assert np.isclose(p, 0.3).sum() > 10 and np.isclose(p, -0.3).sum() > 10
+
+
+def test_power_law_stiffening_is_odd_concave_and_sized_at_rated() -> None:
+    t = np.array([-10.0, -2.5, 0.0, 2.5, 10.0])
+    extra = power_law_twist_arcmin(t, 10.0, 0.3, 0.5)  # 0.3 arcmin * sqrt(|T| / 10 N*m)
+    assert extra.tolist() == pytest.approx([-0.3, -0.15, 0.0, 0.15, 0.3])
+
+
+def test_generator_varies_laws_units_and_noise() -> None:
+    """Not one simulator's forms: friction Coulomb/Dahl/LuGre, stiffening exponential or power
+    law, units around seed 000 pairs 1 and 2, noise 0.1-0.8 arcsec."""
+    rng = np.random.default_rng(4)
+    base = load_plant_config()
+    friction = {make_case(0, "friction", rng, base).truth["law"] for _ in range(20)}
+    laws = {bool(make_case(0, "stiffness_nonlinearity", rng, base).post) for _ in range(12)}
+    cases = [make_case(0, "none", rng, base) for _ in range(12)]
+    m_values = {c.config.unit["m_value_external_mm"][0] for c in cases}
+    noise = [c.config.noise.twist_arcsec_rms for c in cases]
+    assert friction == {"coulomb", "dahl", "lugre"} and laws == {True, False}
+    assert len(m_values) > 6 and min(noise) >= 0.1 and max(noise) <= 0.8
+    runout = make_case(0, "runout", rng, base)
+    assert runout.config.unit["runout_internal_mm"] == pytest.approx(
+        runout.truth["internal_mm"], rel=0.26)
+    power = next(c for c in (make_case(0, "stiffness_nonlinearity", rng, base)
+                             for _ in range(20)) if c.post)
+    assert not power.config.effects.stiffness_nonlinearity.enabled
+    assert power.post["stiffening_power_law"]["exponent"] < 0.7
+    # the analysis' exponential law is not the generator's power law, and still names it
+    report = diagnose_campaign(simulate_campaign(power, samples=1500)).to_dict()
+    assert report["verdict"] == "stiffness_nonlinearity", report["reason"]
+    assert report["shrink"] > 0.7
 
 
 def test_small_validation_meets_the_targets() -> None:

@@ -19,7 +19,7 @@ import numpy as np
 from analysis.errors import AnalysisError
 from analysis.loop import analyse_loop
 from analysis.loop_branches import white_noise_std
-from analysis.models.nominal import NominalModel, reference_nominal_model
+from analysis.models.by_kind import LoopModel, nominal_model_for_unit
 
 #: Decimated points per run kept for fitting.
 TARGET_POINTS = 240
@@ -72,7 +72,7 @@ class PreparedRun:
     input_angle_deg: float | None
     mean_temperature_C: float | None
     start_flank: int
-    nominal: NominalModel | None
+    nominal: LoopModel | None
     lost_motion_arcmin: float  # measured, analysis.loop (NaN: unavailable)
     raw: RunInput = field(repr=False)
 
@@ -196,9 +196,11 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRu
     if temp is not None and not np.all(np.isfinite(temp)):
         finite = np.isfinite(temp)
         temp = None if not finite.any() else np.where(finite, temp, np.nanmean(temp))
-    nominal: NominalModel | None
+    nominal: LoopModel | None
     try:
-        nominal = reference_nominal_model(run.unit) if run.unit else None
+        # the nominal model of the unit's kind (seed 000 reference model, seed 002 cycloid,
+        # seed 001 beveloid): the diagnosis uses its free play and stiffness
+        nominal = nominal_model_for_unit(run.unit, run.rated_torque_Nm)[0] if run.unit else None
     except AnalysisError:
         nominal = None
     sigma = white_noise_std(twist)

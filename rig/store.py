@@ -1,6 +1,9 @@
-"""The measurement store: run folders in rig-run/1 plus an SQLite index (docs/store.md).
+"""The measurement store: run folders in rig-run/1 plus an index (docs/store.md).
 
-Layout of a store root::
+The index is ``index.sqlite`` in the store folder (the embedded default) or a PostgreSQL
+database (``Store("postgresql://...", samples=DIR)``; docs/deployment.md), whose run
+folders go to the samples folder ``DIR`` that every rig reaches. Layout of a store root
+(the samples folder of a database store)::
 
     index.sqlite              runs and campaigns: metadata and status (WAL mode)
     runs/<run_id>/            a run outside any campaign: run.json + samples.csv
@@ -11,18 +14,18 @@ into SQLite. A process killed during a run keeps its samples; the next :class:`S
 on the root marks the run "aborted" (:meth:`Store.recover`). Live writers hold a ``flock``
 on their run folder, so a reader opening the store never aborts a run still being measured.
 
-The default root is ``$RIG_STORE`` if set, else ``./rig-store`` (:func:`default_store_root`).
+The default root is ``$RIG_STORE`` if set, else ``./rig-store`` (:func:`default_store_root`);
+the samples folder of a database store is ``samples=`` or ``$RIG_SAMPLES_DIR``.
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
 import os
 import shutil
 import socket
-import sqlite3
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -51,13 +54,12 @@ from rig.store_ids import (
 )
 from rig.store_index import (
     INDEX_NAME,
+    IndexBackend,
+    RunFilter,
+    SqliteIndex,
     campaign_info,
-    connect,
-    create_index,
-    index_exists,
     run_info,
     to_json,
-    write_transaction,
 )
 from rig.store_recorder import RunRecorder
 from rig.store_records import (
@@ -84,6 +86,8 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 STORE_ENV = "RIG_STORE"
+SAMPLES_ENV = "RIG_SAMPLES_DIR"
+DATABASE_SCHEMES = ("postgresql://", "postgres://")
 DEFAULT_STORE_DIR = "rig-store"
 RECOVERED_REASON = "process ended during the run (found at next start)"
 RUN_RESERVED_KEYS = (
@@ -95,18 +99,46 @@ CAMPAIGN_RESERVED_KEYS = (
 )
 
 
-def default_store_root() -> Path:
-    """``$RIG_STORE`` if set and not empty, else ``./rig-store`` (relative to the cwd)."""
-    return Path(os.environ.get(STORE_ENV) or DEFAULT_STORE_DIR)
+def default_store_root() -> Path | str:
+    """``$RIG_STORE`` if set and not empty, else ``./rig-store`` (relative to the cwd).
+    A database URL in ``$RIG_STORE`` is returned as it is (a str)."""
+    value = os.environ.get(STORE_ENV) or DEFAULT_STORE_DIR
+    return value if is_database_url(value) else Path(value)
+
+
+def is_database_url(value: object) -> bool:
+    """Does ``value`` name a database store (``postgresql://...`` or ``postgres://...``)?"""
+    return isinstance(value, str) and value.startswith(DATABASE_SCHEMES)
+
+
+def outcome_word(value: Any) -> str | None:
+    """run.json's ``outcome`` as the index keeps it: a string as it is; a bool or a dict
+    with ``passed`` as "pass"/"fail"; a dict's ``verdict``/``status``/``result`` string."""
+    if isinstance(value, bool):
+        return "pass" if value else "fail"
+    if isinstance(value, str):
+        return value or None
+    if isinstance(value, dict):
+        for key in ("verdict", "status", "result", "outcome"):
+            if isinstance(value.get(key), str) and value[key]:
+                return value[key]
+        if isinstance(value.get("passed"), bool):
+            return "pass" if value["passed"] else "fail"
+    return None
 
 
 class Store:
-    """A store root: run folders plus ``index.sqlite``. Safe to open from many processes.
+    """A store: run folders plus an index. Safe to open from many processes.
 
-    ``create``: make the root and the index if absent (else a missing index raises
-    :class:`StoreError`). ``recover``: run :meth:`recover` now (its result is kept in
-    ``recovered``). ``busy_timeout_s``: how long a call waits for another process's write
+    ``root``: the store folder (index in ``index.sqlite`` there), or a database URL
+    ``postgresql://...`` (the index in PostgreSQL; the run folders then go to ``samples``,
+    else ``$RIG_SAMPLES_DIR``). ``create``: make the folder and the index if absent (else a
+    missing index raises :class:`StoreError`). An index made by an older version is
+    migrated. ``recover``: run :meth:`recover` now (its result is kept in ``recovered``).
+    ``busy_timeout_s``: how long a call waits for another process's SQLite write
     transaction before failing (writes last milliseconds; the default is generous).
+    ``reconnect_s``: how long a call to a database store retries a lost connection (a
+    server restart) before failing; samples keep going to their files meanwhile.
     """
 
     def __init__(
@@ -116,12 +148,31 @@ class Store:
         create: bool = True,
         recover: bool = True,
         busy_timeout_s: float = 30.0,
+        samples: str | Path | None = None,
+        reconnect_s: float = 60.0,
     ) -> None:
-        self.root = Path(root).absolute()
         self.busy_timeout_s = float(busy_timeout_s)
-        if not create and not index_exists(self.root):
+        self.url: str | None = None
+        self._index: IndexBackend
+        if is_database_url(root):
+            from rig.store_index_pg import PostgresIndex
+
+            folder = samples if samples not in (None, "") else os.environ.get(SAMPLES_ENV)
+            if not folder:
+                raise StoreError(
+                    f"the store {root.split('@')[-1]} is a database: give the folder for the "
+                    f"run files (shared by every rig) with --samples DIR or {SAMPLES_ENV}"
+                )
+            self.url = str(root)
+            self.root = Path(folder).absolute()
+            self._index = PostgresIndex(self.url, reconnect_s=reconnect_s)
+        else:
+            self.root = Path(root).absolute()
+            self._index = SqliteIndex(self.root, self.busy_timeout_s)
+        if not create and not self._index.exists():
+            what = f"no {INDEX_NAME}" if self.url is None else "no rig tables in the database"
             raise StoreError(
-                f"no store at {self.root} (no {INDEX_NAME}); a store is created by the first "
+                f"no store at {self.location} ({what}); a store is created by the first "
                 "measurement run into it"
             )
         try:
@@ -129,16 +180,25 @@ class Store:
             (self.root / "campaigns").mkdir(exist_ok=True)
         except OSError as e:
             raise StoreError(f"cannot create the store at {self.root}: {e.strerror or e}") from e
-        create_index(self.root / INDEX_NAME, self.busy_timeout_s)
+        self._index.ensure_schema()
         self.recovered: list[str] = self.recover() if recover else []
 
+    @property
+    def location(self) -> str:
+        """The store as users name it: its folder, or its database URL without password."""
+        return self._index.location
+
+    @property
+    def backend(self) -> str:
+        """"sqlite" or "postgresql"."""
+        return "sqlite" if self.url is None else "postgresql"
+
+    def close(self) -> None:
+        """Drop the database connections this object holds (they reopen when used)."""
+        self._index.close()
+
     def __repr__(self) -> str:
-        return f"Store({str(self.root)!r})"
-
-    # ----------------------------------------------------------------------- connections
-
-    def _connect(self) -> contextlib.closing[sqlite3.Connection]:
-        return contextlib.closing(connect(self.root / INDEX_NAME, self.busy_timeout_s))
+        return f"Store({self.location!r})"
 
     # ----------------------------------------------------------------------- runs
 
@@ -175,6 +235,8 @@ class Store:
         started_at = utc_now_iso()
         label = safe_label(fields["unit_serial"], "unit")
         folder, run_id = self._claim_folder(folder_parent, label)
+        unit = meta.get("unit") or {}
+        design = unit.get("design") if unit.get("design") is not None else unit.get("model")
         full_meta: dict[str, Any] = {
             "format": RUN_FORMAT,
             "run_id": run_id,
@@ -197,20 +259,16 @@ class Store:
             )
             sync_dir(folder)
             sync_dir(folder.parent)
-            with self._connect() as conn, write_transaction(conn):
-                conn.execute(
-                    """INSERT INTO runs (run_id, campaign_id, unit_serial, operator, rig_id,
-                    calibration, software_version, plan_name, plan_version, status,
-                    started_at, path, writer_pid, writer_host)
-                    VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'running', ?, ?, ?, ?)""",
-                    (
-                        run_id, campaign_id, fields["unit_serial"], fields["operator"],
-                        fields["rig_id"], to_json(fields["calibration"]), __version__,
-                        fields["plan_name"], fields["plan_version"], started_at,
-                        folder.relative_to(self.root).as_posix(), os.getpid(),
-                        socket.gethostname(),
-                    ),
-                )
+            self._index.insert_run({
+                "run_id": run_id, "campaign_id": campaign_id,
+                "unit_serial": fields["unit_serial"], "operator": fields["operator"],
+                "rig_id": fields["rig_id"], "calibration": fields["calibration"],
+                "software_version": __version__, "plan_name": fields["plan_name"],
+                "plan_version": fields["plan_version"], "status": "running",
+                "started_at": started_at, "path": folder.relative_to(self.root).as_posix(),
+                "writer_pid": os.getpid(), "writer_host": socket.gethostname(),
+                "meta": full_meta, "design": None if design is None else str(design),
+            })
         except BaseException:
             if appender is not None:
                 appender.close()
@@ -225,16 +283,15 @@ class Store:
 
     def _claim_folder(self, parent: Path, label: str) -> tuple[Path, str]:
         """Create ``parent/<new id>`` atomically (mkdir is the claim); return it and the id."""
-        with self._connect() as conn:
-            for run_id in id_candidates(label):
-                if conn.execute("SELECT 1 FROM runs WHERE run_id = ?", (run_id,)).fetchone():
-                    continue
-                folder = parent / run_id
-                try:
-                    folder.mkdir()
-                except FileExistsError:
-                    continue
-                return folder, run_id
+        for run_id in id_candidates(label):
+            if self._index.run_exists(run_id):
+                continue
+            folder = parent / run_id
+            try:
+                folder.mkdir()
+            except FileExistsError:
+                continue
+            return folder, run_id
         raise AssertionError("unreachable: id_candidates is endless")
 
     def _finalize_run(
@@ -253,12 +310,8 @@ class Store:
         was not "running".
         """
         finished_at = utc_now_iso()
-        with self._connect() as conn, write_transaction(conn):
-            row = conn.execute(
-                "SELECT status, campaign_id FROM runs WHERE run_id = ?", (run_id,)
-            ).fetchone()
-            if row is None or row["status"] != "running":
-                return False
+
+        def update(campaign_id: str | None) -> dict[str, Any]:
             meta = _read_json_or(folder / RUN_JSON, {"format": RUN_FORMAT, "run_id": run_id})
             meta.update(
                 status=status, reason=reason, result=result, finished_at=finished_at,
@@ -266,18 +319,20 @@ class Store:
             )
             if folder.is_dir():
                 write_json_atomic(folder / RUN_JSON, meta)
-            conn.execute(
-                """UPDATE runs SET status = ?, reason = ?, finished_at = ?, n_samples = ?,
-                metrics = ? WHERE run_id = ? AND status = 'running'""",
-                (status, reason, finished_at, n_samples, to_json(result), run_id),
-            )
-            if status == "completed" and row["campaign_id"] is not None:
+            if status == "completed" and campaign_id is not None:
                 campaign_json = folder.parent / CAMPAIGN_JSON
                 cmeta = _read_json_or(campaign_json, None)
-                if cmeta is not None:
+                if cmeta is not None and folder.name not in cmeta.get("runs", []):
                     cmeta["runs"] = [*cmeta.get("runs", []), folder.name]
                     write_json_atomic(campaign_json, cmeta)
-        return True
+            return {"status": status, "reason": reason, "finished_at": finished_at,
+                    "n_samples": n_samples, "metrics": result, "meta": meta,
+                    "outcome": outcome_word(meta.get("outcome"))}
+
+        audit = {"at": finished_at, "action": f"run {status}", "target": run_id,
+                 "pid": os.getpid(), "host": socket.gethostname(),
+                 "detail": {"reason": reason} if reason else None}
+        return self._index.finalize_run(run_id, update, audit)
 
     def recover(self) -> list[str]:
         """Mark runs left "running" by a process that has ended as "aborted".
@@ -287,13 +342,9 @@ class Store:
         last CSV line (cut by the kill) is cut off and recorded in run.json under
         ``"recovery"``. Returns the ids of the runs marked aborted.
         """
-        with self._connect() as conn:
-            rows = conn.execute(
-                "SELECT run_id, path FROM runs WHERE status = 'running' ORDER BY rowid"
-            ).fetchall()
         recovered = []
-        for row in rows:
-            folder = self.root / row["path"]
+        for run_id, path in self._index.running_runs():
+            folder = self.root / path
             lock = WriterLock.acquire(folder, create=False)
             if lock is None:
                 continue
@@ -308,11 +359,11 @@ class Store:
                     n_samples = None
                     record["read_error"] = str(e)
                 if self._finalize_run(
-                    row["run_id"], folder, "aborted", RECOVERED_REASON, None, n_samples,
+                    run_id, folder, "aborted", RECOVERED_REASON, None, n_samples,
                     {"recovery": record},
                 ):
-                    recovered.append(row["run_id"])
-                    log.warning("run %s: marked aborted: %s", row["run_id"], RECOVERED_REASON)
+                    recovered.append(run_id)
+                    log.warning("run %s: marked aborted: %s", run_id, RECOVERED_REASON)
             finally:
                 lock.release(remove=True)
         return recovered
@@ -323,37 +374,34 @@ class Store:
         campaign_id: str | None = None,
         status: str | None = None,
         limit: int | None = None,
+        serial: str | None = None,
+        outcome: str | None = None,
+        design: str | None = None,
+        since: str | None = None,
+        until: str | None = None,
     ) -> list[RunInfo]:
-        """Runs in the index, newest first, optionally of one campaign / status, at most
-        ``limit``."""
-        where, args = [], []
+        """Runs in the index, newest first (by start time), at most ``limit``, optionally
+        of one campaign / status / unit serial / outcome / design, started at or after
+        ``since`` and before ``until`` (ISO 8601 UTC dates or times, e.g. "2026-11-01")."""
         if campaign_id is not None:
-            where.append("campaign_id = ?")
-            args.append(validate_id(campaign_id, "campaign"))
-        if status is not None:
-            if status not in RUN_STATUSES:
-                raise ValueError(f"status must be one of {RUN_STATUSES}, got {status!r}")
-            where.append("status = ?")
-            args.append(status)
-        sql = "SELECT * FROM runs"
-        if where:
-            sql += " WHERE " + " AND ".join(where)
-        sql += " ORDER BY rowid DESC"
-        if limit is not None:
-            if isinstance(limit, bool) or not isinstance(limit, int) or limit < 1:
-                raise ValueError(f"limit must be a positive int, got {limit!r}")
-            sql += f" LIMIT {limit}"
-        with self._connect() as conn:
-            rows = conn.execute(sql, args).fetchall()
+            validate_id(campaign_id, "campaign")
+        if status is not None and status not in RUN_STATUSES:
+            raise ValueError(f"status must be one of {RUN_STATUSES}, got {status!r}")
+        if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int)
+                                  or limit < 1):
+            raise ValueError(f"limit must be a positive int, got {limit!r}")
+        rows = self._index.query_runs(RunFilter(
+            campaign_id=campaign_id, status=status, serial=serial, outcome=outcome,
+            design=design, since=_iso_bound(since, "since"), until=_iso_bound(until, "until"),
+            limit=limit))
         return [run_info(r, self.root) for r in rows]
 
     def get_run(self, run_id: str) -> RunInfo:
         """The index row of one run (InvalidIdError / UnknownIdError)."""
         validate_id(run_id, "run")
-        with self._connect() as conn:
-            row = conn.execute("SELECT * FROM runs WHERE run_id = ?", (run_id,)).fetchone()
+        row = self._index.get_run(run_id)
         if row is None:
-            raise UnknownIdError(f"no run {run_id!r} in the store {self.root}")
+            raise UnknownIdError(f"no run {run_id!r} in the store {self.location}")
         return run_info(row, self.root)
 
     def run_path(self, run_id: str) -> Path:
@@ -361,8 +409,15 @@ class Store:
         return self.get_run(run_id).path
 
     def load_run(self, run_id: str) -> Run:
-        """Read a run (a running one too: a row cut off mid-write at the end is dropped)."""
-        return read_run(self.run_path(run_id), allow_truncated_tail=True)
+        """Read a run (a running one too: a row cut off mid-write at the end is dropped).
+
+        A run folder or samples file that is missing or unreadable raises
+        :class:`StoreError` naming the run id (never an empty run)."""
+        path = self.run_path(run_id)
+        try:
+            return read_run(path, allow_truncated_tail=True)
+        except (RigError, OSError) as e:
+            raise StoreError(f"run {run_id}: its files cannot be read: {e}") from e
 
     # ----------------------------------------------------------------------- campaigns
 
@@ -393,13 +448,10 @@ class Store:
         }
         try:
             write_json_atomic(folder / CAMPAIGN_JSON, cmeta)
-            with self._connect() as conn, write_transaction(conn):
-                conn.execute(
-                    """INSERT INTO campaigns (campaign_id, name, status, started_at, path, meta)
-                    VALUES (?, ?, 'running', ?, ?, ?)""",
-                    (campaign_id, name, started_at,
-                     folder.relative_to(self.root).as_posix(), to_json(meta)),
-                )
+            self._index.insert_campaign({
+                "campaign_id": campaign_id, "name": name, "started_at": started_at,
+                "path": folder.relative_to(self.root).as_posix(), "meta": meta,
+                "pid": os.getpid(), "host": socket.gethostname()})
         except BaseException:
             shutil.rmtree(folder, ignore_errors=True)
             raise
@@ -411,44 +463,92 @@ class Store:
         """Close a running campaign as "completed" or "aborted" with a JSON-able summary."""
         if status not in FINAL_STATUSES:
             raise ValueError(f"status must be one of {FINAL_STATUSES}, got {status!r}")
-        summary_json = to_json(summary)
+        to_json(summary)
         camp = self.get_campaign(campaign_id)
         finished_at = utc_now_iso()
-        with self._connect() as conn, write_transaction(conn):
-            row = conn.execute(
-                "SELECT status FROM campaigns WHERE campaign_id = ?", (campaign_id,)
-            ).fetchone()
-            if row["status"] != "running":
-                raise StoreError(f"campaign {campaign_id} is already {row['status']}")
+
+        def update(_row: Any) -> dict[str, Any]:
             cjson = camp.path / CAMPAIGN_JSON
             cmeta = _read_json_or(cjson, {"format": CAMPAIGN_FORMAT, "name": camp.name})
             cmeta.update(status=status, finished_at=finished_at, summary=summary)
             write_json_atomic(cjson, cmeta)
-            conn.execute(
-                """UPDATE campaigns SET status = ?, finished_at = ?, summary = ?
-                WHERE campaign_id = ?""",
-                (status, finished_at, summary_json, campaign_id),
-            )
+            return {"status": status, "finished_at": finished_at, "summary": summary,
+                    "audit": {"at": finished_at, "action": f"campaign {status}",
+                              "target": campaign_id, "pid": os.getpid(),
+                              "host": socket.gethostname()}}
+
+        self._index.finish_campaign(campaign_id, update)
 
     def get_campaign(self, campaign_id: str) -> CampaignInfo:
         """The index row of one campaign (InvalidIdError / UnknownIdError)."""
         validate_id(campaign_id, "campaign")
-        with self._connect() as conn:
-            row = conn.execute(
-                "SELECT * FROM campaigns WHERE campaign_id = ?", (campaign_id,)
-            ).fetchone()
+        row = self._index.get_campaign(campaign_id)
         if row is None:
-            raise UnknownIdError(f"no campaign {campaign_id!r} in the store {self.root}")
+            raise UnknownIdError(f"no campaign {campaign_id!r} in the store {self.location}")
         return campaign_info(row, self.root)
 
     def list_campaigns(self) -> list[CampaignInfo]:
         """All campaigns, newest first."""
-        with self._connect() as conn:
-            rows = conn.execute("SELECT * FROM campaigns ORDER BY rowid DESC").fetchall()
-        return [campaign_info(r, self.root) for r in rows]
+        return [campaign_info(r, self.root) for r in self._index.list_campaigns()]
+
+    # ----------------------------------------------------------------------- results, audit
+
+    def add_result(
+        self,
+        *,
+        software_version: str,
+        run_id: str | None = None,
+        campaign_id: str | None = None,
+        metrics: dict[str, Any] | None = None,
+        diagnosis: dict[str, Any] | None = None,
+        error: str | None = None,
+    ) -> bool:
+        """Keep a re-computed result of one run or one campaign (``rig reanalyse``), made by
+        ``software_version``; earlier results stay. False if that version's result of that
+        run/campaign is stored already (nothing changed)."""
+        if (run_id is None) == (campaign_id is None):
+            raise ValueError("give exactly one of run_id and campaign_id")
+        if run_id is not None:
+            validate_id(run_id, "run")
+        if campaign_id is not None:
+            validate_id(campaign_id, "campaign")
+        to_json(metrics)
+        to_json(diagnosis)
+        return self._index.add_result({
+            "run_id": run_id, "campaign_id": campaign_id,
+            "software_version": software_version, "computed_at": utc_now_iso(),
+            "metrics": metrics, "diagnosis": diagnosis, "error": error})
+
+    def results(self, *, run_id: str | None = None, campaign_id: str | None = None,
+                software_version: str | None = None) -> list[dict[str, Any]]:
+        """Stored re-computed results (oldest first): dicts with result_id, run_id,
+        campaign_id, software_version, computed_at, metrics, diagnosis, error."""
+        return [dict(r) for r in self._index.results(
+            run_id=run_id, campaign_id=campaign_id, software_version=software_version)]
+
+    def audit(self, target: str | None = None) -> list[dict[str, Any]]:
+        """The audit trail (oldest first): run/campaign started, completed, aborted, with
+        time, process id and host; optionally of one run or campaign id."""
+        return [dict(r) for r in self._index.audit_records(target)]
 
 
 # --------------------------------------------------------------------------- helpers
+
+
+def _iso_bound(value: Any, name: str) -> str | None:
+    """A ``since``/``until`` bound as the index's ISO text ("2026-11-01" or a full time)."""
+    if value is None:
+        return None
+    text = value.isoformat() if hasattr(value, "isoformat") else value
+    if not isinstance(text, str):
+        raise ValueError(f"{name} must be an ISO 8601 date or time, got {value!r}")
+    try:
+        parsed = datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError:
+        raise ValueError(f"{name}: {text!r} is not an ISO 8601 date or time") from None
+    if parsed.tzinfo is not None:
+        parsed = parsed.astimezone(UTC).replace(tzinfo=None)
+    return parsed.strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 def _reject_reserved(meta: dict[str, Any], reserved: tuple[str, ...], what: str) -> None:

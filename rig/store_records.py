@@ -77,6 +77,8 @@ class RunInfo:
 
     ``n_samples`` is known once the run has finished (None while running); ``metrics`` is
     the ``result`` dict given at finish (None if none). ``reason`` says why a run was aborted.
+    ``outcome`` is run.json's ``outcome`` reduced to a word ("pass", "fail", ...; None if
+    the run has none), indexed for the production history.
     """
 
     run_id: str
@@ -97,6 +99,7 @@ class RunInfo:
     metrics: dict[str, Any] | None = None
     writer_pid: int | None = field(default=None, compare=False)
     writer_host: str | None = field(default=None, compare=False)
+    outcome: str | None = None
 
     @property
     def calibration_warnings(self) -> list[str]:
@@ -125,6 +128,7 @@ class RunInfo:
             "metrics": self.metrics,
             "writer_pid": self.writer_pid,
             "writer_host": self.writer_host,
+            "outcome": self.outcome,
         }
 
 

@@ -13,3 +13,73 @@ SHARED = REPO.parent / "shared"
 @pytest.fixture
 def repo_root() -> Path:
     return REPO
+
+
+# --------------------------------------------------------------------------- the store's back-ends
+
+
+@pytest.fixture(scope="session")
+def pg_server():
+    """A throw-away PostgreSQL cluster for the whole session (tests/pg_server.py)."""
+    import os
+
+    from tests.pg_server import PgServer, find_bin_dir
+
+    bin_dir = find_bin_dir()
+    if bin_dir is None:
+        message = ("PostgreSQL server binaries not found (Debian package postgresql, "
+                   "installed by .ci/install; or set PG_BIN)")
+        if os.environ.get("CI"):
+            pytest.fail(message)
+        pytest.skip(message)
+    server = PgServer(bin_dir)
+    server.start()
+    yield server
+    server.destroy()
+
+
+@pytest.fixture
+def pg_url(pg_server) -> str:
+    """The URL of a new, empty schema of the session's PostgreSQL server."""
+    return pg_server.create_schema()
+
+
+class StoreMaker:
+    """Opens stores on one back-end: ``make_store(root)`` is ``Store(root)`` on SQLite and
+    ``Store(<url of a schema kept for root>, samples=root)`` on PostgreSQL."""
+
+    def __init__(self, backend: str, server) -> None:
+        self.backend = backend
+        self.server = server
+        self._urls: dict[Path, str] = {}
+
+    def target(self, root: Path) -> str:
+        """What ``--store`` / ``Store()`` is given for the store at ``root``."""
+        if self.backend == "sqlite":
+            return str(root)
+        root = Path(root).absolute()
+        if root not in self._urls:
+            self._urls[root] = self.server.create_schema()
+        return self._urls[root]
+
+    def env(self, root: Path) -> dict[str, str]:
+        """Environment a child process needs besides ``target(root)``."""
+        return {} if self.backend == "sqlite" else {"RIG_SAMPLES_DIR": str(Path(root))}
+
+    def location(self, root: Path) -> str:
+        """``Store.location`` of the store at ``root`` (what ``rig runs`` prints)."""
+        return str(Path(root).absolute()) if self.backend == "sqlite" else self.target(root)
+
+    def __call__(self, root: Path, **kwargs):
+        from rig.store import Store
+
+        if self.backend == "sqlite":
+            return Store(root, **kwargs)
+        return Store(self.target(root), samples=root, **kwargs)
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def make_store(request) -> StoreMaker:
+    """The store test suite runs on both back-ends through this fixture."""
+    server = request.getfixturevalue("pg_server") if request.param == "postgresql" else None
+    return StoreMaker(request.param, server)

@@ -1,4 +1,7 @@
-"""The measurement store in one process: runs, campaigns, aborts, ids, calibration, WAL."""
+"""The measurement store in one process: runs, campaigns, aborts, ids, calibration, WAL.
+
+Every test taking ``make_store`` runs on both back-ends (SQLite, PostgreSQL: conftest.py).
+"""
 
 from __future__ import annotations
 
@@ -32,8 +35,8 @@ def fill(rec, n: int) -> None:
         rec.append(row(i))
 
 
-def test_completed_run_round_trips_through_folder_and_index(tmp_path):
-    st = Store(tmp_path / "store")
+def test_completed_run_round_trips_through_folder_and_index(make_store, tmp_path):
+    st = make_store(tmp_path / "store")
     meta = {
         "unit": {"serial": "RV-40E 1234", "kind": "internal_involute", "z_internal": 45},
         "test": {"rated_torque_Nm": 10.0, "input_angle_deg": 0.0},
@@ -71,8 +74,8 @@ def test_completed_run_round_trips_through_folder_and_index(tmp_path):
     assert st.load_run(rec.run_id).n_samples == 250
 
 
-def test_exception_in_the_block_aborts_the_run_and_keeps_its_samples(tmp_path):
-    st = Store(tmp_path)
+def test_exception_in_the_block_aborts_the_run_and_keeps_its_samples(make_store, tmp_path):
+    st = make_store(tmp_path)
     with pytest.raises(RuntimeError, match="torque limit"), st.begin_run({}, COLUMNS) as rec:
         fill(rec, 40)
         raise RuntimeError("torque limit 12 N·m exceeded: 12.5 N·m")
@@ -85,16 +88,16 @@ def test_exception_in_the_block_aborts_the_run_and_keeps_its_samples(tmp_path):
     assert run.meta["reason"] == info.reason
 
 
-def test_keyboard_interrupt_also_aborts(tmp_path):
-    st = Store(tmp_path)
+def test_keyboard_interrupt_also_aborts(make_store, tmp_path):
+    st = make_store(tmp_path)
     with pytest.raises(KeyboardInterrupt), st.begin_run({}, COLUMNS) as rec:
         fill(rec, 3)
         raise KeyboardInterrupt
     assert st.get_run(rec.run_id).reason == "KeyboardInterrupt"
 
 
-def test_append_by_column_name_and_bad_rows(tmp_path):
-    st = Store(tmp_path)
+def test_append_by_column_name_and_bad_rows(make_store, tmp_path):
+    st = make_store(tmp_path)
     with st.begin_run({}, COLUMNS) as rec:
         rec.append({"t_s": 0.0, "torque_Nm": 1.0, "output_angle_deg": 2.0})
         with pytest.raises(ValueError, match="unknown column"):
@@ -106,8 +109,8 @@ def test_append_by_column_name_and_bad_rows(tmp_path):
     assert st.get_run(rec.run_id).n_samples == 1
 
 
-def test_finish_arguments_are_checked_and_a_bad_call_leaves_the_run_open(tmp_path):
-    st = Store(tmp_path)
+def test_finish_arguments_are_checked_and_a_bad_call_leaves_the_run_open(make_store, tmp_path):
+    st = make_store(tmp_path)
     rec = st.begin_run({}, COLUMNS)
     fill(rec, 5)
     with pytest.raises(ValueError, match="needs a reason"):
@@ -125,8 +128,8 @@ def test_finish_arguments_are_checked_and_a_bad_call_leaves_the_run_open(tmp_pat
         rec.finish()
 
 
-def test_bad_start_meta_is_refused_before_any_folder_is_made(tmp_path):
-    st = Store(tmp_path)
+def test_bad_start_meta_is_refused_before_any_folder_is_made(make_store, tmp_path):
+    st = make_store(tmp_path)
     bad = [
         ({"status": "completed"}, "may not set \\['status'\\]"),
         ({"run_id": "mine"}, "may not set"),
@@ -146,8 +149,8 @@ def test_bad_start_meta_is_refused_before_any_folder_is_made(tmp_path):
     assert st.list_runs() == []
 
 
-def test_calibration_past_due_is_warned(tmp_path, caplog):
-    st = Store(tmp_path)
+def test_calibration_past_due_is_warned(make_store, tmp_path, caplog):
+    st = make_store(tmp_path)
     today = datetime.now(UTC).date()
     cal = [
         {"sensor": "encoder-out", "due": (today - timedelta(days=1)).isoformat()},
@@ -163,8 +166,8 @@ def test_calibration_past_due_is_warned(tmp_path, caplog):
     assert st.get_run(rec.run_id).calibration_warnings == rec.warnings
 
 
-def test_ids_are_unique_within_one_second_and_across_threads(tmp_path):
-    st = Store(tmp_path)
+def test_ids_are_unique_within_one_second_and_across_threads(make_store, tmp_path):
+    st = make_store(tmp_path)
     ids: list[str] = []
     errors: list[BaseException] = []
 
@@ -193,8 +196,8 @@ def test_ids_are_unique_within_one_second_and_across_threads(tmp_path):
     "bad",
     ["..", "../x", "a/b", "a\\b", ".hidden", "", "x" * 101, "a b", "a\x00", "é", 7, None],
 )
-def test_ids_from_callers_are_validated(tmp_path, bad):
-    st = Store(tmp_path)
+def test_ids_from_callers_are_validated(make_store, tmp_path, bad):
+    st = make_store(tmp_path)
     for call in (st.get_run, st.run_path, st.load_run, st.get_campaign):
         with pytest.raises(InvalidIdError, match="invalid"):
             call(bad)
@@ -206,8 +209,8 @@ def test_ids_from_callers_are_validated(tmp_path, bad):
         st.begin_run({}, COLUMNS, campaign_id=bad)
 
 
-def test_unknown_ids_and_hostile_serials(tmp_path):
-    st = Store(tmp_path / "s")
+def test_unknown_ids_and_hostile_serials(make_store, tmp_path):
+    st = make_store(tmp_path / "s")
     with pytest.raises(UnknownIdError, match="no run 'unit-20260101T000000Z-1'"):
         st.get_run("unit-20260101T000000Z-1")
     with st.begin_run({"unit": {"serial": "../../etc/passwd"}}, COLUMNS) as rec:
@@ -219,8 +222,8 @@ def test_unknown_ids_and_hostile_serials(tmp_path):
     assert rec.run_id.startswith("unit-")
 
 
-def test_campaign_folder_is_a_readable_campaign_of_its_completed_runs(tmp_path):
-    st = Store(tmp_path)
+def test_campaign_folder_is_a_readable_campaign_of_its_completed_runs(make_store, tmp_path):
+    st = make_store(tmp_path)
     cid = st.create_campaign("pair 1 positions", {"unit": {"serial": "P1"}, "positions": 3})
     done = []
     for k in range(3):
@@ -252,12 +255,12 @@ def test_campaign_folder_is_a_readable_campaign_of_its_completed_runs(tmp_path):
     assert [c.campaign_id for c in st.list_campaigns()] == [cid]
 
 
-def test_a_live_run_of_this_process_is_not_aborted_by_a_second_store(tmp_path):
-    st = Store(tmp_path)
+def test_a_live_run_of_this_process_is_not_aborted_by_a_second_store(make_store, tmp_path):
+    st = make_store(tmp_path)
     rec = st.begin_run({}, COLUMNS)
     fill(rec, 10)
     rec.samples.flush()
-    second = Store(tmp_path)
+    second = make_store(tmp_path)
     assert second.recovered == [] and second.recover() == []
     assert second.get_run(rec.run_id).status == "running"
     assert second.load_run(rec.run_id).n_samples == 10  # readable while running
@@ -265,16 +268,16 @@ def test_a_live_run_of_this_process_is_not_aborted_by_a_second_store(tmp_path):
     assert second.get_run(rec.run_id).status == "completed"
 
 
-def test_an_abandoned_recorder_is_recovered_once_its_lock_is_gone(tmp_path):
-    st = Store(tmp_path)
+def test_an_abandoned_recorder_is_recovered_once_its_lock_is_gone(make_store, tmp_path):
+    st = make_store(tmp_path)
     rec = st.begin_run({}, COLUMNS)
     fill(rec, 7)
     rec.samples.close()
     rec._lock.release(remove=False)  # what the kernel does when the writer process dies
-    assert Store(tmp_path).recovered == [rec.run_id]
+    assert make_store(tmp_path).recovered == [rec.run_id]
     info = st.get_run(rec.run_id)
     assert info.status == "aborted" and info.n_samples == 7
-    assert Store(tmp_path).recovered == []  # once only
+    assert make_store(tmp_path).recovered == []  # once only
 
 
 def test_index_is_in_wal_mode_and_an_open_reader_does_not_block_the_writer(tmp_path):

@@ -1,4 +1,7 @@
-"""``rig runs`` run as a real process: table, JSON, default store folder, errors."""
+"""``rig runs`` run as a real process: table, JSON, default store folder, errors.
+
+The tests taking ``store_dir`` run on both back-ends (SQLite, PostgreSQL: conftest.py).
+"""
 
 from __future__ import annotations
 
@@ -28,10 +31,12 @@ os.kill(os.getpid(), signal.SIGKILL)
 """
 
 
-def rig(*args: str, cwd: Path, env_store: str | None = None) -> subprocess.CompletedProcess:
-    env = {k: v for k, v in os.environ.items() if k != "RIG_STORE"}
+def rig(*args: str, cwd: Path, env_store: str | None = None,
+        extra_env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k not in ("RIG_STORE", "RIG_SAMPLES_DIR")}
     if env_store is not None:
         env["RIG_STORE"] = env_store
+    env.update(extra_env or {})
     return subprocess.run(
         [sys.executable, "-c", "from rig.cli import main; main()", *args],
         cwd=cwd, env=env, capture_output=True, text=True, timeout=120,
@@ -39,10 +44,12 @@ def rig(*args: str, cwd: Path, env_store: str | None = None) -> subprocess.Compl
 
 
 @pytest.fixture
-def store_dir(tmp_path: Path) -> tuple[Path, dict[str, str]]:
-    """A store with a completed, an aborted and a killed run (and a past-due calibration)."""
+def store_dir(make_store, tmp_path: Path):
+    """A store with a completed, an aborted and a killed run (and a past-due calibration):
+    (--store value, run ids, environment for the child, Store.location, back-end)."""
     root = tmp_path / "rig-store"
-    st = Store(root)
+    st = make_store(root)
+    target, env = make_store.target(root), make_store.env(root)
     with st.begin_run(
         {"unit": {"serial": "RV-1"}, "operator": "Li", "plan": {"name": "gbt", "version": "2"},
          "calibration": [{"sensor": "TS-9", "due": "2001-01-01"}]},
@@ -56,17 +63,17 @@ def store_dir(tmp_path: Path) -> tuple[Path, dict[str, str]]:
     rec.finish("aborted", reason="E-stop pressed")
     ids["aborted"] = rec.run_id
     killed = subprocess.run(
-        [sys.executable, "-c", KILLED_WRITER, str(root)],
-        cwd=REPO, capture_output=True, text=True, timeout=60,
+        [sys.executable, "-c", KILLED_WRITER, target],
+        cwd=REPO, capture_output=True, text=True, timeout=60, env={**os.environ, **env},
     )
     assert killed.returncode == -signal.SIGKILL, killed.stderr
     ids["killed"] = killed.stdout.strip()
-    return root, ids
+    return target, ids, env, make_store.location(root), make_store.backend
 
 
 def test_table_lists_runs_with_status_and_marks_the_killed_run(store_dir, tmp_path):
-    root, ids = store_dir
-    out = rig("runs", "--store", str(root), cwd=tmp_path)
+    root, ids, env, _, _ = store_dir
+    out = rig("runs", "--store", root, cwd=tmp_path, extra_env=env)
     assert out.returncode == 0, out.stderr
     text = out.stdout
     assert f"marked aborted {ids['killed']}" in text
@@ -79,12 +86,13 @@ def test_table_lists_runs_with_status_and_marks_the_killed_run(store_dir, tmp_pa
 
 
 def test_json_output_and_filters(store_dir, tmp_path):
-    root, ids = store_dir
+    root, ids, env, location, _ = store_dir
     target = tmp_path / "runs.json"
-    out = rig("runs", "--store", str(root), "--json", str(target), cwd=tmp_path)
+    out = rig("runs", "--store", root, "--json", str(target), cwd=tmp_path, extra_env=env)
     assert out.returncode == 0, out.stderr
     doc = json.loads(target.read_text())
-    assert doc["store"] == str(root) and doc["recovered"] == [ids["killed"]]
+    assert doc["store"] == location and doc["recovered"] == [ids["killed"]]
+    assert len(doc["runs"]) == 3  # every run once
     by_id = {r["run_id"]: r for r in doc["runs"]}
     assert set(by_id) == set(ids.values())
     done = by_id[ids["completed"]]
@@ -96,21 +104,23 @@ def test_json_output_and_filters(store_dir, tmp_path):
     assert by_id[ids["killed"]]["reason"] == RECOVERED_REASON
     assert by_id[ids["killed"]]["n_samples"] == 1
 
-    out = rig("runs", "--store", str(root), "--json", "-", "--status", "aborted",
-              "--limit", "1", cwd=tmp_path)
+    out = rig("runs", "--store", root, "--json", "-", "--status", "aborted",
+              "--limit", "1", cwd=tmp_path, extra_env=env)
     assert out.returncode == 0, out.stderr
     doc = json.loads(out.stdout)
     assert [r["run_id"] for r in doc["runs"]] == [ids["killed"]]  # newest aborted one
 
 
 def test_store_folder_defaults_to_rig_store_env_then_cwd(store_dir, tmp_path):
-    root, ids = store_dir
+    root, ids, env, location, backend = store_dir
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
-    out = rig("runs", "--json", "-", cwd=elsewhere, env_store=str(root))
+    out = rig("runs", "--json", "-", cwd=elsewhere, env_store=root, extra_env=env)
     assert out.returncode == 0, out.stderr
-    assert json.loads(out.stdout)["store"] == str(root)
-    out = rig("runs", "--json", "-", cwd=root.parent)  # ./rig-store
+    assert json.loads(out.stdout)["store"] == location
+    if backend != "sqlite":  # ./rig-store below is a folder store
+        return
+    out = rig("runs", "--json", "-", cwd=Path(root).parent)  # ./rig-store
     assert out.returncode == 0, out.stderr
     assert {r["run_id"] for r in json.loads(out.stdout)["runs"]} == set(ids.values())
     out = rig("runs", "--help", cwd=tmp_path)

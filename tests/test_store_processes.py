@@ -1,4 +1,7 @@
-"""The store across real processes: SIGKILL during a run, recovery, concurrent readers."""
+"""The store across real processes: SIGKILL during a run, recovery, concurrent readers.
+
+Every test runs on both back-ends (SQLite, PostgreSQL: ``make_store`` in conftest.py).
+"""
 
 from __future__ import annotations
 
@@ -16,7 +19,7 @@ import numpy as np
 import pytest
 
 from rig.runformat import read_run
-from rig.store import RECOVERED_REASON, Store
+from rig.store import RECOVERED_REASON
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -97,9 +100,10 @@ print("reader", lists, loads, ",".join(sorted(seen)), flush=True)
 """
 
 
-def spawn(script: str, *args: str, stdin: int | None = None) -> subprocess.Popen:
+def spawn(script: str, *args: str, stdin: int | None = None,
+          env: dict[str, str] | None = None) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-c", script, *args],
+        [sys.executable, "-c", script, *args], env={**os.environ, **(env or {})},
         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=stdin, text=True,
     )
 
@@ -129,8 +133,9 @@ def next_line(lines: queue.Queue, proc: subprocess.Popen, timeout: float = 60.0)
     return line
 
 
-def test_sigkill_keeps_the_samples_and_the_next_start_marks_the_run_aborted(tmp_path):
-    proc = spawn(WRITER, str(tmp_path))
+def test_sigkill_keeps_the_samples_and_the_next_start_marks_the_run_aborted(make_store, tmp_path):
+    target, env = make_store.target(tmp_path), make_store.env(tmp_path)
+    proc = spawn(WRITER, target, env=env)
     lines = line_reader(proc)
     try:
         first = next_line(lines, proc)
@@ -140,7 +145,7 @@ def test_sigkill_keeps_the_samples_and_the_next_start_marks_the_run_aborted(tmp_
         while count < 400:
             count = int(next_line(lines, proc).split()[1])
         # a second process opening the store while the writer lives must not abort the run
-        live = Store(tmp_path)
+        live = make_store(tmp_path)
         assert live.recovered == []
         assert live.get_run(run_id).status == "running"
         assert live.load_run(run_id).n_samples > 0
@@ -161,7 +166,7 @@ def test_sigkill_keeps_the_samples_and_the_next_start_marks_the_run_aborted(tmp_
             proc.kill()
             proc.wait(10)
 
-    store = Store(tmp_path)
+    store = make_store(tmp_path)
     assert store.recovered == [run_id]
     info = store.get_run(run_id)
     assert info.status == "aborted" and info.reason == RECOVERED_REASON
@@ -177,17 +182,18 @@ def test_sigkill_keeps_the_samples_and_the_next_start_marks_the_run_aborted(tmp_
     assert meta["status"] == "aborted" and meta["reason"] == RECOVERED_REASON
     assert meta["recovery"]["by_pid"] == os.getpid()
     read_run(info.path)  # strict reader: the folder is clean rig-run/1 after recovery
-    assert Store(tmp_path).recovered == []
+    assert make_store(tmp_path).recovered == []
 
 
-def test_a_row_cut_off_by_the_kill_is_dropped_and_recorded(tmp_path):
-    proc = spawn(HALF_ROW, str(tmp_path))
+def test_a_row_cut_off_by_the_kill_is_dropped_and_recorded(make_store, tmp_path):
+    target, env = make_store.target(tmp_path), make_store.env(tmp_path)
+    proc = spawn(HALF_ROW, target, env=env)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == -signal.SIGKILL, err
     run_id = out.strip()
     raw = (tmp_path / "runs" / run_id / "samples.csv").read_bytes()
     assert raw.endswith(b"1.5,4.0,2.0000")
-    store = Store(tmp_path)
+    store = make_store(tmp_path)
     assert store.recovered == [run_id]
     run = read_run(store.run_path(run_id))
     assert run.n_samples == 3 and list(run.t_s) == [0.0, 0.5, 1.0]
@@ -195,14 +201,15 @@ def test_a_row_cut_off_by_the_kill_is_dropped_and_recorded(tmp_path):
     assert store.get_run(run_id).n_samples == 3
 
 
-def test_a_live_writer_in_another_process_is_left_alone_and_finishes(tmp_path):
-    proc = spawn(HOLDER, str(tmp_path), stdin=subprocess.PIPE)
+def test_a_live_writer_in_another_process_is_left_alone_and_finishes(make_store, tmp_path):
+    target, env = make_store.target(tmp_path), make_store.env(tmp_path)
+    proc = spawn(HOLDER, target, stdin=subprocess.PIPE, env=env)
     lines = line_reader(proc)
     try:
         run_id = next_line(lines, proc)
         for _ in range(3):
-            assert Store(tmp_path).recovered == []
-        assert Store(tmp_path).get_run(run_id).status == "running"
+            assert make_store(tmp_path).recovered == []
+        assert make_store(tmp_path).get_run(run_id).status == "running"
         proc.stdin.write("finish\n")
         proc.stdin.flush()
         assert next_line(lines, proc) == "done"
@@ -211,16 +218,18 @@ def test_a_live_writer_in_another_process_is_left_alone_and_finishes(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait(10)
-    info = Store(tmp_path).get_run(run_id)
+    info = make_store(tmp_path).get_run(run_id)
     assert (info.status, info.metrics, info.n_samples) == ("completed", {"ok": 1}, 1)
 
 
-def test_concurrent_reader_process_never_blocks_or_fails_while_a_writer_works(tmp_path):
-    Store(tmp_path)
+def test_concurrent_reader_process_never_blocks_or_fails_while_a_writer_works(make_store,
+                                                                             tmp_path):
+    target, env = make_store.target(tmp_path), make_store.env(tmp_path)
+    make_store(tmp_path)
     stop = tmp_path / "stop-reader"
     n_runs = 25
-    reader = spawn(READER, str(tmp_path), str(stop))
-    writer = spawn(MANY_RUNS, str(tmp_path), str(n_runs))
+    reader = spawn(READER, target, str(stop), env=env)
+    writer = spawn(MANY_RUNS, target, str(n_runs), env=env)
     try:
         w_out, w_err = writer.communicate(timeout=100)
         stop.touch()
@@ -235,6 +244,6 @@ def test_concurrent_reader_process_never_blocks_or_fails_while_a_writer_works(tm
     assert "database is locked" not in w_err + r_err
     _, lists, loads, _ = r_out.split()
     assert int(lists) > 0
-    runs = Store(tmp_path).list_runs()
+    runs = make_store(tmp_path).list_runs()
     assert len(runs) == n_runs and {r.status for r in runs} == {"completed"}
     assert all(r.n_samples == 40 for r in runs)

@@ -13,7 +13,8 @@ from typing import Annotated, Any
 import typer
 from rich.table import Table
 
-from rig.commands.measure import STORE_HELP, console, progress_bar, write_json
+from rig.commands.measure import console, progress_bar, write_json
+from rig.store_options import DEFAULT_STORE, SamplesOption, StoreOption
 
 
 def _summary_table(result: dict[str, Any]) -> Table:
@@ -51,8 +52,8 @@ def register(app: typer.Typer) -> None:
         rig: Annotated[Path | None, typer.Option(
             "--rig", help="Rig configuration (TOML) of real or simulated device addresses.")
         ] = None,
-        store: Annotated[Path, typer.Option(envvar="RIG_STORE", help=STORE_HELP)
-                         ] = Path("rig-store"),
+        store: StoreOption = DEFAULT_STORE,
+        samples: SamplesOption = None,
         json_file: Annotated[Path | None, typer.Option(
             "--json", help="Write the per-run metrics and the campaign summary as JSON "
             "('-': stdout).")] = None,
@@ -79,7 +80,7 @@ def register(app: typer.Typer) -> None:
             return
         plant_cfg = plant_config_for(camp.unit_data(), camp.simulation, camp.source) \
             if simulated else None
-        st = Store(store)
+        st = Store(store, samples=samples)
         out.print(f"campaign {camp.name}: {est.n_runs} runs, about {est.total_s:.0f} s")
         with open_session(rig=rig, simulated=simulated, plant=plant_cfg) as session, \
                 progress_bar(out, est.total_s) as on_event:

@@ -16,11 +16,15 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
+from rig.store_options import (
+    DEFAULT_STORE,
+    STORE_HELP,  # noqa: F401 (imported from here by other commands)
+    SamplesOption,
+    StoreOption,
+)
+
 if TYPE_CHECKING:
     from rig.engine_events import ProgressEvent
-
-STORE_HELP = ("Store folder. Default: the RIG_STORE environment variable if set, else "
-              "./rig-store in the current directory (as `rig runs`).")
 
 
 def console() -> Console:
@@ -121,8 +125,8 @@ def register(app: typer.Typer) -> None:
             help="Limit: backlash at most this, arcmin.")] = None,
         min_stiffness: Annotated[float | None, typer.Option(
             help="Limit: stiffness at least this, N·m/arcmin.")] = None,
-        store: Annotated[Path, typer.Option(envvar="RIG_STORE", help=STORE_HELP)
-                         ] = Path("rig-store"),
+        store: StoreOption = DEFAULT_STORE,
+        samples: SamplesOption = None,
         json_file: Annotated[Path | None, typer.Option(
             "--json", help="Write the run's metrics, status and reason as JSON ('-': stdout).")
         ] = None,
@@ -182,7 +186,7 @@ def register(app: typer.Typer) -> None:
                 raise RigError(str(exc)) from exc
             if not unit_data:
                 unit_data = dict(plant_cfg.unit)
-        st = Store(store)
+        st = Store(store, samples=samples)
         with open_session(rig=rig, simulated=simulated, plant=plant_cfg) as session, \
                 progress_bar(out, est.total_s) as on_event:
             from rig.engine import EngineOptions

@@ -11,10 +11,12 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from rig.store_options import DEFAULT_STORE, SamplesOption, StoreOption
+
 STATUS_STYLE = {"running": "yellow", "completed": "green", "aborted": "red"}
 
 
-def _table(runs: list, root: Path) -> Table:
+def _table(runs: list, root: str) -> Table:
     table = Table(title=f"Runs in {root} (newest first)")
     table.add_column("run", no_wrap=True)
     table.add_column("status")
@@ -48,14 +50,8 @@ def _table(runs: list, root: Path) -> Table:
 def register(app: typer.Typer) -> None:
     @app.command()
     def runs(
-        store: Annotated[
-            Path,
-            typer.Option(
-                envvar="RIG_STORE",
-                help="Store folder. Default: the RIG_STORE environment variable if set, "
-                "else ./rig-store in the current directory.",
-            ),
-        ] = Path("rig-store"),
+        store: StoreOption = DEFAULT_STORE,
+        samples: SamplesOption = None,
         json_file: Annotated[
             Path | None,
             typer.Option("--json", help="Also write the list as JSON to this file ('-': stdout)."),
@@ -70,7 +66,9 @@ def register(app: typer.Typer) -> None:
         """List the stored runs with their status (newest first).
 
         Opening the store marks runs left "running" by a process that has ended as aborted.
-        The store folder is --store, else $RIG_STORE, else ./rig-store.
+        The store is --store, else $RIG_STORE, else ./rig-store: a folder, or a database
+        URL postgresql://... whose run files are in --samples (else $RIG_SAMPLES_DIR).
+        --json lists every run once, with its run_id.
         """
         from rig.store import Store
 
@@ -78,10 +76,10 @@ def register(app: typer.Typer) -> None:
             raise typer.BadParameter(
                 f"{status!r} is not one of running, completed, aborted", param_hint="--status"
             )
-        st = Store(store, create=False)
+        st = Store(store, create=False, samples=samples)
         infos = st.list_runs(campaign_id=campaign, status=status, limit=limit)
         if json_file is not None:
-            doc = {"store": str(st.root), "recovered": st.recovered,
+            doc = {"store": st.location, "recovered": st.recovered,
                    "runs": [i.to_dict() for i in infos]}
             text = json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
             if str(json_file) == "-":
@@ -93,9 +91,9 @@ def register(app: typer.Typer) -> None:
         for run_id in st.recovered:
             console.print(f"[red]marked aborted[/red] {run_id}: its process ended during the run")
         if not infos:
-            console.print(f"no runs in {st.root}")
+            console.print(f"no runs in {st.location}")
             return
-        console.print(_table(infos, st.root))
+        console.print(_table(infos, st.location))
         for info in infos:
             for message in info.calibration_warnings:
                 console.print(f"[red]warning[/red] {info.run_id}: {message}")

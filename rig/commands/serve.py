@@ -8,6 +8,8 @@ from typing import Annotated
 
 import typer
 
+from rig.store_options import SamplesOption
+
 
 def register(app: typer.Typer) -> None:
     @app.command()
@@ -20,8 +22,10 @@ def register(app: typer.Typer) -> None:
             help="Address to listen on. Other than 127.0.0.1 needs --token.")] = "127.0.0.1",
         port: Annotated[int, typer.Option(
             min=0, max=65535, help="Port (0: a free one, printed).")] = 8765,
-        store: Annotated[Path | None, typer.Option(
-            help="Measurement store (default: $RIG_STORE or ./rig-store).")] = None,
+        store: Annotated[str | None, typer.Option(
+            help="Measurement store: a folder or a database URL postgresql://... "
+                 "(default: $RIG_STORE or ./rig-store).")] = None,
+        samples: SamplesOption = None,
         token: Annotated[str | None, typer.Option(
             help="Operator token (default: $RIG_WEB_TOKEN, else the store's token file, "
                  "else generated and printed).")] = None,
@@ -48,8 +52,8 @@ def register(app: typer.Typer) -> None:
             raise RigError("say which rig: --simulated (start the simulated rig) or --rig FILE "
                            "(a rig configuration)")
         root = store if store is not None else default_store_root()
-        settings = resolve_settings(host, port, store_root=root, token=token)
-        the_store = Store(root)
+        the_store = Store(root, samples=samples)
+        settings = resolve_settings(host, port, store_root=the_store.root, token=token)
         hub = LiveHub()
         if simulated:
             factory = simulated_session_factory(unit)

@@ -416,7 +416,7 @@ class Store:
         path = self.run_path(run_id)
         try:
             return read_run(path, allow_truncated_tail=True)
-        except (RigError, OSError) as e:
+        except (RigError, OSError, ValueError) as e:  # ValueError: a corrupt Parquet file
             raise StoreError(f"run {run_id}: its files cannot be read: {e}") from e
 
     # ----------------------------------------------------------------------- campaigns

@@ -18,6 +18,7 @@ Both keep the same tables and columns and the same versioned migrations
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import sqlite3
 import time
@@ -490,18 +491,23 @@ class SqliteIndex(IndexBackend):
             return [_row_dict(r) for r in conn.execute(sql + " ORDER BY audit_id", args)]
 
     def bulk_insert_runs(self, rows: Iterable[Mapping[str, Any]]) -> int:
-        n = 0
-        cols: list[str] | None = None
+        rows = iter(rows)
+        first = next(rows, None)
+        if first is None:
+            return 0
+        cols = list(first)
+        sql = f"INSERT INTO runs ({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})"
+        count = 0
+
+        def values() -> Iterator[list[Any]]:
+            nonlocal count
+            for row in itertools.chain([first], rows):
+                count += 1
+                yield [to_json(row[c]) if c in JSON_COLUMNS else row[c] for c in cols]
+
         with self._connect() as conn, write_transaction(conn):
-            for row in rows:
-                if cols is None:
-                    cols = list(row)
-                    sql = (f"INSERT INTO runs ({', '.join(cols)}) "
-                           f"VALUES ({', '.join('?' * len(cols))})")
-                conn.execute(sql, [to_json(row[c]) if c in JSON_COLUMNS else row[c]
-                                   for c in cols])
-                n += 1
-        return n
+            conn.executemany(sql, values())
+        return count
 
 
 # --------------------------------------------------------------------------- rows

@@ -535,6 +535,7 @@ def run_info(row: Mapping[str, Any], root: Path) -> RunInfo:
         writer_pid=row["writer_pid"],
         writer_host=row["writer_host"],
         outcome=row.get("outcome"),
+        design=row.get("design"),
     )
 
 

@@ -78,7 +78,8 @@ class RunInfo:
     ``n_samples`` is known once the run has finished (None while running); ``metrics`` is
     the ``result`` dict given at finish (None if none). ``reason`` says why a run was aborted.
     ``outcome`` is run.json's ``outcome`` reduced to a word ("pass", "fail", ...; None if
-    the run has none), indexed for the production history.
+    the run has none), indexed for the production history; ``design`` the unit's
+    ``unit.design`` (else ``unit.model``), the design a production line makes.
     """
 
     run_id: str
@@ -100,6 +101,7 @@ class RunInfo:
     writer_pid: int | None = field(default=None, compare=False)
     writer_host: str | None = field(default=None, compare=False)
     outcome: str | None = None
+    design: str | None = None
 
     @property
     def calibration_warnings(self) -> list[str]:
@@ -129,6 +131,7 @@ class RunInfo:
             "writer_pid": self.writer_pid,
             "writer_host": self.writer_host,
             "outcome": self.outcome,
+            "design": self.design,
         }
 
 

@@ -54,6 +54,7 @@ def write_campaign(
     n_quarter: int = 1000,
     design: str = "SYN-1",
     limits: dict[str, float] | None = None,
+    unit_data: dict[str, Any] | None = None,
     run_seconds: float = 0.0,
     on_run: Any = None,
 ) -> str:
@@ -61,11 +62,12 @@ def write_campaign(
 
     ``play_arcmin``: one value, or one per position. ``run_seconds``: about how long each
     run takes (rows paced like a rig's, in 20 bursts). ``on_run(run_id)`` is called after
-    each finished run.
+    each finished run. ``unit_data``: design data of the unit (a run.json ``unit``, e.g.
+    rig/examples/units/seed000-pair1.json) kept with serial and design in the metadata.
     Each run's result holds the closed-form metrics; the campaign's meta the ``limits``.
     """
     plays = play_arcmin if isinstance(play_arcmin, list) else [play_arcmin] * len(positions_deg)
-    unit = {"serial": serial, "design": design}
+    unit = {**(unit_data or {}), "serial": serial, "design": design}
     campaign_id = store.create_campaign(
         f"{design}-{serial}",
         {"unit": unit, "limits": limits or {}, "profile": "nabtesco",

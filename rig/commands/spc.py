@@ -1,0 +1,79 @@
+"""``rig spc``: the production quality view of a store (control charts, rules, Cp/Cpk)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from rig.store_options import DEFAULT_STORE, SamplesOption, StoreOption
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def spc(
+        store: StoreOption = DEFAULT_STORE,
+        samples: SamplesOption = None,
+        design: Annotated[str | None, typer.Option(
+            "--design", help="Only units of this design (run.json unit.design, else "
+            "unit.model).")] = None,
+        since: Annotated[str | None, typer.Option(
+            "--since", help="Only tests started on or after this UTC date/time "
+            "(ISO 8601, e.g. 2026-11-01).")] = None,
+        html: Annotated[Path | None, typer.Option(
+            "--html", help="Write the charts as an HTML page.")] = None,
+        json_file: Annotated[Path | None, typer.Option(
+            "--json", help="Write every figure as JSON ('-': stdout).")] = None,
+    ) -> None:
+        """Lost motion, backlash and stiffness per unit over time: individuals/moving-range
+        charts with control limits, the Western Electric rules, Cp/Cpk against the campaign
+        limits and the seed 000 batch band of the design (docs/spc.md)."""
+        from rich.console import Console
+        from rich.table import Table
+
+        from rig.errors import RigError
+        from rig.spc import spc_report
+        from rig.spc_html import render_html
+        from rig.store import Store
+
+        st = Store(store, create=False, samples=samples)
+        try:
+            doc = spc_report(st, design=design, since=since)
+        except ValueError as exc:
+            raise RigError(str(exc)) from exc
+        if json_file is not None:
+            text = json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
+            if str(json_file) == "-":
+                sys.stdout.write(text)
+            else:
+                json_file.write_text(text, encoding="utf-8")
+        if html is not None:
+            html.write_text(render_html(doc), encoding="utf-8")
+        if str(json_file) == "-":
+            return
+        out = Console(width=None if sys.stdout.isatty() else 160)
+
+        def f(value: float | None) -> str:
+            return "" if value is None else f"{value:.4g}"
+
+        if not doc["designs"]:
+            out.print(f"no completed runs in {st.location}"
+                      + (f" of design {design}" if design else ""))
+        for d in doc["designs"]:
+            table = Table(title=f"design {d['design']}: {d['n_tests']} unit tests, "
+                                f"{d['n_runs']} runs")
+            for col in ("metric", "n", "mean", "LCL", "UCL", "MR̄", "Cpk", "signals"):
+                table.add_column(col, justify="left" if col == "metric" else "right")
+            for name, m in d["metrics"].items():
+                if m["chart"] is None:
+                    table.add_row(name, "", m["error"], "", "", "", "", "")
+                    continue
+                c, cap = m["chart"], m["capability"]
+                table.add_row(name, str(cap["n"]), f(c["individuals"]["centre"]),
+                              f(c["individuals"]["lcl"]), f(c["individuals"]["ucl"]),
+                              f(c["moving_range"]["centre"]), f(cap["cpk"]),
+                              str(len(c["violations"])))
+            out.print(table)

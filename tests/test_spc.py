@@ -1,0 +1,146 @@
+"""``rig spc``: every figure against a hand computation (charts, rules, capability, batch band).
+
+Hand computations (values x = 2.0, 2.2, 2.1, 2.6, 2.3):
+mean = 11.2 / 5 = 2.24; moving ranges 0.2, 0.1, 0.5, 0.3, MR-bar = 1.1 / 4 = 0.275;
+sigma_within = 0.275 / 1.128 = 0.2437943; individuals limits 2.24 ± 0.825 / 1.128 =
+2.24 ± 0.7313830 -> 2.9713830 / 1.5086170; MR upper limit 3.267 * 0.275 = 0.898425.
+Against LSL 1.5, USL 3.0: Cp = 1.5 * 1.128 / (6 * 0.275) = 1.692 / 1.65 = 1.0254545;
+Cpk = min(0.76, 0.74) * 1.128 / (3 * 0.275) = 0.83472 / 0.825 = 1.0117818; overall
+s = sqrt((0.24² + 0.04² + 0.14² + 0.36² + 0.06²) / 4) = sqrt(0.053) = 0.2302173,
+Pp = 1.5 / (6 s) = 1.0859306, Ppk = 0.74 / (3 s) = 1.0714515.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from analysis.spc import capability, imr_chart, run_rules
+
+REPO = Path(__file__).resolve().parent.parent
+UNIT = json.loads((REPO / "rig/examples/units/seed000-pair1.json").read_text())
+X = [2.0, 2.2, 2.1, 2.6, 2.3]
+
+
+def test_individuals_and_moving_range_chart_by_hand():
+    c = imr_chart(X)
+    assert c.centre == pytest.approx(2.24, abs=1e-12)
+    assert c.moving_ranges.tolist() == pytest.approx([0.2, 0.1, 0.5, 0.3], abs=1e-12)
+    assert c.mr_centre == pytest.approx(0.275, abs=1e-12)
+    assert c.sigma_within == pytest.approx(0.2437943, abs=1e-7)
+    assert (c.ucl, c.lcl) == (pytest.approx(2.9713830, abs=1e-7),
+                              pytest.approx(1.5086170, abs=1e-7))
+    assert c.mr_ucl == pytest.approx(0.898425, abs=1e-12)
+    assert c.violations == []
+
+
+def test_capability_by_hand():
+    cap = capability(X, 0.275 / 1.128, lsl=1.5, usl=3.0)
+    assert cap["cp"] == pytest.approx(1.0254545, abs=1e-7)
+    assert cap["cpk"] == pytest.approx(1.0117818, abs=1e-7)
+    assert cap["sigma_overall"] == pytest.approx(0.2302173, abs=1e-7)
+    assert cap["pp"] == pytest.approx(1.0859306, abs=1e-7)
+    assert cap["ppk"] == pytest.approx(1.0714515, abs=1e-7)
+    upper_only = capability(X, 0.275 / 1.128, usl=3.0)  # 0.76 * 1.128 / 0.825 = 1.0391273
+    assert upper_only["cp"] is None and upper_only["cpk"] == pytest.approx(1.0391273, abs=1e-7)
+    lower_only = capability(X, 0.275 / 1.128, lsl=1.5)  # (2.24 - 1.5) / (3 sigma) = 1.0117818
+    assert lower_only["cpk"] == pytest.approx(1.0117818, abs=1e-7)
+    assert capability(X, 0.0, usl=3.0)["cpk"] is None  # no spread: undefined
+
+
+@pytest.mark.parametrize(("values", "expected"), [
+    ([0.0, 3.2, 0.0], [("WE1", 1, (1,))]),
+    ([0.0, 2.5, -0.5, 2.1, 0.0], [("WE2", 3, (1, 3))]),
+    ([1.5, 1.2, -0.5, 1.1, 1.3, 0.0], [("WE3", 4, (0, 1, 3, 4))]),
+    ([0.5, 0.6] * 4 + [-0.5], [("WE4", 7, tuple(range(8)))]),
+    ([-0.3, -0.2, -0.1, 0.1, 0.2, 0.3], [("N3", 5, tuple(range(6)))]),
+    ([-2.5, -0.2, -2.2, 0.3], [("WE2", 2, (0, 2))]),  # below the centre too
+])
+def test_each_rule_on_a_sequence_built_to_break_it(values, expected):
+    got = [(v.rule, v.index, v.points) for v in run_rules(values, 0.0, 1.0)]
+    assert got == expected
+
+
+def test_a_jump_signals_on_both_charts():
+    # MR-bar = (8 * 0.1 + 2.0) / 9 = 0.31111; D4 MR-bar = 1.01640 < 2.0 (MR at point 9).
+    # mean = 2.4 / 10 = 0.24, UCL = 0.24 + 3 * 0.31111 / 1.128 = 1.06745 < 2.0 (WE1 at 9);
+    # points 0..8 (<= 0.1) lie below 0.24: WE4 at 7 and 8.
+    c = imr_chart([0.0, 0.1] * 4 + [0.0, 2.0])
+    assert c.mr_ucl == pytest.approx(3.267 * 2.8 / 9, abs=1e-12)
+    assert c.ucl == pytest.approx(0.24 + 3 * 2.8 / 9 / 1.128, abs=1e-12)
+    got = sorted((v.chart, v.rule, v.index) for v in c.violations)
+    assert got == [("I", "WE1", 9), ("I", "WE4", 7), ("I", "WE4", 8), ("MR", "WE1", 9)]
+
+
+def small_line(st) -> None:
+    """Five units, two positions each; worst lost motion = max play + 0.02 (closed form:
+    2 * 3 % * 10 N·m / 30 N·m/arcmin) = 2.02, 2.22, 2.12, 2.62, 2.32 arcmin; worst backlash
+    = X; one run of another design that must stay out of the SYN-1 charts."""
+    from rig.synthetic_runs import write_campaign
+
+    plays = [[2.0, 1.9], [2.1, 2.2], [2.1, 1.8], [2.6, 2.5], [2.3, 2.2]]
+    for k, p in enumerate(plays):
+        write_campaign(st, f"P-{k}", play_arcmin=p, design="SYN-1", unit_data=UNIT,
+                       limits={"lost_motion_arcmin_max": 3.0,
+                               "stiffness_Nm_per_arcmin_min": 20.0}, n_quarter=100)
+    write_campaign(st, "OTHER", play_arcmin=9.0, positions_deg=(0.0,), design="SYN-2",
+                   n_quarter=100)
+
+
+def test_rig_spc_json_and_html_on_a_small_store(make_store, tmp_path):
+    root = tmp_path / "store"
+    small_line(make_store(root))
+    env = {k: v for k, v in os.environ.items() if k not in ("RIG_STORE", "RIG_SAMPLES_DIR")}
+    env.update(make_store.env(root))
+    out = subprocess.run(
+        [sys.executable, "-c", "from rig.cli import main; main()", "spc", "--store",
+         make_store.target(root), "--design", "SYN-1", "--since", "2000-01-01",
+         "--json", str(tmp_path / "spc.json"), "--html", str(tmp_path / "spc.html")],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    doc = json.loads((tmp_path / "spc.json").read_text())
+    (d,) = doc["designs"]
+    assert (d["design"], d["n_tests"], d["n_runs"]) == ("SYN-1", 5, 10)
+    assert [t["unit_serial"] for t in d["tests"]] == [f"P-{k}" for k in range(5)]
+    lm = d["metrics"]["lost_motion_arcmin"]
+    assert [p["value"] for p in lm["points"]] == pytest.approx(
+        [2.02, 2.22, 2.12, 2.62, 2.32], abs=1e-12)
+    ind = lm["chart"]["individuals"]
+    assert ind["centre"] == pytest.approx(2.26, abs=1e-12)
+    assert (ind["ucl"], ind["lcl"]) == (pytest.approx(2.9913830, abs=1e-7),
+                                        pytest.approx(1.5286170, abs=1e-7))
+    assert lm["chart"]["moving_range"]["ucl"] == pytest.approx(0.898425, abs=1e-9)
+    assert lm["usl"] == 3.0 and lm["capability"]["cp"] is None
+    assert lm["capability"]["cpk"] == pytest.approx(1.0117818, abs=1e-7)  # (3 - 2.26)/3σ
+    bl = d["metrics"]["backlash_arcmin"]
+    assert bl["chart"]["individuals"]["centre"] == pytest.approx(2.24, abs=1e-12)
+    assert bl["capability"]["cpk"] is None  # no backlash limit in the campaigns
+    st_ = d["metrics"]["stiffness_Nm_per_arcmin"]
+    assert st_["chart"]["individuals"]["centre"] == pytest.approx(30.0)
+    assert st_["lsl"] == 20.0 and st_["capability"]["cpk"] is None  # zero spread
+    # the seed 000 batch band of pair 1 at 10 N·m, ±3 %: as `rig campaign run` prints it
+    band = lm["batch"]["band"]
+    assert band["band_95_arcmin"] == pytest.approx([3.909, 6.411], abs=1e-3)
+    assert doc["constants"] == {"d2": 1.128, "D4": 3.267, "sigma_limits": 3.0}
+    page = (tmp_path / "spc.html").read_text()
+    assert page.count("data:image/png;base64,") == 3
+    assert "3.909 .. 6.411 arcmin" in page and "WE4" in page and "1.012" in page
+    assert "SYN-2" not in page
+
+
+def test_rig_spc_errors(tmp_path):
+    run = [sys.executable, "-c", "from rig.cli import main; main()", "spc"]
+    out = subprocess.run([*run, "--store", str(tmp_path / "none")], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "no store at" in out.stderr
+    from rig.store import Store
+
+    Store(tmp_path / "s")
+    out = subprocess.run([*run, "--store", str(tmp_path / "s"), "--since", "yesterday"],
+                         cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "since: 'yesterday' is not an ISO 8601" in out.stderr

@@ -43,7 +43,7 @@ from analysis.diagnosis_fit import (
     temperatures_known,
 )
 from analysis.diagnosis_where import gap_map, lack_of_fit, per_run_play, play_fourier
-from analysis.effects import CANDIDATES, arcmin_to_um, bearing_play_arcmin
+from analysis.effects import CANDIDATES, arcmin_to_um, bearing_play_arcmin, tooth_pair_phase
 from analysis.errors import AnalysisError
 
 ARCSEC = 60.0
@@ -168,11 +168,20 @@ def folds_by_condition(stack: Stack, cond: dict[str, tuple]) -> list[list[int]]:
     return folds
 
 
-def folds_by_repeat(stack: Stack, cond: dict[str, tuple]) -> list[list[int]]:
-    """Held-out sets of repeats: fold r leaves out the r-th run of every repeated condition."""
+def folds_by_repeat(stack: Stack, cond: dict[str, tuple],
+                    varied: Sequence[str] = ()) -> list[list[int]]:
+    """Held-out sets of repeats: fold r leaves out the r-th run of every repeated condition.
+    A repeat is the same tooth pair meshing at the same other conditions: the position enters
+    as its tooth-pair phase (analysis.effects.tooth_pair_phase), so positions one repeat
+    period apart (one output revolution for 45/40 teeth) are repeats."""
     by: dict[tuple, list[int]] = {}
+    pos_at = list(varied).index("position") if "position" in varied else None
     for i, r in enumerate(stack.runs):
-        by.setdefault(cond[r.run_id], []).append(i)
+        key = cond[r.run_id]
+        if pos_at is not None and r.input_angle_deg is not None:
+            phase = int(tooth_pair_phase(r.input_angle_deg, stack.z_internal, stack.z_external))
+            key = (*key[:pos_at], ("tooth", phase), *key[pos_at + 1:])
+        by.setdefault(key, []).append(i)
     reps = [v for v in by.values() if len(v) >= 2]
     if not reps:
         return []
@@ -361,7 +370,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
                             "(run.json 'unit'); a run has none usable")
     cond, varied = conditions_of(stack)
     cfolds = folds_by_condition(stack, cond)
-    rfolds = folds_by_repeat(stack, cond)
+    rfolds = folds_by_repeat(stack, cond, varied)
     why_not = testable(stack, cond, varied)
 
     noise = math.sqrt(float(np.mean(np.concatenate(

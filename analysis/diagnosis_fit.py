@@ -28,7 +28,7 @@ from analysis.effects import (
     flank_sign,
     model_lost_motion_arcmin,
     runout_basis,
-    tooth_pair_index,
+    tooth_pair_phase,
     um_to_arcmin,
 )
 from analysis.errors import AnalysisError
@@ -143,13 +143,15 @@ def run_columns(stack: Stack, run: PreparedRun, effects: Sequence[str], nl: dict
         temp = run.temperature_C if run.temperature_C is not None else np.full(s.size, math.nan)
         cols.append(s / 2.0 * (temp - stack.reference_C))
     if "tooth_spacing_error" in effects:
-        tooth = int(tooth_pair_index(run.input_angle_deg or 0.0, stack.z_internal))
+        tooth = int(tooth_pair_phase(run.input_angle_deg or 0.0, stack.z_internal,
+                                     stack.z_external))
         cols += [s / 2.0 * (1.0 if t == tooth else 0.0) for t in teeth]
     return np.column_stack(cols)
 
 
 def teeth_of(stack: Stack) -> list[int]:
-    return sorted({int(tooth_pair_index(r.input_angle_deg or 0.0, stack.z_internal))
+    return sorted({int(tooth_pair_phase(r.input_angle_deg or 0.0, stack.z_internal,
+                                        stack.z_external))
                    for r in stack.runs})
 
 

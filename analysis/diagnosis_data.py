@@ -229,12 +229,10 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRu
         sigma_b = max(sigma_b, 0.5 * sigma / math.sqrt(block))
     else:
         sigma_b = sigma / math.sqrt(block)
-    # leave out the blocks floating in the play at zero torque (noise estimated with them)
-    held = np.abs(tb) >= FLOAT_BAND_SIGMAS * sigma_tb + 2e-4 * amplitude
-    if held.sum() >= 10:
-        tb, yb = tb[held], yb[held]
-    else:
-        held = np.ones(tb.size, dtype=bool)
+    # blocks at zero torque are kept: with no torque on it the unit floats in the free play,
+    # which analysis.diagnosis_fit models (censored between the flank last loaded and the
+    # centre of the play); there a torque-sensor offset shows (the unit on the other flank)
+    held = np.ones(tb.size, dtype=bool)
     lost_motion = math.nan
     try:
         res = analyse_loop(t, torque, twist, rated_torque_Nm=run.rated_torque_Nm)

@@ -129,7 +129,7 @@ def run_columns(stack: Stack, run: PreparedRun, effects: Sequence[str], nl: dict
     written as ``twist = X beta + offset``."""
     torque = run.torque_Nm - nl.get("torque_offset_Nm", 0.0)
     g = chain_torque_Nm(torque, nl.get("friction_Nm", 0.0), run.start_flank)
-    s = flank_sign(g, 3.0 * run.sigma_torque_Nm + 1e-4 * run.rated_torque_Nm, run.start_flank)
+    s = flank_sign(g, flank_band_Nm(run), run.start_flank)
     tau = np.abs(g)
     cols = [s / 2.0, s * tau]
     if "stiffness_nonlinearity" in effects:
@@ -147,6 +147,40 @@ def run_columns(stack: Stack, run: PreparedRun, effects: Sequence[str], nl: dict
                                      stack.z_external))
         cols += [s / 2.0 * (1.0 if t == tooth else 0.0) for t in teeth]
     return np.column_stack(cols)
+
+
+def flank_band_Nm(run: PreparedRun) -> float:
+    """Noise band of the chain torque (N*m) within which the flank is undetermined: three
+    block-mean torque sigmas (+1e-4 of rated for a noiseless channel)."""
+    return 3.0 * run.sigma_torque_Nm + 1e-4 * run.rated_torque_Nm
+
+
+def run_floating(run: PreparedRun, nl: dict[str, float]) -> np.ndarray:
+    """Points whose chain torque is within the flank band: nothing holds the unit on a flank,
+    it floats in the free play (True)."""
+    torque = run.torque_Nm - nl.get("torque_offset_Nm", 0.0)
+    g = chain_torque_Nm(torque, nl.get("friction_Nm", 0.0), run.start_flank)
+    return np.abs(g) < flank_band_Nm(run)
+
+
+def censor_floating(r: np.ndarray, X: np.ndarray, beta: np.ndarray, floating: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals (arcmin) with the float across the play modelled: a floating point may lie
+    anywhere between the flank it last touched (the model's value) and the centre of the play
+    (half the play towards the other flank), at no cost; beyond the centre only the excess
+    counts, outwards the full residual. Returns (effective residual, inside mask). Column 0 of
+    X is ``s / 2`` (the play column), ``beta[0]`` the play."""
+    if not floating.any():
+        return r, np.zeros(r.size, dtype=bool)
+    s = 2.0 * X[:, 0]
+    half = max(float(beta[0]), 0.0) / 2.0
+    d = s * r  # > 0: beyond the kept flank outwards; < 0: drifted towards the centre
+    inside = floating & (d <= 0) & (d >= -half)
+    past = floating & (d < -half)
+    out = r.copy()
+    out[inside] = 0.0
+    out[past] = r[past] + s[past] * half
+    return out, inside
 
 
 def teeth_of(stack: Stack) -> list[int]:
@@ -205,10 +239,12 @@ def _centre(values: np.ndarray, weights: np.ndarray, run: np.ndarray, n_runs: in
 
 def _solve(X: np.ndarray, y: np.ndarray, sig: np.ndarray, run: np.ndarray, n_runs: int,
            lo: np.ndarray, hi: np.ndarray, prior: np.ndarray, fixed: np.ndarray | None,
-           iterations: int = 3, want_cov: bool = False,
+           iterations: int = 3, want_cov: bool = False, floating: np.ndarray | None = None,
            ) -> tuple[np.ndarray, float, float, np.ndarray, np.ndarray | None]:
     """Robust bounded LS with per-run offsets projected out (``run``: run index per point).
-    ``fixed``: coefficients held (predictive gap) instead of fitted. Huber re-weighting."""
+    ``fixed``: coefficients held (predictive gap) instead of fitted. Huber re-weighting.
+    ``floating``: points floating in the play (:func:`censor_floating`); those inside their
+    interval get no weight, those past the centre are fitted to the centre."""
     p = X.shape[1]
     w = np.ones(y.size)
     beta = fixed if fixed is not None else np.zeros(p)
@@ -217,6 +253,8 @@ def _solve(X: np.ndarray, y: np.ndarray, sig: np.ndarray, run: np.ndarray, n_run
     pr[np.arange(pr.shape[0]), np.flatnonzero(has_prior)] = 1.0 / prior[has_prior]
     inv_var = 1.0 / sig**2
     A = None
+    X0 = X
+    flt = floating if floating is not None and floating.any() else None
     for _ in range(iterations if fixed is None else 2):
         ww = w * inv_var
         if fixed is None:
@@ -230,11 +268,20 @@ def _solve(X: np.ndarray, y: np.ndarray, sig: np.ndarray, run: np.ndarray, n_run
             if np.any(beta < lo - 1e-12) or np.any(beta > hi + 1e-12):
                 res = lsq_linear(A / scale, b, bounds=(lo * scale, hi * scale), method="bvls")
                 beta = res.x / scale
-        r = _centre(y - X @ beta, ww, run, n_runs)
+        r = _centre(y - X0 @ beta, ww, run, n_runs)
         u = np.abs(r) / sig
         w = np.minimum(1.0, HUBER_C / np.maximum(u, 1e-12))
+        if flt is not None:
+            r_eff, inside = censor_floating(r, X0, beta, flt)
+            w = np.minimum(1.0, HUBER_C / np.maximum(np.abs(r_eff) / sig, 1e-12))
+            w[inside] = 0.0
+            past = flt & ~inside & (2.0 * X0[:, 0] * r < 0)
+            X = X0.copy()
+            X[past] = 0.0  # fitted to the centre of the play (the run offset)
     ww = w * inv_var
-    r = _centre(y - X @ beta, ww, run, n_runs)
+    r = _centre(y - X0 @ beta, ww, run, n_runs)
+    if flt is not None:
+        r, _ = censor_floating(r, X0, beta, flt)
     u = np.abs(r) / sig
     objective = float(np.sum(np.where(u <= HUBER_C, 0.5 * u**2, HUBER_C * (u - 0.5 * HUBER_C))))
     cov = None
@@ -262,8 +309,9 @@ def fit(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None = None,
     fixed_beta = None
     if fixed is not None:
         fixed_beta = np.array([fixed.get(nm, 0.0) for nm in names])
+    floating = np.concatenate([run_floating(stack.runs[i], nl) for i in idx])
     beta, obj, chi2, r, cov = _solve(X, y, sig, run, len(idx), lo, hi, prior, fixed_beta,
-                                     want_cov=want_cov)
+                                     want_cov=want_cov, floating=floating)
     fitres = LinearFit(tuple(names), beta, nl, obj, chi2, int(y.size), cov=cov)
     fitres.residual = {stack.runs[i].run_id: r[run == k] for k, i in enumerate(idx)}
     return fitres
@@ -385,8 +433,11 @@ def predict_run(stack: Stack, f: LinearFit, effects: Sequence[str], i: int) -> n
     run = stack.runs[i]
     teeth = teeth_of(stack)
     X = run_columns(stack, run, effects, f.nl, teeth)
+    floating = run_floating(run, f.nl)
     r = run.twist_arcmin - X @ f.beta
-    return r - r.mean()
+    keep = ~floating
+    r = r - (r[keep].mean() if keep.any() else r.mean())
+    return censor_floating(r, X, f.beta, floating)[0]
 
 
 def run_lost_motion(stack: Stack, params: LoopParams, i: int) -> float:

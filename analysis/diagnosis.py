@@ -77,6 +77,10 @@ PLAY_ABSENT = 0.25
 #: Stiffness deviation from seed 004 eq. (8) taken as a finding (relative).
 STIFFNESS_TOLERANCE = 0.10
 MAX_FOLDS = 5
+#: Second effects: at most this many added under ``also``, each chosen among this many
+#: candidates (by in-sample BIC) fitted jointly with what is already there.
+MAX_ALSO = 2
+ALSO_TRIALS = 3
 #: Candidates cross-validated after screening, and the in-sample BIC gain they need.
 SCREEN_KEEP = 3
 SCREEN_DELTA_BIC = -10.0
@@ -599,6 +603,35 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
 
     pool = [c for c in models.values()
             if c.plausible and c.heldout_runs > 0 and not c.screened_out]
+    def additions(chosen: list[Candidate]) -> list[Candidate]:
+        """Second (and third) effects: each addition is fitted jointly and kept only when it
+        earns its place on the held-out runs (:func:`separated` against the model without
+        it: a lower BIC by SEPARATION_BIC and a consistently smaller held-out residual) and
+        removes GREEDY_GAIN of the systematic held-out gap still left."""
+        chosen = list(chosen)
+        current = chosen[-1]
+        ranked = sorted((c for c in models.values() if c.plausible),
+                        key=lambda c: c.delta_bic)
+        for _ in range(MAX_ALSO):
+            have = set(current.effects)
+            if have & pair:
+                have |= pair  # one flank-curvature family at a time
+            trials = []
+            for c in ranked:
+                if c.effects[0] in have or c.delta_bic >= SCREEN_DELTA_BIC:
+                    continue
+                trials.append(evaluate((*current.effects, c.effects[0])))
+                if len(trials) >= ALSO_TRIALS:
+                    break
+            earned = [t for t in trials if t.plausible and t.heldout_runs > 0
+                      and sysh(t) ** 2 <= (1.0 - GREEDY_GAIN) * sysh(current) ** 2
+                      and separated(stack, t, current)]
+            if not earned:
+                break
+            current = min(earned, key=lambda t: t.heldout_rms_arcmin)
+            chosen.append(current)
+        return chosen
+
     curv, curv_why = curvature_effect(models, k_nom)
     pair = {"bearing_clearance", "stiffness_nonlinearity"}
     in_pool = [c for c in pool if c.effects[0] in pair]
@@ -625,11 +658,12 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
             names = [best.effects[0]] + [c.effects[0] for c in ties]
             winner, why = play_tiebreak(names, models, nominal_play)
             if winner is not None:
-                return (winner, [], None, [models[winner]],
+                return (winner, [], None, additions([models[winner]]),
                         "held-out fits tie; decided by the free play: " + why)
             return ("ambiguous", names, _next(names), [best],
                     "several effects explain the gap equally well under this design")
-        return best.effects[0], [], None, [best], "one effect explains the held-out gap"
+        return (best.effects[0], [], None, additions([best]),
+                "one effect explains the held-out gap")
     # greedy: add effects while each removes a significant share of what is left
     chosen: list[Candidate] = []
     current_sys = sys0
@@ -649,7 +683,7 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
         if current_sys <= max(EXPLAINED_SHARE * sys0, threshold):
             break
     if chosen and current_sys <= max(EXPLAINED_SHARE * sys0, threshold):
-        return (chosen[0].effects[0], [], None, chosen,
+        return (chosen[0].effects[0], [], None, additions(chosen),
                 "effects added greedily explain the held-out gap")
     names = [c.effects[-1] for c in chosen] or [c.effects[0] for c in pool[:2]]
     if insample_only:

@@ -392,10 +392,11 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
     pred_rms, pred_lm = _insample(stack, predictive)
     base_rms, base_lm = _insample(stack, base)
 
-    def evaluate(effects: tuple[str, ...], start: LinearFit | None = None) -> Candidate:
+    def evaluate(effects: tuple[str, ...], start: LinearFit | None = None,
+                 by_repeat: bool = False) -> Candidate:
         full = start if start is not None else _full_fit(stack, effects)
         folds, scheme = cfolds, "leave-one-condition-out"
-        if "tooth_spacing_error" in effects:
+        if "tooth_spacing_error" in effects or by_repeat:
             folds, scheme = rfolds, "leave-one-repeat-out"
         resid: dict[str, np.ndarray] = {}
         if folds:
@@ -651,6 +652,17 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
     explaining = [c for c in pool if explains(c, _sys(before(c)[0], noise))]
     if explaining:
         best = explaining[0]
+        smooth = models.get("runout")
+        if (best.effects[0] == "tooth_spacing_error" and smooth is not None
+                and smooth in explaining):
+            # per-tooth plays hold any position pattern; the smooth eq. (4) runout, with 4
+            # parameters, is preferred unless the per-tooth model beats it on the same
+            # held-out repeats
+            smooth_rep = evaluate(("runout",), smooth.fit, by_repeat=True)
+            if not separated(stack, best, smooth_rep):
+                explaining = [smooth] + [c for c in explaining if c is not smooth
+                                         and c is not best]
+                best = smooth
         ties = [c for c in explaining[1:]
                 if sysh(c) <= max(threshold, TIE_FACTOR * sysh(best))
                 and c.scheme == best.scheme and not separated(stack, best, c)]
@@ -688,8 +700,10 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
     names = [c.effects[-1] for c in chosen] or [c.effects[0] for c in pool[:2]]
     if insample_only:
         best_in = min(insample_only, key=lambda c: c.fit.objective)
-        if best_in.delta_bic < -10.0 and best_in.fit.objective < min(
-                (c.fit.objective for c in pool), default=math.inf):
+        # no in-sample evidence against it (BIC within SEPARATION_BIC of the best held-out
+        # candidate's): the design cannot tell, so the verdict is ambiguous, not unexplained
+        if best_in.delta_bic < SCREEN_DELTA_BIC and best_in.delta_bic <= min(
+                (c.delta_bic for c in pool), default=math.inf) + SEPARATION_BIC:
             names = [best_in.effects[0], *names]
             return ("ambiguous", names[:3], _next(names[:2]), chosen,
                     f"{best_in.effects[0]} fits best in-sample but the design holds out no "

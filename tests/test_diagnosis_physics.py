@@ -1,0 +1,58 @@
+"""The physics rules of the generalised diagnosis (issue 10), each on a closed form or on
+injected ground truth: tooth-pair repeats, the float across the play at zero torque, the
+bearing/stiffening split by the loaded slope."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from analysis.diagnosis import Candidate, curvature_effect
+from analysis.diagnosis_fit import LinearFit, censor_floating
+from analysis.effects import tooth_pair_phase, tooth_repeat_period_deg
+
+
+def test_tooth_pair_repeats_after_lcm_mesh_steps() -> None:
+    # 45/40 teeth: lcm 360 mesh steps = 2880 deg of input = one output revolution (ratio 8)
+    assert tooth_repeat_period_deg(45, 40) == 2880.0
+    a = np.array([548.1, 548.1 + 2880.0, 340.85])
+    ph = tooth_pair_phase(a, 45, 40)
+    assert ph[0] == ph[1] != ph[2]
+    # one input turn later the ring tooth repeats but the pinion tooth does not
+    assert tooth_pair_phase(548.1 + 360.0, 45, 40) != ph[0]
+    # 61/56: lcm 3416 steps -> 360 * 3416 / 61 deg, not one output turn (ratio 11.2)
+    assert math.isclose(tooth_repeat_period_deg(61, 56), 360.0 * 3416 / 61)
+
+
+def test_float_across_the_play_is_censored() -> None:
+    play = 4.0
+    X = np.array([[0.5], [0.5], [0.5], [0.5], [-0.5]])  # s / 2: kept flank +, +, +, +, -
+    beta = np.array([play])
+    r = np.array([-1.0, -3.0, 0.5, -3.0, 1.5])  # measured minus kept-flank model
+    floating = np.array([True, True, True, False, True])
+    out, inside = censor_floating(r, X, beta, floating)
+    # drifted towards the centre (up to half the play): free; past it only the excess counts
+    assert inside.tolist() == [True, False, False, False, True]
+    assert out.tolist() == [0.0, -1.0, 0.5, -3.0, 0.0]
+
+
+def _take_up_fit(compliance: float) -> Candidate:
+    """A saturating take-up fit (play, loaded compliance, extra twist) with a tight
+    covariance, as analysis.diagnosis_fit returns it."""
+    f = LinearFit(("play", "compliance", "soft_twist"), np.array([3.0, compliance, 0.2]),
+                  {"stiffening_torque_Nm": 1.0}, 100.0, 200.0, 200,
+                  cov=np.diag([1e-8, (0.002 * compliance) ** 2, 1e-8]))
+    return Candidate(("stiffness_nonlinearity",), f, 0.01, 0.01, 4, "leave-one-condition-out")
+
+
+def test_loaded_slope_names_the_flank_curvature() -> None:
+    k_nom = 30.0
+    # a clearance taken up at small torque leaves the nominal slope
+    name, why = curvature_effect({"stiffness_nonlinearity": _take_up_fit(1 / 30.5)}, k_nom)
+    assert name == "bearing_clearance" and "nominal slope" in why
+    # a hardening contact is stiffer at load than the linear nominal
+    name, _ = curvature_effect({"stiffness_nonlinearity": _take_up_fit(1 / 40.0)}, k_nom)
+    assert name == "stiffness_nonlinearity"
+    # softer at load than nominal: neither shape, undecided
+    assert curvature_effect({"stiffness_nonlinearity": _take_up_fit(1 / 20.0)}, k_nom)[0] is None

@@ -301,7 +301,9 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
                 notes.append("friction above 15 % of rated torque")
         elif e == "torque_sensor_offset":
             out["offset_Nm"] = f.nl.get("torque_offset_Nm", 0.0)
-            if abs(out["offset_Nm"]) > 0.08 * rated:
+            nearest = f.nl.get("torque_offset_nearest_zero_Nm", out["offset_Nm"])
+            out["offset_nearest_zero_Nm"] = nearest
+            if abs(nearest) > 0.08 * rated:
                 ok = False
                 notes.append("torque offset above 8 % of rated torque")
         elif e == "stiffness_nonlinearity":

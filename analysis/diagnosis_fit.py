@@ -280,10 +280,15 @@ def _solve(X: np.ndarray, y: np.ndarray, sig: np.ndarray, run: np.ndarray, n_run
             X[past] = 0.0  # fitted to the centre of the play (the run offset)
     ww = w * inv_var
     r = _centre(y - X0 @ beta, ww, run, n_runs)
+    float_cost = 0.0
     if flt is not None:
-        r, _ = censor_floating(r, X0, beta, flt)
+        r, inside = censor_floating(r, X0, beta, flt)
+        # a floating point inside its interval costs what a fitted point costs on average
+        # (E[u^2 / 2] = 1/2): letting points float is no free lunch for a candidate
+        float_cost = 0.5 * float(inside.sum())
     u = np.abs(r) / sig
     objective = float(np.sum(np.where(u <= HUBER_C, 0.5 * u**2, HUBER_C * (u - 0.5 * HUBER_C))))
+    objective += float_cost
     cov = None
     if want_cov and A is not None:
         cov = np.linalg.pinv(A.T @ A)
@@ -401,6 +406,24 @@ def fit_profile(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None
                 j = int(np.argmin([t.objective for t in trials]))
                 if trials[j].objective < cand.objective:
                     cand = trials[j]
+                # the objective is flat between flank switches: the data bound the offset to
+                # that interval only; take its middle and keep its bounds (plausibility is
+                # judged at the bound nearest zero)
+                objs = np.array([r.objective for r in results])
+                flat = objs <= cand.objective + 1e-6 * (1.0 + abs(cand.objective))
+                lo_j = hi_j = k
+                while lo_j > 0 and flat[lo_j - 1]:
+                    lo_j -= 1
+                while hi_j < grid.size - 1 and flat[hi_j + 1]:
+                    hi_j += 1
+                if hi_j > lo_j:
+                    mid = 0.5 * (float(grid[lo_j]) + float(grid[hi_j]))
+                    trial = fit(stack, effects, runs, {**current, key: mid})
+                    if trial.objective <= cand.objective + 1e-6 * (1.0 + abs(cand.objective)):
+                        cand = trial
+                    span = (float(grid[lo_j]), float(grid[hi_j]))
+                    cand.nl["torque_offset_nearest_zero_Nm"] = (
+                        0.0 if span[0] <= 0.0 <= span[1] else min(span, key=abs))
             current = dict(cand.nl)
             best = cand
     return best

@@ -303,6 +303,9 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             out["offset_Nm"] = f.nl.get("torque_offset_Nm", 0.0)
             nearest = f.nl.get("torque_offset_nearest_zero_Nm", out["offset_Nm"])
             out["offset_nearest_zero_Nm"] = nearest
+            if "torque_offset_low_Nm" in f.nl:
+                out["offset_interval_Nm"] = [f.nl["torque_offset_low_Nm"],
+                                             f.nl["torque_offset_high_Nm"]]
             if abs(nearest) > 0.08 * rated:
                 ok = False
                 notes.append("torque offset above 8 % of rated torque")
@@ -568,13 +571,20 @@ def curvature_effect(models: dict[str, Candidate], k_nom: float) -> tuple[str | 
     up adds compliance only below its closing torque and leaves the mesh's nominal slope at
     load (seed 004 eq. 8); Hertzian contact stiffening makes the contact itself stiffer as the
     load grows, so the tangent stiffness at load exceeds the nominal linear (secant) value.
-    Read on the saturating take-up fit (extra twist + linear slope): loaded stiffness within
+    Read on the best take-up fit (extra twist + linear slope): loaded stiffness within
     the tolerance of the nominal (the larger of STIFFNESS_TOLERANCE and two standard errors
     of the fitted compliance) -> bearing clearance, stiffer -> contact stiffening, softer ->
     undecided. Returns (effect or None, why)."""
-    c = models.get("stiffness_nonlinearity")
-    if c is None or not math.isfinite(k_nom) or k_nom <= 0:
+    members = [models[n] for n in ("stiffness_nonlinearity", "bearing_clearance")
+               if n in models and models[n].heldout_runs > 0]
+    if not members:
+        members = [models[n] for n in ("stiffness_nonlinearity", "bearing_clearance")
+                   if n in models]
+    if not members or not math.isfinite(k_nom) or k_nom <= 0:
         return None, ""
+    # the member of the take-up family (smooth saturating, or a kinked soft stage) that fits
+    # the held-out runs best gives the loaded slope
+    c = min(members, key=lambda m: m.heldout_rms_arcmin)
     comp = c.fit.coef("compliance")
     if comp <= 0:
         return "stiffness_nonlinearity", "the flank is rigid at load: the contact stiffens"

@@ -34,6 +34,8 @@ from analysis.effects import (
 from analysis.errors import AnalysisError
 
 HUBER_C = 2.5
+#: Half the 95 % quantile of chi2 with one degree of freedom: a profile-likelihood interval.
+PROFILE_95 = 1.92
 #: Nonlinear parameter of each effect: (name, lower, upper as fractions of rated torque, log?).
 NONLINEAR = {
     "friction": ("friction_Nm", 0.0, 0.2, False),
@@ -407,10 +409,11 @@ def fit_profile(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None
                 if trials[j].objective < cand.objective:
                     cand = trials[j]
                 # the objective is flat between flank switches: the data bound the offset to
-                # that interval only; take its middle and keep its bounds (plausibility is
-                # judged at the bound nearest zero)
+                # that interval only. Its 95 % profile-likelihood interval (objective within
+                # chi2_1(0.95) / 2 = 1.92 of the best); take its middle and keep its bounds
+                # (plausibility is judged at the bound nearest zero)
                 objs = np.array([r.objective for r in results])
-                flat = objs <= cand.objective + 1e-6 * (1.0 + abs(cand.objective))
+                flat = objs <= cand.objective + PROFILE_95
                 lo_j = hi_j = k
                 while lo_j > 0 and flat[lo_j - 1]:
                     lo_j -= 1
@@ -419,11 +422,12 @@ def fit_profile(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None
                 if hi_j > lo_j:
                     mid = 0.5 * (float(grid[lo_j]) + float(grid[hi_j]))
                     trial = fit(stack, effects, runs, {**current, key: mid})
-                    if trial.objective <= cand.objective + 1e-6 * (1.0 + abs(cand.objective)):
+                    if trial.objective <= cand.objective + PROFILE_95:
                         cand = trial
                     span = (float(grid[lo_j]), float(grid[hi_j]))
                     cand.nl["torque_offset_nearest_zero_Nm"] = (
                         0.0 if span[0] <= 0.0 <= span[1] else min(span, key=abs))
+                    cand.nl["torque_offset_low_Nm"], cand.nl["torque_offset_high_Nm"] = span
             current = dict(cand.nl)
             best = cand
     return best

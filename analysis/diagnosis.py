@@ -541,14 +541,20 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
         gap_sys = _sys(gb[0], noise)
         report["explained_share"] = (1.0 - (_sys(main.heldout_rms_arcmin, noise) / gap_sys) ** 2
                                      if gap_sys > 0 else 0.0)
-        if len(chosen) > 1:
-            also = []
-            prev = main
-            for c in chosen[1:]:
-                also.append({"effect": c.effects[-1],
-                             "shrink": 1.0 - c.heldout_rms_arcmin / prev.heldout_rms_arcmin,
-                             "params": _clean(c.params)})
-                prev = c
+        also = []
+        prev = main
+        for c in chosen[1:]:
+            also.append({"effect": c.effects[-1],
+                         "shrink": 1.0 - c.heldout_rms_arcmin / prev.heldout_rms_arcmin,
+                         "params": _clean(c.params)})
+            prev = c
+        series = series_compliance(chosen[-1].fit, k_nom)
+        take_up = {"bearing_clearance", "stiffness_nonlinearity"}
+        if (series is not None and verdict not in ("shaft_compliance", "unexplained")
+                and not take_up & set(chosen[-1].effects)):
+            # (a take-up's loaded slope is what names it: not read as a series compliance)
+            also.append(series)
+        if also:
             report["also"] = also
     if verdict == "ambiguous":
         report["candidates"] = candidates
@@ -564,6 +570,30 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
     report["lack_of_fit"] = lack_of_fit(plays, {r.run_id: cond[r.run_id] for r in stack.runs})
     report["localization"] = _localize(gm, fourier, varied)
     return Diagnosis(report=report, stack=stack, base=base, models=models)
+
+
+def series_compliance(f: LinearFit, k_nom: float) -> dict[str, Any] | None:
+    """A series compliance left once the effects are fitted: the loaded stiffness of the final
+    model more than the tolerance (STIFFNESS_TOLERANCE or two standard errors) below seed 004
+    eq. (8). From loops it cannot be told from a softer mesh, so it is only ever listed beside
+    an effect (``also``), with the series stiffness ``1 / (1/K - 1/K_nom)``."""
+    comp = f.coef("compliance")
+    if comp <= 0 or not math.isfinite(k_nom) or k_nom <= 0:
+        return None
+    k_load = 1.0 / comp
+    rel_se = 0.0
+    if f.cov is not None and "compliance" in f.names:
+        j = f.names.index("compliance")
+        scale = math.sqrt(max(2.0 * f.objective / max(f.n - len(f.beta), 1), 1.0))
+        rel_se = math.sqrt(max(f.cov[j, j], 0.0)) * scale / comp
+    tol = max(STIFFNESS_TOLERANCE, 2.0 * rel_se)
+    if k_load >= k_nom * (1.0 - tol):
+        return None
+    return {"effect": "shaft_compliance", "shrink": None,
+            "params": {"stiffness_Nm_per_arcmin": 1.0 / (1.0 / k_load - 1.0 / k_nom),
+                       "loaded_stiffness_Nm_per_arcmin": k_load},
+            "evidence": f"loaded stiffness {k_load:.3g} N*m/arcmin with the effects fitted, "
+                        f"{1 - k_load / k_nom:.0%} below seed 004 eq. (8)"}
 
 
 def curvature_effect(models: dict[str, Candidate], k_nom: float) -> tuple[str | None, str]:
@@ -623,19 +653,22 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
         removes GREEDY_GAIN of the systematic held-out gap still left."""
         chosen = list(chosen)
         current = chosen[-1]
-        ranked = sorted((c for c in models.values() if c.plausible),
-                        key=lambda c: c.delta_bic)
         for _ in range(MAX_ALSO):
             have = set(current.effects)
             if have & pair:
                 have |= pair  # one flank-curvature family at a time
-            trials = []
-            for c in ranked:
-                if c.effects[0] in have or c.delta_bic >= SCREEN_DELTA_BIC:
+            # screen: each remaining candidate fitted jointly with what is there, in-sample
+            joint = []
+            for name in models:
+                if name in have:
                     continue
-                trials.append(evaluate((*current.effects, c.effects[0])))
-                if len(trials) >= ALSO_TRIALS:
-                    break
+                jf = _full_fit(stack, (*current.effects, name))
+                gain = _bic(jf) - _bic(current.fit)
+                if gain < SCREEN_DELTA_BIC:
+                    joint.append((gain, name, jf))
+            joint.sort(key=lambda g: g[0])
+            trials = [evaluate((*current.effects, name), jf)
+                      for _, name, jf in joint[:ALSO_TRIALS]]
             earned = [t for t in trials if t.plausible and t.heldout_runs > 0
                       and sysh(t) ** 2 <= (1.0 - GREEDY_GAIN) * sysh(current) ** 2
                       and separated(stack, t, current)]

@@ -47,8 +47,6 @@ from analysis.effects import CANDIDATES, arcmin_to_um, bearing_play_arcmin, toot
 from analysis.errors import AnalysisError
 
 ARCSEC = 60.0
-#: Systematic held-out gap (arcsec RMS) below which it is not worth a verdict.
-FLOOR_ARCSEC = 0.35
 #: The structural gap counts when its systematic part exceeds this many noise RMS.
 NONE_SIGMAS = 0.8
 #: A candidate explains the gap when the systematic part left is at most this share.
@@ -384,8 +382,11 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
 
     noise = math.sqrt(float(np.mean(np.concatenate(
         [np.full(r.twist_arcmin.size, r.sigma_arcmin**2) for r in prepared]))))
-    floor = FLOOR_ARCSEC / ARCSEC
-    threshold = max(NONE_SIGMAS * noise, floor)
+    # the threshold follows from the measured noise (which holds the channels' resolution,
+    # analysis.diagnosis_data.resolution_of) and the campaign design: the systematic part of
+    # a held-out RMS over N points is known to about noise * (2 / N)^(1/4)
+    n_points = sum(r.twist_arcmin.size for r in prepared)
+    threshold = max(NONE_SIGMAS, (2.0 / max(n_points, 1)) ** 0.25) * noise
 
     # 1. predictive and structural gaps
     nom = prepared[0].nominal

@@ -77,6 +77,25 @@ class PreparedRun:
     raw: RunInput = field(repr=False)
 
 
+def resolution_of(values: np.ndarray) -> float:
+    """The quantum (count) of a quantised channel: the smallest step between the distinct
+    readings when readings repeat (fewer distinct values than half the samples) and the
+    steps are multiples of it; 0 for a channel that is not visibly quantised."""
+    v = np.asarray(values, dtype=float)
+    u = np.unique(v)
+    if u.size < 3 or u.size > v.size // 2:
+        return 0.0
+    steps = np.diff(u)
+    steps = steps[steps > 1e-12 * max(1.0, float(np.max(np.abs(u))))]
+    if steps.size == 0:
+        return 0.0
+    q = float(np.min(steps))
+    ratio = steps / q
+    if np.median(np.abs(ratio - np.round(ratio))) > 0.05:
+        return 0.0
+    return q
+
+
 def direction_and_reversal(t_s: np.ndarray, torque_Nm: np.ndarray, threshold_Nm: float
                            ) -> tuple[np.ndarray, np.ndarray]:
     """Torque direction (+1 rising, -1 falling) with hysteresis ``threshold_Nm`` and the time
@@ -203,8 +222,13 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRu
         nominal = nominal_model_for_unit(run.unit, run.rated_torque_Nm)[0] if run.unit else None
     except AnalysisError:
         nominal = None
-    sigma = white_noise_std(twist)
-    sigma_t = white_noise_std(torque)
+    # a channel's resolution belongs in its noise floor: a reading that sits on one count
+    # for long stretches makes the second-difference estimate collapse, while the error of
+    # a reading is still uniform over one count (q^2 / 12)
+    q_twist = resolution_of(twist)
+    q_torque = resolution_of(torque)
+    sigma = math.hypot(white_noise_std(twist), q_twist / math.sqrt(12.0))
+    sigma_t = math.hypot(white_noise_std(torque), q_torque / math.sqrt(12.0))
     amplitude = float(np.percentile(np.abs(torque), 99.5))
     if nominal is not None and math.isfinite(nominal.stiffness_Nm_per_arcmin):
         soft = 10.0 / nominal.stiffness_Nm_per_arcmin
@@ -229,6 +253,10 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRu
         sigma_b = max(sigma_b, 0.5 * sigma / math.sqrt(block))
     else:
         sigma_b = sigma / math.sqrt(block)
+    # without dither (noise below a count) averaging does not shrink the quantisation error
+    # of a block mean: it stays up to half a count, uniform -> q / sqrt(12)
+    if white_noise_std(twist) < q_twist:
+        sigma_b = max(sigma_b, q_twist / math.sqrt(12.0))
     # blocks at zero torque are kept: with no torque on it the unit floats in the free play,
     # which analysis.diagnosis_fit models (censored between the flank last loaded and the
     # centre of the play); there a torque-sensor offset shows (the unit on the other flank)

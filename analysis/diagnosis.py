@@ -33,6 +33,7 @@ from analysis.diagnosis_fit import (
     LinearFit,
     Stack,
     build_stack,
+    effect_size_arcmin,
     fit,
     fit_profile,
     loop_params,
@@ -512,6 +513,23 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
                         "params": {"stiffness_Nm_per_arcmin": ks},
                         "evidence": {"from": "calibrated stiffness against seed 004 eq. (8)"}})
 
+    sizes: dict[str, float] = {}
+    if verdict in CANDIDATES and len(chosen) > 1:
+        # the verdict is the larger effect: the one whose own term in the joint fit moves the
+        # twist most (RMS); the others go under also
+        joint = chosen[-1]
+        sizes = {e: effect_size_arcmin(stack, joint.fit, joint.effects, e)
+                 for e in joint.effects}
+        largest = max(sizes, key=sizes.get)
+        if largest != verdict and largest in models:
+            verdict = largest
+            reason += f"; {largest} is the larger term of the joint fit"
+            chosen = [models[largest], *[c for c in chosen[1:]]]
+            chosen[0] = models[largest]
+    curv_name, _ = curvature_effect(models, k_nom)
+    take_up_pair = ("bearing_clearance", "stiffness_nonlinearity")
+    if curv_name is not None and verdict in take_up_pair and verdict != curv_name:
+        verdict = curv_name  # one take-up family: the loaded slope names it
     main = chosen[0] if chosen else None
     gb = before(main) if main else (h0, base_c.heldout_lm_error_arcmin)
     report: dict[str, Any] = {
@@ -545,9 +563,17 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
         also = []
         prev = main
         for c in chosen[1:]:
-            also.append({"effect": c.effects[-1],
-                         "shrink": 1.0 - c.heldout_rms_arcmin / prev.heldout_rms_arcmin,
-                         "params": _clean(c.params)})
+            listed = [e for e in c.effects if e != verdict and e not in
+                      {a["effect"] for a in also}]
+            if curv_name is not None:
+                listed = [curv_name if e in take_up_pair else e for e in listed]
+                listed = [e for e in listed if e != verdict]
+            for e in listed[-1:] if listed else []:
+                also.append({"effect": e,
+                             "shrink": 1.0 - c.heldout_rms_arcmin / prev.heldout_rms_arcmin,
+                             "params": _clean(c.params)})
+                if e in sizes:
+                    also[-1]["size_arcsec"] = sizes[e] * ARCSEC
             prev = c
         series = series_compliance(chosen[-1].fit, k_nom)
         take_up = {"bearing_clearance", "stiffness_nonlinearity"}

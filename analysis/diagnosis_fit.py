@@ -433,6 +433,38 @@ def fit_profile(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None
     return best
 
 
+#: Linear coefficients (name prefixes) and nonlinear parameters of each candidate's own term.
+OWN_TERMS = {
+    "friction": ((), ("friction_Nm",)),
+    "torque_sensor_offset": ((), ("torque_offset_Nm",)),
+    "stiffness_nonlinearity": (("soft_twist",), ()),
+    "bearing_clearance": (("bearing_compliance",), ()),
+    "runout": (("runout_",), ()),
+    "thermal_expansion": (("thermal",), ()),
+    "tooth_spacing_error": (("tooth_",), ()),
+}
+
+
+def effect_size_arcmin(stack: Stack, f: LinearFit, effects: Sequence[str], name: str) -> float:
+    """RMS (arcmin) of one effect's own term in a joint fit: the fitted twist minus the twist
+    with that effect switched off (its coefficients zeroed, its friction/offset set to 0),
+    each run's mean removed (the twist zero is free)."""
+    coefs, nls = OWN_TERMS.get(name, ((), ()))
+    beta0 = np.array([0.0 if any(n.startswith(c) for c in coefs) else b
+                      for n, b in zip(f.names, f.beta, strict=True)])
+    nl0 = {k: (0.0 if k in nls else v) for k, v in f.nl.items()}
+    teeth = teeth_of(stack)
+    sq, n = 0.0, 0
+    for run in stack.runs:
+        full = run_columns(stack, run, ("backlash", *effects), f.nl, teeth) @ f.beta
+        off = run_columns(stack, run, ("backlash", *effects), nl0, teeth) @ beta0
+        d = full - off
+        d = d - d.mean()
+        sq += float(d @ d)
+        n += d.size
+    return math.sqrt(sq / n) if n else 0.0
+
+
 def loop_params(stack: Stack, f: LinearFit) -> LoopParams:
     """The analysis.effects parameters of a fit."""
     comp = f.coef("compliance")

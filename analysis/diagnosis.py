@@ -576,6 +576,17 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
                     also[-1]["size_arcsec"] = sizes[e] * ARCSEC
             prev = c
         series = series_compliance(chosen[-1].fit, k_nom)
+        if series is not None:
+            # in-sample shrink of the series compliance: the final model with the loaded
+            # compliance held at the nominal 1 / K against the fitted one
+            last = chosen[-1]
+            held = dict(zip(last.fit.names, last.fit.beta.tolist(), strict=True))
+            held["compliance"] = 1.0 / k_nom
+            stiff = fit(stack, ("backlash", *last.effects), None, last.fit.nl, fixed=held)
+            r_fit = np.concatenate(list(last.fit.residual.values()))
+            r_nom = np.concatenate(list(stiff.residual.values()))
+            if r_nom.size and float(r_nom @ r_nom) > 0:
+                series["shrink"] = 1.0 - math.sqrt(float(r_fit @ r_fit) / float(r_nom @ r_nom))
         take_up = {"bearing_clearance", "stiffness_nonlinearity"}
         if (series is not None and verdict not in ("shaft_compliance", "unexplained")
                 and not take_up & set(chosen[-1].effects)):
@@ -616,7 +627,7 @@ def series_compliance(f: LinearFit, k_nom: float) -> dict[str, Any] | None:
     tol = max(STIFFNESS_TOLERANCE, 2.0 * rel_se)
     if k_load >= k_nom * (1.0 - tol):
         return None
-    return {"effect": "shaft_compliance", "shrink": None,
+    return {"effect": "shaft_compliance", "shrink": 0.0, "shrink_in_sample": True,
             "params": {"stiffness_Nm_per_arcmin": 1.0 / (1.0 / k_load - 1.0 / k_nom),
                        "loaded_stiffness_Nm_per_arcmin": k_load},
             "evidence": f"loaded stiffness {k_load:.3g} N*m/arcmin with the effects fitted, "

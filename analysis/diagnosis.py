@@ -33,6 +33,7 @@ from analysis.diagnosis_fit import (
     LinearFit,
     Stack,
     build_stack,
+    cached_columns,
     effect_size_arcmin,
     fit,
     fit_profile,
@@ -591,7 +592,28 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
         if (series is not None and verdict not in ("shaft_compliance", "unexplained")
                 and not take_up & set(chosen[-1].effects)):
             # (a take-up's loaded slope is what names it: not read as a series compliance)
-            also.append(series)
+            last = chosen[-1]
+            size_series = series_size_arcmin(stack, last.fit, last.effects, k_nom)
+            size_main = max(effect_size_arcmin(stack, last.fit, last.effects, e)
+                            for e in last.effects)
+            series["size_arcsec"] = size_series * ARCSEC
+            if size_series > size_main:
+                # the series compliance is the larger term: it is the verdict, the effects
+                # fitted beside it go under also
+                also.insert(0, {"effect": verdict, "shrink": report["shrink"],
+                                "params": _clean(main.params),
+                                "size_arcsec": size_main * ARCSEC})
+                verdict = "shaft_compliance"
+                report["verdict"] = verdict
+                report["reason"] = reason + ("; a series compliance (loaded stiffness below "
+                                             "seed 004 eq. 8) is the larger term")
+                report["shrink"] = series["shrink"]
+                report["ranking"].insert(0, {
+                    "effect": "shaft_compliance", "shrink": series["shrink"],
+                    "params": series["params"], "plausible": True, "notes": [],
+                    "evidence": {"from": series["evidence"], "in_sample": True}})
+            else:
+                also.append(series)
         if also:
             report["also"] = also
     if verdict == "ambiguous":
@@ -632,6 +654,21 @@ def series_compliance(f: LinearFit, k_nom: float) -> dict[str, Any] | None:
                        "loaded_stiffness_Nm_per_arcmin": k_load},
             "evidence": f"loaded stiffness {k_load:.3g} N*m/arcmin with the effects fitted, "
                         f"{1 - k_load / k_nom:.0%} below seed 004 eq. (8)"}
+
+
+def series_size_arcmin(stack: Stack, f: LinearFit, effects: Sequence[str], k_nom: float
+                       ) -> float:
+    """RMS (arcmin) of the series-compliance term of a fit: the flank twist of the fitted
+    loaded compliance minus that of the nominal ``1 / K``, each run's mean removed."""
+    c = f.coef("compliance") - 1.0 / k_nom
+    sq, n = 0.0, 0
+    for i in range(stack.n_runs):
+        col = cached_columns(stack, i, ("backlash", *effects), f.nl, teeth_of(stack))[:, 1]
+        d = col * c
+        d = d - d.mean()
+        sq += float(d @ d)
+        n += d.size
+    return math.sqrt(sq / n) if n else 0.0
 
 
 def curvature_effect(models: dict[str, Candidate], k_nom: float) -> tuple[str | None, str]:

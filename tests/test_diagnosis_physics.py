@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from analysis.diagnosis import Candidate, curvature_effect
+from analysis.diagnosis import Candidate, curvature_effect, series_compliance
 from analysis.diagnosis_fit import LinearFit, censor_floating
 from analysis.effects import tooth_pair_phase, tooth_repeat_period_deg
 
@@ -56,3 +56,13 @@ def test_loaded_slope_names_the_flank_curvature() -> None:
     assert name == "stiffness_nonlinearity"
     # softer at load than nominal: neither shape, undecided
     assert curvature_effect({"stiffness_nonlinearity": _take_up_fit(1 / 20.0)}, k_nom)[0] is None
+
+
+def test_series_compliance_is_listed_only_when_the_loaded_slope_is_soft() -> None:
+    k_nom = 30.0
+    soft = _take_up_fit(1 / 20.0).fit  # 33 % softer at load than seed 004 eq. (8)
+    entry = series_compliance(soft, k_nom)
+    assert entry is not None and entry["effect"] == "shaft_compliance"
+    # series spring: 1/K_load = 1/K_nom + 1/K_s -> K_s = 1 / (1/20 - 1/30) = 60
+    assert math.isclose(entry["params"]["stiffness_Nm_per_arcmin"], 60.0, rel_tol=1e-9)
+    assert series_compliance(_take_up_fit(1 / 29.0).fit, k_nom) is None

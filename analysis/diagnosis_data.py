@@ -77,6 +77,61 @@ class PreparedRun:
     raw: RunInput = field(repr=False)
 
 
+#: Largest lag between the channels searched (samples).
+MAX_LAG_SAMPLES = 10
+#: In-sample evidence (chi2 units, like a BIC difference) a lag needs to be corrected.
+LAG_EVIDENCE = 10.0
+
+
+def _flank_rss(torque: np.ndarray, twist: np.ndarray, t: np.ndarray, amplitude: float,
+               sigma: float) -> float:
+    """Residual sum of squares (in noise units) of the loaded flanks (|T| > 20 % of the
+    amplitude, where the unit is on a flank whatever friction and play do) under a smooth
+    flank law per flank (1, T, T^2) with a constant loading/unloading separation (Coulomb
+    friction's 2F/K): what a lag between the channels adds is a separation proportional to
+    the torque rate, which this law cannot hold."""
+    on = np.abs(torque) > 0.2 * amplitude
+    if on.sum() < 30:
+        return math.nan
+    direction, _ = direction_and_reversal(t, torque, 0.02 * amplitude)
+    s = np.sign(torque)
+    cols = []
+    for sign in (1.0, -1.0):
+        m = (s == sign).astype(float)
+        cols += [m, m * torque, m * torque**2, m * direction]
+    X = np.column_stack(cols)[on]
+    y = twist[on]
+    beta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ beta
+    return float(r @ r) / max(sigma, 1e-12) ** 2
+
+
+def channel_lag_samples(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
+                        sigma: float) -> int:
+    """Lag (samples) of the twist behind the torque channel (negative: ahead): the integer
+    shift that best explains the loaded flanks (:func:`_flank_rss`), kept only when it
+    improves them by LAG_EVIDENCE noise-units over no shift (a filter or transport delay of
+    one channel; with constant-rate ramps only it looks like friction and is not found)."""
+    n = torque.size
+    amplitude = float(np.percentile(np.abs(torque), 99.5))
+    if n < 200 or amplitude <= 0:
+        return 0
+    lmax = min(MAX_LAG_SAMPLES, n // 100)
+    core = slice(lmax, n - lmax)
+    best, best_rss = 0, _flank_rss(torque[core], twist[core], t[core], amplitude, sigma)
+    if not math.isfinite(best_rss):
+        return 0
+    base = best_rss
+    for lag in range(-lmax, lmax + 1):
+        if lag == 0:
+            continue
+        shifted = np.roll(torque, lag)[core]  # torque of sample k - lag beside twist k
+        rss = _flank_rss(shifted, twist[core], t[core], amplitude, sigma)
+        if rss < best_rss:
+            best, best_rss = lag, rss
+    return best if base - best_rss > LAG_EVIDENCE else 0
+
+
 def resolution_of(values: np.ndarray) -> float:
     """The quantum (count) of a quantised channel: the smallest step between the distinct
     readings when readings repeat (fewer distinct values than half the samples) and the
@@ -229,6 +284,17 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRu
     q_torque = resolution_of(torque)
     sigma = math.hypot(white_noise_std(twist), q_twist / math.sqrt(12.0))
     sigma_t = math.hypot(white_noise_std(torque), q_torque / math.sqrt(12.0))
+    # a lag between the channels (a filter in one of them) is a sensor artifact, not a gap:
+    # found on the loaded flanks and taken out by shifting the torque channel
+    lag = channel_lag_samples(t, torque, twist, sigma)
+    if lag:
+        keep_n = t.size - abs(lag)
+        if lag > 0:
+            torque, twist, t = torque[:keep_n], twist[lag:], t[lag:]
+        else:
+            torque, twist, t = torque[-lag:], twist[:keep_n], t[:keep_n]
+        if temp is not None:
+            temp = temp[lag:] if lag > 0 else temp[:keep_n]
     amplitude = float(np.percentile(np.abs(torque), 99.5))
     if nominal is not None and math.isfinite(nominal.stiffness_Nm_per_arcmin):
         soft = 10.0 / nominal.stiffness_Nm_per_arcmin

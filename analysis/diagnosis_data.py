@@ -85,13 +85,12 @@ LAG_EVIDENCE = 10.0
 
 def _flank_rss(torque: np.ndarray, twist: np.ndarray, t: np.ndarray, amplitude: float,
                sigma: float) -> float:
-    """Residual sum of squares (in noise units) of the loaded flanks (15-60 % of the
-    amplitude: on a flank whatever the play does, and away from the reversals at the peaks,
-    where a friction holds the twist for 2F of torque) under a smooth
+    """Residual sum of squares (in noise units) of the loaded flanks (|T| > 20 % of the
+    amplitude, where the unit is on a flank whatever friction and play do) under a smooth
     flank law per flank (1, T, T^2) with a constant loading/unloading separation (Coulomb
     friction's 2F/K): what a lag between the channels adds is a separation proportional to
     the torque rate, which this law cannot hold."""
-    on = (np.abs(torque) > 0.15 * amplitude) & (np.abs(torque) < 0.6 * amplitude)
+    on = np.abs(torque) > 0.2 * amplitude
     if on.sum() < 30:
         return math.nan
     direction, _ = direction_and_reversal(t, torque, 0.02 * amplitude)

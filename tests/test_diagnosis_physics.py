@@ -1,0 +1,87 @@
+"""The physics rules of the generalised diagnosis (issue 10), each on a closed form or on
+injected ground truth: tooth-pair repeats, the float across the play at zero torque, the
+bearing/stiffening split by the loaded slope."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from analysis.diagnosis import Candidate, curvature_effect, series_compliance
+from analysis.diagnosis_fit import LinearFit, censor_floating
+from analysis.effects import tooth_pair_phase, tooth_repeat_period_deg
+
+
+def test_tooth_pair_repeats_after_lcm_mesh_steps() -> None:
+    # 45/40 teeth: lcm 360 mesh steps = 2880 deg of input = one output revolution (ratio 8)
+    assert tooth_repeat_period_deg(45, 40) == 2880.0
+    a = np.array([548.1, 548.1 + 2880.0, 340.85])
+    ph = tooth_pair_phase(a, 45, 40)
+    assert ph[0] == ph[1] != ph[2]
+    # one input turn later the ring tooth repeats but the pinion tooth does not
+    assert tooth_pair_phase(548.1 + 360.0, 45, 40) != ph[0]
+    # 61/56: lcm 3416 steps -> 360 * 3416 / 61 deg, not one output turn (ratio 11.2)
+    assert math.isclose(tooth_repeat_period_deg(61, 56), 360.0 * 3416 / 61)
+
+
+def test_float_across_the_play_is_censored() -> None:
+    play = 4.0
+    X = np.array([[0.5], [0.5], [0.5], [0.5], [-0.5]])  # s / 2: kept flank +, +, +, +, -
+    beta = np.array([play])
+    r = np.array([-1.0, -3.0, 0.5, -3.0, 1.5])  # measured minus kept-flank model
+    floating = np.array([True, True, True, False, True])
+    out, inside = censor_floating(r, X, beta, floating)
+    # drifted towards the centre (up to half the play): free; past it only the excess counts
+    assert inside.tolist() == [True, False, False, False, True]
+    assert out.tolist() == [0.0, -1.0, 0.5, -3.0, 0.0]
+
+
+def _take_up_fit(compliance: float) -> Candidate:
+    """A saturating take-up fit (play, loaded compliance, extra twist) with a tight
+    covariance, as analysis.diagnosis_fit returns it."""
+    f = LinearFit(("play", "compliance", "soft_twist"), np.array([3.0, compliance, 0.2]),
+                  {"stiffening_torque_Nm": 1.0}, 100.0, 200.0, 200,
+                  cov=np.diag([1e-8, (0.002 * compliance) ** 2, 1e-8]))
+    return Candidate(("stiffness_nonlinearity",), f, 0.01, 0.01, 4, "leave-one-condition-out")
+
+
+def test_loaded_slope_names_the_flank_curvature() -> None:
+    k_nom = 30.0
+    # a clearance taken up at small torque leaves the nominal slope
+    name, why = curvature_effect({"stiffness_nonlinearity": _take_up_fit(1 / 30.5)}, k_nom)
+    assert name == "bearing_clearance" and "nominal slope" in why
+    # a hardening contact is stiffer at load than the linear nominal
+    name, _ = curvature_effect({"stiffness_nonlinearity": _take_up_fit(1 / 40.0)}, k_nom)
+    assert name == "stiffness_nonlinearity"
+    # softer at load than nominal: neither shape, undecided
+    assert curvature_effect({"stiffness_nonlinearity": _take_up_fit(1 / 20.0)}, k_nom)[0] is None
+
+
+def test_series_compliance_is_listed_only_when_the_loaded_slope_is_soft() -> None:
+    k_nom = 30.0
+    soft = _take_up_fit(1 / 20.0).fit  # 33 % softer at load than seed 004 eq. (8)
+    entry = series_compliance(soft, k_nom)
+    assert entry is not None and entry["effect"] == "shaft_compliance"
+    # series spring: 1/K_load = 1/K_nom + 1/K_s -> K_s = 1 / (1/20 - 1/30) = 60
+    assert math.isclose(entry["params"]["stiffness_Nm_per_arcmin"], 60.0, rel_tol=1e-9)
+    assert series_compliance(_take_up_fit(1 / 29.0).fit, k_nom) is None
+
+
+def test_lag_between_channels_is_found() -> None:
+    """Sinusoidal loading of the nominal loop (play + linear flanks, injected): a torque
+    channel 3 samples late is found (the rate-proportional branch split), and no lag is found
+    without it."""
+    from analysis.diagnosis_data import channel_lag_samples
+    from analysis.effects import LoopParams, predict_twist_arcmin
+
+    n = 3000
+    t = np.arange(n) / 250.0
+    torque = 10.0 * np.sin(2 * np.pi * t / 4.0)
+    rng = np.random.default_rng(3)
+    # a torque channel late by 3 samples: the twist is 3 samples ahead of it (lag -3)
+    for friction, lag, expected in ((0.0, 3, -3), (0.0, 0, 0)):
+        twist = predict_twist_arcmin(LoopParams(3.0, 25.0, friction_Nm=friction), torque)
+        twist = twist + rng.normal(0, 0.2 / 60, n)
+        measured = np.concatenate([np.full(lag, torque[0]), torque[:n - lag]])
+        assert channel_lag_samples(t, measured, twist, 0.2 / 60) == expected

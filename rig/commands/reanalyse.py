@@ -1,0 +1,78 @@
+"""``rig reanalyse``: re-compute the metrics and diagnoses of stored runs on Dask."""
+
+from __future__ import annotations
+
+import json
+import sys
+from typing import Annotated
+
+import typer
+
+from rig.store_options import DEFAULT_STORE, SamplesOption, StoreOption
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def reanalyse(
+        store: StoreOption = DEFAULT_STORE,
+        samples: SamplesOption = None,
+        since: Annotated[str | None, typer.Option(
+            "--since", help="Only runs and campaigns started on or after this UTC date/time "
+            "(ISO 8601).")] = None,
+        dask: Annotated[str | None, typer.Option(
+            "--dask", help="A Dask scheduler's address (tcp://scheduler:8786); its workers "
+            "must reach the sample files at the same path.")] = None,
+        workers: Annotated[int | None, typer.Option(
+            "--workers", min=1, help="Processes of the local Dask cluster (default 1).")
+        ] = None,
+        json_out: Annotated[bool, typer.Option(
+            "--json", help="Print the summary as JSON on stdout.")] = False,
+    ) -> None:
+        """Analyse every completed run and diagnose every completed campaign again with this
+        software version; the results are kept beside the older ones (docs/deployment.md).
+
+        Runs and campaigns that already have a result of this version are skipped: after an
+        interruption, run the same command again to go on. Exit code 1 if a run's files were
+        missing or unreadable (each is named).
+        """
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+        from rig.errors import RigError
+        from rig.reanalyse import reanalyse as run_reanalysis
+        from rig.store import Store
+
+        if dask and workers:
+            raise RigError("give --dask (a scheduler) or --workers (a local cluster), not both")
+        st = Store(store, create=False, samples=samples)
+        err = Console(stderr=True)
+        progress = Progress("re-analysing", BarColumn(), MofNCompleteColumn(),
+                            TimeRemainingColumn(), console=err, transient=False)
+        task = progress.add_task("jobs", total=None)
+
+        def on_progress(done: int, total: int) -> None:
+            progress.update(task, completed=done, total=total)
+
+        try:
+            with progress:
+                summary = run_reanalysis(st, since=since, dask_address=dask, workers=workers,
+                                         on_progress=on_progress)
+        except KeyboardInterrupt:
+            err.print("[red]interrupted[/red]: the results written so far are kept; run the "
+                      "same command again to go on")
+            raise typer.Exit(2) from None
+        except (OSError, TimeoutError) as exc:
+            raise RigError(f"Dask scheduler {dask}: {exc}") from exc
+        except ValueError as exc:
+            raise RigError(str(exc)) from exc
+        doc = summary.to_dict()
+        if json_out:
+            sys.stdout.write(json.dumps(doc, indent=2) + "\n")
+        else:
+            err.print(f"software {summary.software_version}: {summary.n_runs} runs, "
+                      f"{summary.n_campaigns} campaigns; {summary.written} results written, "
+                      f"{summary.skipped} done before, {summary.errors} not analysable")
+        for message in summary.unreadable:
+            err.print(f"[red]unreadable[/red] {message}")
+        if summary.unreadable:
+            raise typer.Exit(1)

@@ -30,7 +30,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Lost motion, backlash and stiffness per unit over time: individuals/moving-range
         charts with control limits, the Western Electric rules, Cp/Cpk against the campaign
-        limits and the seed 000 batch band of the design (docs/spc.md)."""
+        limits and the seed 000 batch band of the design (docs/deployment.md)."""
         from rich.console import Console
         from rich.table import Table
 

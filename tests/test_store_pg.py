@@ -174,3 +174,25 @@ def test_rig_runs_json_on_postgresql_lists_every_run_once(pg_url, tmp_path):
     assert sorted(listed) == sorted(ids) and len(listed) == 5
     assert doc["store"] == pg_url
     assert all(Path(r["path"]).parent == tmp_path / "samples" / "runs" for r in doc["runs"])
+
+
+def test_the_pages_history_reads_either_back_end(make_store, tmp_path, monkeypatch):
+    from fastapi.testclient import TestClient
+
+    from rig.synthetic_runs import write_campaign
+    from rig.web import create_app
+    from rig.web.settings import TOKEN_ENV, resolve_settings
+
+    st = make_store(tmp_path / "store")
+    cid = write_campaign(st, "H-1", play_arcmin=[2.0, 2.1])
+    monkeypatch.delenv(TOKEN_ENV, raising=False)
+    settings = resolve_settings(store_root=st.root, token="history-test-token")
+    with TestClient(create_app(settings, store=st)) as client:
+        runs = client.get("/api/runs").json()
+        assert [r["run_id"] for r in runs] == [r.run_id for r in st.list_runs()]
+        assert len(runs) == 2 and {r["campaign_id"] for r in runs} == {cid}
+        loop = client.get(f"/api/runs/{runs[0]['run_id']}/loop").json()
+        assert loop["n_samples"] == 4001 and loop["metrics"]["backlash_arcmin"] == \
+            pytest.approx(2.1, abs=1e-9)
+        camps = client.get("/api/campaigns").json()
+        assert [c["campaign_id"] for c in camps] == [cid]

@@ -1,12 +1,15 @@
 """Many rigs, one PostgreSQL store: concurrent writer processes, a SIGKILL, a server restart.
 
-Each writer is a process recording a short campaign through the ordinary Store API
+One writer is the simulated rig itself (``rig campaign run --simulated`` with its devices
+over their real protocols); the others record short campaigns through the ordinary Store API
 (:func:`rig.synthetic_runs.write_campaign`: runs of the reference dead-zone loop, samples
-paced like a rig's). The server is a real throw-away PostgreSQL cluster (tests/pg_server.py).
+paced like a rig's), so that several campaigns overlap on a 2-core machine. The server is a
+real throw-away PostgreSQL cluster (tests/pg_server.py).
 """
 
 from __future__ import annotations
 
+import json
 import os
 import queue
 import signal
@@ -22,6 +25,24 @@ from rig.store import RECOVERED_REASON, Store
 from rig.synthetic_runs import closed_form_metrics
 
 REPO = Path(__file__).resolve().parent.parent
+TINY = f"""
+name = "tiny-line"
+[unit]
+file = "{REPO / 'rig/examples/units/seed000-pair1.json'}"
+serial = "SIM-1"
+[plan]
+rated_torque_Nm = 10.0
+steps_per_quarter = 2
+extra_levels_pct = [3.0]
+dwell_s = 0.0
+pre_cycles = 0
+zero_band_Nm = 0.3
+zero_rate_Nm_per_s = 0.6
+[axes]
+positions_deg = [90.0]
+[limits]
+lost_motion_arcmin_max = 9.0
+"""
 
 WRITER = """
 import sys
@@ -66,11 +87,18 @@ def collect(procs: list[subprocess.Popen], timeout: float = 60.0) -> list[str]:
     return errors
 
 
-def test_five_writers_at_once_one_killed_nothing_lost_or_duplicated(pg_url, tmp_path):
+def test_five_writers_one_the_simulated_rig_one_killed_lose_nothing(pg_url, tmp_path):
     samples = tmp_path / "shared-samples"
     Store(pg_url, samples=samples)  # created once; the writers open it concurrently
+    (tmp_path / "tiny.toml").write_text(TINY)
+    env = {k: v for k, v in os.environ.items() if k not in ("RIG_STORE", "RIG_SAMPLES_DIR")}
+    sim_rig = subprocess.Popen(
+        [sys.executable, "-c", "from rig.cli import main; main()", "campaign", "run",
+         str(tmp_path / "tiny.toml"), "--simulated", "--store", pg_url, "--samples",
+         str(samples), "--json", str(tmp_path / "sim.json")],
+        cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     n_runs = 3
-    writers = [spawn(pg_url, str(samples), f"LINE-{k}", str(n_runs), "0.4") for k in range(4)]
+    writers = [spawn(pg_url, str(samples), f"LINE-{k}", str(n_runs), "1.5") for k in range(3)]
     victim = spawn(pg_url, str(samples), "KILLED", "3", "1.0")
     victim_lines = lines_of(victim)
     try:
@@ -82,15 +110,17 @@ def test_five_writers_at_once_one_killed_nothing_lost_or_duplicated(pg_url, tmp_
         outputs = [w.communicate(timeout=60)[0] for w in writers]
         for w in writers:
             assert w.returncode == 0, w.stderr.read()
+        _, sim_err = sim_rig.communicate(timeout=120)
+        assert sim_rig.returncode == 0, sim_err[-2000:]
     finally:
-        for p in (*writers, victim):
+        for p in (*writers, victim, sim_rig):
             if p.poll() is None:
                 p.kill()
                 p.wait(10)
 
     reported = [line.split()[1] for out in outputs for line in out.splitlines()
                 if line.startswith("RUN")]
-    assert len(reported) == 4 * n_runs and len(set(reported)) == 4 * n_runs
+    assert len(reported) == 3 * n_runs and len(set(reported)) == 3 * n_runs
     st = Store(pg_url, samples=samples)  # opening recovers the killed writer's run
     assert len(st.recovered) == 1
     (killed_run,) = st.recovered
@@ -99,10 +129,17 @@ def test_five_writers_at_once_one_killed_nothing_lost_or_duplicated(pg_url, tmp_
     assert info.unit_serial == "KILLED" and st.load_run(killed_run).n_samples == info.n_samples
     runs = st.list_runs()
     ids = [r.run_id for r in runs]
-    assert len(ids) == len(set(ids)) == 4 * n_runs + 2  # + the killed writer's two runs
+    # + the killed writer's two runs + the simulated rig's run
+    assert len(ids) == len(set(ids)) == 3 * n_runs + 3
     assert set(reported) <= set(ids)
+    sim = json.loads((tmp_path / "sim.json").read_text())
+    (sim_run,) = st.list_runs(serial="SIM-1")
+    assert sim_run.run_id == sim["runs"][0]["run_id"] and sim_run.status == "completed"
+    assert sim_run.metrics["lost_motion_arcmin"] == sim["runs"][0]["lost_motion_arcmin"]
+    assert st.get_campaign(sim["campaign_id"]).status == "completed"
+    assert st.load_run(sim_run.run_id).n_samples == sim_run.n_samples > 100
     truth = closed_form_metrics(2.0, 30.0, 10.0)
-    for k in range(4):
+    for k in range(3):
         mine = st.list_runs(serial=f"LINE-{k}")
         assert len(mine) == n_runs and {r.status for r in mine} == {"completed"}
         assert all(r.n_samples == 4001 and r.metrics == truth for r in mine)

@@ -75,9 +75,10 @@ def register(app: typer.Typer) -> None:
             raise RigError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from exc
         bound = sock.getsockname()[1]
         url = settings.url.replace(f":{port}/", f":{bound}/")
+        token_file = the_store.root / "web" / "operator-token"
         where = {"option": "from --token", "environment": "from $RIG_WEB_TOKEN",
-                 "file": f"from {root / 'web' / 'operator-token'}",
-                 "generated": f"generated; kept in {root / 'web' / 'operator-token'}"}
+                 "file": f"from {token_file}",
+                 "generated": f"generated; kept in {token_file}"}
         print(f"control page: {url}", flush=True)
         print(f"operator token: {settings.token} ({where[settings.token_source]})", flush=True)
         print(f"operator link: {url}#token={settings.token}", flush=True)

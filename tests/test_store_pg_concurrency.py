@@ -40,9 +40,9 @@ zero_band_Nm = 0.3
 zero_rate_Nm_per_s = 0.6
 [axes]
 positions_deg = [90.0]
-[limits]
-lost_motion_arcmin_max = 9.0
 """
+# No [limits]: this test is about the store (no run lost or duplicated); on a loaded machine the
+# sparse plan can leave a metric unavailable, which a limit would turn into exit code 1.
 
 WRITER = """
 import sys

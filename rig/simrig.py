@@ -349,14 +349,27 @@ def _terminate(proc: subprocess.Popen, timeout_s: float = 20.0) -> int:
     return proc.returncode
 
 
+def _write_stats(sim: SimulatedRig, path: Path) -> None:
+    """The simulated devices' own figures (the drive's watchdog) as JSON, replaced atomically:
+    what a load test reads from outside (``RIG_SIM_STATS``)."""
+    server = getattr(sim, "modbus_server", None)
+    if server is None:
+        return
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(server.drive.stats()), encoding="utf-8")
+    os.replace(tmp, path)
+
+
 def serve_until_signalled(sim: SimulatedRig, poll_s: float = 0.2) -> int:
     """Run ``sim`` (started) until SIGTERM/SIGINT; then stop cleanly and return 0."""
     done = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: done.set())
                 for sig in (signal.SIGTERM, signal.SIGINT)}
+    stats_path = os.environ.get("RIG_SIM_STATS")
     try:
         while not done.wait(poll_s):
-            pass
+            if stats_path:
+                _write_stats(sim, Path(stats_path))
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)

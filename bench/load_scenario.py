@@ -13,10 +13,12 @@ Used by ``python -m bench load`` (figures) and ``tests/test_load.py`` (targets).
   diagnosis requested from the page while the measured campaign runs;
 - the measured campaign started through ``POST /api/control/start``.
 
-Figures: whether the campaign completed, samples lost (acquisition periods without a row:
-gaps in the recorded ``t_s`` beyond 1.5 encoder periods, counted in periods), p99 of the
-acquisition jitter (|interval - period|, ms), the longest keepalive gap the drive saw (s)
-against its watchdog (s).
+Figures: whether the campaign completed; samples lost: encoder samples that reached the
+drivers but not the store (run.json ``result.samples_dropped``: full driver queues, merge
+drops; exact counts); periods of the encoder clock without a row (``load_missing_periods``,
+from the row times: a SYNC the starved host sent late, or stamping slop of a few periods);
+p99 of the acquisition jitter (|interval - period|, ms); the longest keepalive gap the drive
+saw (s) against its watchdog (s).
 """
 
 from __future__ import annotations
@@ -82,8 +84,12 @@ def acquisition_figures(t_s: np.ndarray, period_s: float) -> tuple[int, float]:
 
 
 @contextlib.contextmanager
-def _serve(store: Path, stats: Path, log: Path) -> Iterator[str]:
+def _serve(store: Path, stats: Path, log: Path, realtime_priority: int | None
+           ) -> Iterator[str]:
     env = {**os.environ, "RIG_SIM_STATS": str(stats)}
+    env.pop("RIG_SIM_REALTIME_PRIORITY", None)
+    if realtime_priority is not None:
+        env["RIG_SIM_REALTIME_PRIORITY"] = str(realtime_priority)
     env.pop("RIG_WEB_TOKEN", None)
     with open(log, "w", encoding="utf-8") as err:
         proc = subprocess.Popen([*RIG, "serve", "--simulated", "--port", "0", "--store",
@@ -143,15 +149,21 @@ def _measure(client: httpx.Client, body: dict[str, Any], timeout_s: float
 
 def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ...] = (
         0.0, 90.0, 180.0, 270.0), steps_per_quarter: int = 4, busy: int = 3,
-        sse_clients: int = 20, timeout_s: float = 600.0) -> dict[str, Any]:
-    """Run the scenario of the module docstring; return its figures (see module doc)."""
+        sse_clients: int = 20, timeout_s: float = 600.0, realtime_priority: int | None = None
+        ) -> dict[str, Any]:
+    """Run the scenario of the module docstring; return its figures (see module doc).
+
+    ``realtime_priority``: SCHED_FIFO for the simulated devices and, through the rig
+    configuration they write (``[rig] realtime_priority``), for the engine process.
+    """
     with contextlib.ExitStack() as stack:
         if workdir is None:
             workdir = Path(stack.enter_context(tempfile.TemporaryDirectory()))
         store = workdir / "store"
         store.mkdir(parents=True, exist_ok=True)
         stats = workdir / "sim-stats.json"
-        url = stack.enter_context(_serve(store, stats, workdir / "serve.log"))
+        url = stack.enter_context(_serve(store, stats, workdir / "serve.log",
+                                        realtime_priority))
         client = stack.enter_context(httpx.Client(base_url=url, timeout=30))
         # the earlier campaign (no load): the one the page is asked to diagnose
         earlier = _measure(client, _campaign_body("earlier", list(positions),
@@ -197,7 +209,7 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
         stop_load()
         result = done.get("last_result") or {}
         campaign_id = result.get("campaign_id")
-        lost, jitters, n_rows = 0, [], 0
+        lost, missing, jitters, n_rows = 0, 0, [], 0
         period_s = 0.002
         if campaign_id:
             the_store = Store(store)
@@ -206,14 +218,16 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
                 t = np.asarray(loaded.data["t_s"], dtype=float)
                 period_s = float(loaded.meta.get("sensors", {}).get("encoder_period_s")
                                  or period_s)
-                run_lost, run_jitter = acquisition_figures(t, period_s)
-                lost += run_lost
+                run_missing, run_jitter = acquisition_figures(t, period_s)
+                missing += run_missing
+                lost += int((loaded.meta.get("result") or {}).get("samples_dropped", 0))
                 jitters.append(run_jitter)
                 n_rows += t.size
         drive = json.loads(stats.read_text(encoding="utf-8")) if stats.is_file() else {}
         return {
             "load_campaign_completed": int(done.get("state") == "completed"),
             "load_samples_lost": lost,
+            "load_missing_periods": missing,
             "load_max_keepalive_gap_s": drive.get("drive_max_write_gap_s"),
             "load_watchdog_s": drive.get("drive_watchdog_s"),
             "load_acquisition_jitter_p99_ms": max(jitters) if jitters else None,

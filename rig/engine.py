@@ -118,6 +118,7 @@ class Engine:
         self._pause_requested = False
         self._stopping: str | None = None
         self._merger = ChannelMerger()
+        self._dropped_at_begin = 0
         self._recent: deque[MergedRow] = deque()
         self._open: OpenRun | None = None
         self._setpoint = 0.0
@@ -272,6 +273,7 @@ class Engine:
         with self._lock:
             open_run, self._open = self._open, None
         if open_run is not None:
+            open_run.samples_dropped = self._dropped_total() - self._dropped_at_begin
             self.outcomes.append(open_run.finish_aborted(reason))
             self._publish("run_finished", message=f"run {open_run.label} aborted: {reason}",
                           data=self.outcomes[-1].to_dict())
@@ -514,8 +516,20 @@ class Engine:
         self._ramp(0.0, step.rate_Nm_per_s, 0.02)
         self._sleep_until(time.monotonic() + step.settle_s)
         t0 = time.monotonic()
-        self._sleep_until(t0 + step.window_s)
-        rows = [r for r in self._recent_rows(step.window_s + 0.5) if r.t_mono_s >= t0]
+        t_end = t0 + step.window_s
+        self._sleep_until(t_end)
+        # The window's rows may reach us late when the PC is busy (the receiving thread
+        # waits for the CPU): wait for them, up to the tolerance of the stale-sample trip.
+        deadline = t_end + self.options.stale_timeout_s
+        while True:
+            rows = [r for r in self._recent_rows(step.window_s + deadline - t0)
+                    if r.t_mono_s >= t0]
+            if (rows and rows[-1].t_mono_s >= t_end) or time.monotonic() >= deadline:
+                break
+            self._sleep_until(min(deadline, time.monotonic() + 0.01))
+        # at zero command the torque is steady: rows stamped just after the window (late
+        # delivery) are as good as the window's own
+        rows = [r for r in rows if r.t_mono_s <= t_end] or rows
         if not rows:
             raise DeviceTimeout("acquisition", f"torque samples over {step.window_s:g} s "
                                 "for the torque zero", "none")
@@ -577,10 +591,16 @@ class Engine:
         columns += ["torque_command_Nm", "step", "sample_window"]
         recorder = self.store.begin_run(meta, columns, campaign_id=self.campaign_id)
         open_run = OpenRun(recorder, step.label, time.monotonic(), profile=self.options.profile)
+        self._dropped_at_begin = self._dropped_total()
         with self._lock:
             self._open = open_run
         self._zero_before = None
         self._publish("run_started", message=f"run {step.label} ({recorder.run_id}) started")
+
+    def _dropped_total(self) -> int:
+        """Encoder samples lost so far: full driver queues plus merge drops (count)."""
+        counter = getattr(self.io, "samples_dropped", None)
+        return (0 if counter is None else int(counter())) + self._merger.dropped_before_torque
 
     def _stop_recording(self) -> None:
         """Wait until the rows up to now are in the open run, then stop appending rows."""
@@ -601,6 +621,7 @@ class Engine:
         self._stop_recording()
         with self._lock:
             self._open = None
+        open_run.samples_dropped = self._dropped_total() - self._dropped_at_begin
         outcome = open_run.finish_completed()
         self.outcomes.append(outcome)
         self._publish("run_finished", message=f"run {open_run.label} completed",

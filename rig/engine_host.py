@@ -23,8 +23,8 @@ The local channel (docs/reliability.md, "Engine process"):
 
 If the server dies (even by SIGKILL), the engine notices within 0.2 s, stops any
 measurement (safe state: zero torque, drive disabled), closes the open run as aborted and
-exits. Optional real-time priority (``SCHED_FIFO``) is set here when the rig configuration
-asks for it and the system permits it (:func:`apply_realtime_priority`).
+exits. Optional real-time priority (``SCHED_FIFO``, ``[rig] realtime_priority``) is set on
+this process when the rig is opened (rig/realtime.py), never on the server.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ from typing import Any
 
 from rig.errors import RigError
 
-__all__ = ["EngineHost", "EngineSpec", "apply_realtime_priority"]
+__all__ = ["EngineHost", "EngineSpec"]
 
 log = logging.getLogger(__name__)
 
@@ -66,24 +66,8 @@ class EngineSpec:
     """The example unit of the simulated rig; None with ``rig_path``."""
     rig_path: str | None = None
     description: str = ""
-    realtime_priority: int | None = None
-    """SCHED_FIFO priority (1-99) of the engine process, None: the normal scheduler."""
     log_file: str | None = None
     extra: dict[str, Any] = field(default_factory=dict)
-
-
-def apply_realtime_priority(priority: int | None) -> str:
-    """Put this process under SCHED_FIFO at ``priority`` if asked and permitted; say what
-    happened (one line, also logged)."""
-    if priority is None:
-        return "normal scheduler"
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(priority)))
-    except (AttributeError, OSError, ValueError) as exc:
-        message = f"SCHED_FIFO {priority} not applied ({exc}); normal scheduler"
-        log.warning(message)
-        return message
-    return f"SCHED_FIFO priority {priority}"
 
 
 # ---------------------------------------------------------------------- the engine process
@@ -190,7 +174,6 @@ def _engine_main(spec: EngineSpec, address: Any, authkey: bytes, live: Connectio
         from rig.store import Store
         from rig.web.controller import RigController
 
-        scheduling = apply_realtime_priority(spec.realtime_priority)
         store = Store(spec.store, samples=spec.samples)
         hub = _ForwardingHub(live)
         controller = RigController(store, hub, _session_factory(spec),  # type: ignore[arg-type]
@@ -201,7 +184,7 @@ def _engine_main(spec: EngineSpec, address: Any, authkey: bytes, live: Connectio
         ready.send(("err", f"{type(exc).__name__}: {exc}"))
         return
     controller.start()
-    ready.send(("ok", scheduling))
+    ready.send(("ok", "started"))
 
     def accept_loop() -> None:
         while not stop.is_set():

@@ -93,6 +93,8 @@ class OpenRun:
         self.last_t_mono = -math.inf
         self._last_t_s = -math.inf
         self.recording = True
+        self.samples_dropped = 0
+        """Encoder samples lost during this run (driver queues, merge), set by the engine."""
 
     def note(self, text: str) -> None:
         self.notes.append(text)
@@ -127,7 +129,8 @@ class OpenRun:
 
     def _base_result(self) -> dict[str, Any]:
         result: dict[str, Any] = {"torque_zero": dict(self.torque_zero),
-                                  "crosscheck_max_diff_Nm": self.crosscheck_max_diff_Nm}
+                                  "crosscheck_max_diff_Nm": self.crosscheck_max_diff_Nm,
+                                  "samples_dropped": self.samples_dropped}
         if self.notes:
             result["engine_notes"] = list(self.notes)
         return result

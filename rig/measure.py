@@ -25,6 +25,7 @@ from rig.engine_events import ProgressEvent
 from rig.engine_record import json_safe
 from rig.errors import RigError
 from rig.plans import Plan
+from rig.realtime import apply_realtime_priority
 from rig.store import Store
 from simulators.plant_config import (
     DEFAULT_PLANT_TOML,
@@ -109,6 +110,7 @@ def open_session(*, rig: Path | None = None, simulated: bool = False,
             rig = sim.rig_config_path
         assert rig is not None
         config = load_rig_config(rig)
+        apply_realtime_priority(config.rig.realtime_priority)
         if simulated:
             config = relaxed_heartbeats(config)
         devices = stack.enter_context(open_rig(config))

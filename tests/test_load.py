@@ -18,7 +18,8 @@ from bench.load_scenario import acquisition_figures, run_load_scenario
 def test_acquisition_figures_count_missing_periods_not_bursts():
     period = 0.004
     t = [i * period for i in range(101)]
-    assert acquisition_figures(t, period) == (0, 0.0)
+    lost, jitter = acquisition_figures(t, period)
+    assert lost == 0 and jitter < 1e-9
     gap = t[:40] + t[45:]  # five periods without a row
     lost, _ = acquisition_figures(gap, period)
     assert lost == 5
@@ -32,5 +33,5 @@ def test_campaign_from_the_page_completes_under_load(tmp_path: Path):
     assert figures["load_diagnosis_http_status"] == 200, figures
     assert figures["load_watchdog_trips"] == 0, figures
     assert figures["load_max_keepalive_gap_s"] < figures["load_watchdog_s"] / 2, figures
-    assert figures["load_samples_lost"] == 0, figures
+    assert figures["load_samples_lost"] == 0, figures  # dropped between driver and store
     assert figures["load_rows"] > 1000, figures

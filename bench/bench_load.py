@@ -3,9 +3,13 @@ processes, a diagnosis and 20 live-stream clients run beside it (bench/load_scen
 
 Figures (issue 12's names): ``load_campaign_completed`` (1 or 0), ``load_samples_lost``,
 ``load_max_keepalive_gap_s`` (the longest silence the simulated drive saw while enabled),
-``load_watchdog_s``, ``load_acquisition_jitter_p99_ms``. ``BENCH_LOAD_REPEATS`` (default 1)
-repeats the scenario; then ``load_completed_runs`` counts the completed ones.
+``load_watchdog_s``, ``load_acquisition_jitter_p99_ms``; also ``load_missing_periods``.
 Target: completed, 0 samples lost, keepalive gap under half the watchdog.
+
+Then the same with real-time priority (``[rig] realtime_priority`` = 20 for the engine, the
+same for the simulated devices), the names prefixed ``load_rt_``: what SCHED_FIFO buys.
+``BENCH_LOAD_REPEATS`` (default 1) repeats the normal-scheduler scenario;
+``load_completed_runs`` counts the completed ones. ``BENCH_LOAD_RT=0`` skips the RT pass.
 """
 
 from __future__ import annotations
@@ -17,8 +21,9 @@ from typing import Any
 from bench.load_scenario import run_load_scenario
 
 UNITS = {"load_campaign_completed": "1/0", "load_samples_lost": "samples",
-         "load_max_keepalive_gap_s": "s", "load_watchdog_s": "s",
-         "load_acquisition_jitter_p99_ms": "ms"}
+         "load_missing_periods": "periods", "load_max_keepalive_gap_s": "s",
+         "load_watchdog_s": "s", "load_acquisition_jitter_p99_ms": "ms"}
+RT_PRIORITY = 20
 
 
 def run() -> Iterator[dict[str, Any]]:
@@ -32,3 +37,8 @@ def run() -> Iterator[dict[str, Any]]:
                    "state": figures["load_state"], "rows": figures["load_rows"]}
     if repeats > 1:
         yield {"name": "load_completed_runs", "value": completed, "unit": f"of {repeats}"}
+    if os.environ.get("BENCH_LOAD_RT", "1") != "0":
+        figures = run_load_scenario(realtime_priority=RT_PRIORITY)
+        for name, unit in UNITS.items():
+            yield {"name": name.replace("load_", "load_rt_", 1), "value": figures[name],
+                   "unit": unit, "priority": RT_PRIORITY, "state": figures["load_state"]}

@@ -529,6 +529,15 @@ class Store:
         return [dict(r) for r in self._index.results(
             run_id=run_id, campaign_id=campaign_id, software_version=software_version)]
 
+    def record_action(self, action: str, target: str | None = None,
+                      detail: dict[str, Any] | None = None) -> None:
+        """Add an operator's action to the audit trail (who is in ``detail``: operator), with
+        the time, this process and host."""
+        to_json(detail)
+        self._index.add_audit({"at": utc_now_iso(), "action": action, "target": target or "",
+                               "pid": os.getpid(), "host": socket.gethostname(),
+                               "detail": detail})
+
     def audit(self, target: str | None = None) -> list[dict[str, Any]]:
         """The audit trail (oldest first): run/campaign started, completed, aborted, with
         time, process id and host; optionally of one run or campaign id."""

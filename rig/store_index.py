@@ -373,6 +373,11 @@ class SqliteIndex(IndexBackend):
                                "target": row["run_id"], "pid": row["writer_pid"],
                                "host": row["writer_host"]})
 
+    def add_audit(self, audit: Mapping[str, Any]) -> None:
+        """One audit record on its own (an operator's action: a fault reset, an override)."""
+        with self._connect() as conn, write_transaction(conn):
+            self._audit(conn, audit)
+
     def finalize_run(self, run_id: str, update: Callable[[str | None], RunUpdate | None],
                      audit: Mapping[str, Any]) -> bool:
         with self._connect() as conn, write_transaction(conn):

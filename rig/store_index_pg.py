@@ -239,6 +239,14 @@ class PostgresIndex(IndexBackend):
         return self._call(lambda c, _: c.execute(
             "SELECT 1 FROM runs WHERE run_id = %s", (run_id,)).fetchone() is not None)
 
+    def add_audit(self, audit: Mapping[str, Any]) -> None:
+        """One audit record on its own (an operator's action: a fault reset, an override)."""
+
+        def add(conn: psycopg.Connection, attempt: int) -> None:
+            with conn.transaction():
+                self._audit(conn, audit)
+        self._call(add)
+
     def insert_run(self, row: Mapping[str, Any]) -> None:
         cols = ", ".join(RUN_INSERT_COLUMNS)
         marks = ", ".join(["%s"] * len(RUN_INSERT_COLUMNS))

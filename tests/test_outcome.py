@@ -128,7 +128,8 @@ def test_an_estopped_run_is_incomplete_and_a_locked_input_names_the_run(tmp_path
 
         thread = threading.Thread(target=lambda: box.setdefault("result", measure_plan(
             session, store, hysteresis_plan(loop), run_meta(UNIT, session),
-            options=EngineOptions(limits=limits, profile="nabtesco"), progress=progress, on_engine=on_engine)),
+            options=EngineOptions(limits=limits, profile="nabtesco"), progress=progress,
+            on_engine=on_engine)),
             daemon=True)
         thread.start()
         assert started.wait(60)

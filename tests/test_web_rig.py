@@ -104,8 +104,12 @@ def test_pause_resume_then_estop_leaves_the_rig_safe(page):
 
     stop = client.post("/api/control/estop")  # no token: the E-stop always works
     assert stop.status_code == 200 and "measurement stopped" in stop.json()["message"]
-    stopped = wait_for(client, lambda s: s["state"] == "aborted", 30.0)
+    # an E-stop is latched until the operator acknowledges it (never "idle" meanwhile)
+    stopped = wait_for(client, lambda s: s["state"] == "fault", 30.0)
     assert stopped["fault"]["title"].startswith("E-stop pressed")
+    assert stopped["last_result"]["outcome"] == "incomplete"  # not a FAIL of the unit
+    assert {"device": "E-stop", "detail": "E-stop pressed on the control page"} in \
+        stopped["faults"]
     safe = wait_for(client, lambda s: s["safe"] is not None, 10.0)
     assert safe["safe"] is True and safe["live"]["drive_enabled"] is False
     assert safe["live"]["setpoint_Nm"] == 0.0
@@ -113,6 +117,13 @@ def test_pause_resume_then_estop_leaves_the_rig_safe(page):
     assert info.status == "aborted" and "E-stop" in info.reason
     assert store.load_run(run_id).n_samples > 100  # every sample so far is kept
     assert safe["input_lock"]["confirmed"] is False  # confirm again before the next test
+    # acknowledged from the page: the E-stop latch clears, the badge says idle again
+    assert client.post("/api/devices/reset-faults", json={"operator": "test"}).status_code \
+        == 401  # an operator's action
+    reset = client.post("/api/devices/reset-faults", json={"operator": "test"}, headers=AUTH)
+    assert reset.status_code == 200 and reset.json()["ok"], reset.text
+    assert wait_for(client, lambda s: s["state"] == "idle", 10.0)["faults"] == []
+    assert any(a["action"] == "fault reset" for a in store.audit())
 
 
 def test_estop_pressed_as_a_run_starts_stops_it(page):
@@ -122,9 +133,10 @@ def test_estop_pressed_as_a_run_starts_stops_it(page):
     assert client.post("/api/control/start", json=short_run(), headers=AUTH).status_code == 200
     stop = client.post("/api/control/estop")  # before or just after the engine exists
     assert stop.status_code == 200 and "measurement stopped" in stop.json()["message"]
-    done = wait_for(client, lambda s: s["state"] in ("aborted", "completed"), 60.0)
-    assert done["state"] == "aborted" and "E-stop" in done["fault"]["detail"]
+    done = wait_for(client, lambda s: s["state"] in ("fault", "completed"), 60.0)
+    assert done["state"] == "fault" and "E-stop" in done["fault"]["detail"]
     safe = wait_for(client, lambda s: s["safe"] is not None, 10.0)
     assert safe["safe"] is True
     new = [r for r in store.list_runs() if r.run_id not in before]
     assert all(r.status == "aborted" for r in new)  # the loop never completed
+    assert client.post("/api/devices/reset-faults", headers=AUTH).json()["ok"]

@@ -113,6 +113,8 @@ class RigController:
         self._measuring = False
         self._monitor_lock = threading.Lock()
         self._estop_pending: str | None = None
+        self._estop_latched: str | None = None
+        """An E-stop pressed while idle: acknowledged by a fault reset, like a drive fault."""
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -287,13 +289,69 @@ class RigController:
 
     # ------------------------------------------------------------------ status
 
+    def faults(self) -> list[dict[str, str]]:
+        """Latched faults now (device and what it says; the E-stop pressed while idle): while
+        any is latched, nothing starts until the operator resets them."""
+        with self._lock:
+            found = [{"device": d["name"], "detail": str(d.get("detail", ""))}
+                     for d in self._devices if not d.get("ok", True)]
+            if self._estop_latched:
+                found.append({"device": "E-stop", "detail": self._estop_latched})
+        return found
+
+    def _refuse_if_faulted(self, what: str) -> None:
+        faults = self.faults()
+        if faults:
+            listed = "; ".join(f"{f['device']}: {f['detail']}" for f in faults)
+            raise ControlError(f"{what} refused: a fault is latched ({listed}). Remove its "
+                               f"cause, then Reset faults (POST /api/devices/reset-faults)")
+
+    def reset_faults(self, operator: str | None = None) -> dict[str, Any]:
+        """Acknowledge and reset latched faults (the drive's fault latch, an E-stop pressed
+        while idle); the drive stays disabled at zero torque. Logged in the store's audit
+        trail with who and when. 409 while a measurement runs."""
+        session = self._require_session()
+        if self._busy():
+            raise ControlError("a measurement is running: abort it before resetting faults")
+        before = self.faults()
+        errors: list[str] = []
+        drive = session.devices.drive
+        with self._device_lock:
+            if drive is not None:
+                try:
+                    drive.reset_fault()
+                    drive.safe_state()
+                except DeviceError as exc:
+                    errors.append(str(exc))
+        with self._lock:
+            self._estop_latched = None
+            self._fault_reason = None
+            if not self._busy() and self.state in ("idle", "completed", "aborted", "fault"):
+                self.state = "idle"
+        self._monitor_once()
+        after = self.faults()
+        rig_id = session.devices.config.rig.rig_id
+        self.store.record_action("fault reset", target=f"rig {rig_id}", detail={
+            "operator": operator, "before": before, "after": after, "errors": errors})
+        cleared = [f for f in before if f not in after]
+        message = ("faults reset: " + ", ".join(f["device"] for f in cleared) if cleared
+                   else "no fault was latched") if not after else (
+            "still faulted: " + "; ".join(f"{f['device']}: {f['detail']}" for f in after)
+            + " (the cause is still there)")
+        self.hub.add_event({"type": "state", "state": self.state})
+        return {"ok": not after, "message": message, "cleared": cleared, "still": after}
+
     def status(self, operator: bool) -> dict[str, Any]:
         """The page's view of the rig now (the ``Status`` model)."""
+        faults = self.faults()
         with self._lock:
             progress = self._progress
             session = self.session
+            state = self.state
+            if faults and state in ("idle", "completed", "aborted"):
+                state = "fault"  # never "idle" while a device is faulted
             out = {
-                "state": self.state, "operator": operator,
+                "state": state, "operator": operator, "faults": faults,
                 "rig": (session.io.description if session is not None else
                         (self.description or None)),
                 "simulated": self.simulated,
@@ -327,6 +385,7 @@ class RigController:
 
     def preview(self, req: RunRequest) -> dict[str, Any]:
         """Steps, duration estimate and whether the plan fits the rig (nothing moves)."""
+        self._refuse_if_faulted("preview")
         plan = build_plan(req)
         steps = list(plan.steps())
         est = estimate(steps)
@@ -363,6 +422,7 @@ class RigController:
             session = self._require_session()
             if self._busy():
                 raise ControlError(f"a measurement is already {self.state}: abort it first")
+            self._refuse_if_faulted("start")
             if not self._lock_confirmed:
                 raise ControlError("confirm the input lock first (Devices: Confirm input "
                                    "lock): a test may start only with the input locked")
@@ -538,6 +598,7 @@ class RigController:
                 self._fault_reason = reason
                 if not self._busy():
                     self.state = "idle"
+                self._estop_latched = reason  # acknowledged by Reset faults
                 self._lock_confirmed = False
         else:
             done.append("no rig connected")

@@ -264,12 +264,38 @@ class InputLock(BaseModel):
     by_motor: bool
 
 
+class LatchedFault(BaseModel):
+    """A latched fault: the device (or "E-stop") and what it says."""
+
+    device: str
+    detail: str
+
+
+class ResetFaultsRequest(BaseModel):
+    """Who acknowledges the faults (kept in the store's audit trail)."""
+
+    model_config = _strict
+
+    operator: str | None = Field(None, min_length=1, max_length=80)
+
+
+class ResetFaultsResult(BaseModel):
+    """What the reset did: ``ok`` when no fault is left; cleared and remaining faults."""
+
+    ok: bool
+    message: str
+    cleared: list[LatchedFault]
+    still: list[LatchedFault]
+
+
 class Status(BaseModel):
     """Everything the page shows about the rig now."""
 
     state: Literal["no_rig", "idle", "starting", "running", "paused", "stopping",
-                   "completed", "aborted"]
+                   "completed", "aborted", "fault"]
+    """"fault": idle with a latched fault (a device, or an E-stop): Reset faults first."""
     operator: bool
+    faults: list[LatchedFault] = Field(default_factory=list)
     rig: str | None
     simulated: bool
     torque_limit_Nm: float | None
@@ -325,6 +351,10 @@ class LoopData(BaseModel):
     band_Nm: float | None
     metrics: dict[str, Any]
     analysis_error: str | None
+    outcome: Literal["ok", "not_ok", "incomplete"] | None = None
+    """The run's recorded verdict against its ``limits`` (None: recorded before outcomes)."""
+    limits: dict[str, Any] | None = None
+    status: str | None = None
 
 
 class CampaignSummary(BaseModel):

@@ -20,6 +20,8 @@ from rig.web.models import (
     InputLockRequest,
     Message,
     PlanPreview,
+    ResetFaultsRequest,
+    ResetFaultsResult,
     RunRequest,
     Status,
     TareResult,
@@ -52,10 +54,11 @@ def status(request: Request) -> dict[str, Any]:
     return _controller(request).status(is_operator(request))
 
 
-@router.post("/plan/preview", response_model=PlanPreview, responses=BAD_BODY,
-             summary="Preview a run or campaign: steps, estimated duration, fits the rig")
+@router.post("/plan/preview", response_model=PlanPreview, responses={**BAD_BODY, **CONFLICT},
+             summary="Preview a run or campaign: steps, estimated duration, fits the rig "
+                     "(409 while a fault is latched)")
 def preview(request: Request, body: RunRequest) -> dict[str, Any]:
-    return _controller(request).preview(body)
+    return _do(lambda: _controller(request).preview(body))
 
 
 @router.post("/control/start", response_model=Message,
@@ -96,6 +99,17 @@ def tare(request: Request, _token: Operator) -> dict[str, Any]:
     offset = _do(_controller(request).tare)
     return {"ok": True, "offset_Nm": offset,
             "message": f"torque transducer tared (offset {offset:+.4f} N*m)"}
+
+
+@router.post("/devices/reset-faults", response_model=ResetFaultsResult,
+             responses={**AUTH, **CONFLICT, **BAD_BODY},
+             summary="Acknowledge and reset latched faults (drive fault latch, E-stop); logged")
+def reset_faults(request: Request, _token: Operator,
+                 body: ResetFaultsRequest | None = None) -> dict[str, Any]:
+    operator = body.operator if body is not None else None
+    client = request.client.host if request.client else "?"
+    who = f"{operator or 'operator token'} from {client}"
+    return _do(lambda: _controller(request).reset_faults(who))
 
 
 @router.post("/devices/input-lock", response_model=Message,

@@ -112,7 +112,8 @@ def run_loop(request: Request, run_id: RunId,
         "torque_Nm": [float(torque[i]) for i in keep],
         "twist_arcmin": [float(twist[i]) - centre for i in keep],
         "model_twist_arcmin": model, "band_Nm": band, "metrics": metrics,
-        "analysis_error": error,
+        "analysis_error": error, "outcome": run.meta.get("outcome"),
+        "limits": run.meta.get("limits"), "status": run.meta.get("status"),
     })
 
 

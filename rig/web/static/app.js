@@ -241,29 +241,49 @@ function renderStatus(s) {
     $("progress-bar").style.width = s.state === "completed" ? "100%" : "0";
     $("progress-text").textContent = s.message || s.state;
   }
-  // fault
-  const f = s.fault;
+  // fault: the last stop's explanation, and what is latched now (reset by the operator)
+  const latched = s.faults || [];
+  const f = s.fault || (latched.length ? {
+    title: "A fault is latched: nothing can start",
+    action: "Remove its cause, then press Reset faults.",
+    detail: "" } : null);
   $("fault").hidden = !f;
   if (f) {
     $("fault-title").textContent = f.title;
-    $("fault-action").textContent = f.action;
-    $("fault-detail").textContent = f.detail;
+    const listed = latched.map((x) => x.device + ": " + x.detail).join("\n");
+    $("fault-action").textContent = latched.length
+      ? "Latched: " + latched.map((x) => x.device).join(", ") + ". Remove the cause, then press Reset faults."
+      : f.action;
+    $("fault-detail").textContent = [f.detail, listed].filter(Boolean).join("\n");
   }
+  $("reset-faults").hidden = !latched.length;
   // buttons
   const op = s.operator;
   const connected = s.state !== "no_rig" && s.state !== "starting";
-  $("start").disabled = !op || busy || !connected || !lock.confirmed;
+  const faulted = latched.length > 0;
+  $("start").disabled = !op || busy || !connected || !lock.confirmed || faulted;
+  $("start").title = faulted ? "a fault is latched: Reset faults first" : "";
+  $("preview").disabled = busy || faulted;
+  $("reset-faults").disabled = !op || busy;
   $("pause").disabled = !op || s.state !== "running";
   $("resume").disabled = !op || s.state !== "paused";
   $("abort").disabled = !op || !busy;
   $("tare").disabled = !op || busy || !connected;
   $("lock").disabled = !op || busy || !connected;
-  if (s.last_result && !busy) renderResult(s.last_result);
+  // a stored run drawn from the history keeps its own numbers beside it
+  if (s.last_result && !busy && !live.stored) renderResult(s.last_result);
+}
+
+const OUTCOME_WORDS = { ok: "OK", not_ok: "NOT OK", incomplete: "INCOMPLETE" };
+function outcomeHtml(outcome) {
+  if (!outcome) return '<span class="muted">–</span>';
+  const cls = outcome === "ok" ? "pass" : outcome === "not_ok" ? "fail" : "incomplete";
+  return `<span class="${cls}">${OUTCOME_WORDS[outcome] || esc(outcome)}</span>`;
 }
 
 function renderResult(r) {
   const el = $("result");
-  const verdict = r.passed ? '<span class="pass">PASS</span>' : '<span class="fail">FAIL</span>';
+  const verdict = outcomeHtml(r.outcome || (r.passed ? "ok" : "not_ok"));
   $("m-verdict").innerHTML = verdict;
   let html = `${r.kind} ${r.status}: ${verdict}`;
   if (r.failures && r.failures.length) html += "<br>" + r.failures.map(esc).join("<br>");
@@ -391,6 +411,11 @@ async function previewPlan() {
   return p;
 }
 
+function operatorName() {
+  const v = $("setup").elements.operator.value.trim();
+  return v ? v.slice(0, 80) : null;
+}
+
 async function run(action, fn) {
   try { const r = await fn(); if (r && r.message) notice(r.message, false); }
   catch (e) { notice(action + ": " + e.message, true); }
@@ -439,6 +464,8 @@ async function showStoredRun(runId) {
   live.bandNm = d.band_Nm;
   $("loop-title").textContent = "stored: " + runId + (d.analysis_error ? " (" + d.analysis_error + ")" : "");
   showMetrics(d.metrics, null);
+  $("m-verdict").innerHTML = outcomeHtml(d.outcome);
+  $("result").innerHTML = `stored run ${esc(runId)} ${esc(d.status || "")}: ${outcomeHtml(d.outcome)}`;
   scheduleDraw();
 }
 
@@ -452,6 +479,8 @@ function wire() {
   });
   $("token-clear").addEventListener("click", () => { sessionStorage.removeItem("rigToken"); refreshStatus(); });
   $("tare").addEventListener("click", () => run("tare", () => api("POST", "/api/devices/tare")));
+  $("reset-faults").addEventListener("click", () => run("reset faults", () =>
+    api("POST", "/api/devices/reset-faults", { operator: operatorName() })));
   $("lock").addEventListener("click", () => run("input lock", () => {
     const a = num($("lock-angle").value);
     return api("POST", "/api/devices/input-lock", a === null ? { confirm: true } : { angle_deg: a, confirm: true });

@@ -1,0 +1,130 @@
+"""The operator's day in Debian chromium (issue 11): a latched drive fault is acknowledged and
+reset from the page, start and preview are refused while it is latched, the badge never says
+idle while a device is faulted, an E-stop needs the same acknowledgement, and the numbers
+beside a stored loop drawn from the history are that run's, whatever the status poll brings.
+
+The drive fault is made from outside, as a second Modbus master on the line would: a setpoint
+over the drive's limit written with pymodbus to the simulated drive, which refuses it and
+latches SETPOINT_OVER_LIMIT (docs/modbus.md).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import pytest
+from playwright.sync_api import expect, sync_playwright
+from pymodbus.client import ModbusTcpClient
+
+from drivers.modbus_map import LOADING_DRIVE_MAP, encode_float32
+from rig.config import load_rig_config
+from rig.store import Store
+from tests.e2e.test_control_page import ARTIFACTS, TOKEN, get_json, launch_browser, rig_serve
+
+AUTH = {"Authorization": f"Bearer {TOKEN}", "Content-Type": "application/json"}
+
+
+def post(url: str, body: dict | None = None) -> tuple[int, dict]:
+    req = urllib.request.Request(url, data=json.dumps(body or {}).encode(), headers=AUTH,
+                                 method="POST")
+    try:
+        with urllib.request.urlopen(req, timeout=60) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as exc:
+        return exc.code, json.loads(exc.read() or b"{}")
+
+
+def latch_drive_fault_from_outside(url: str) -> None:
+    """A second Modbus master writes a setpoint over the drive's limit: the drive refuses it
+    (exception 3) and latches its fault."""
+    rig_text = get_json(url + "api/status")["rig"]
+    path = re.search(r"\(([^)]*rig\.toml)\)", rig_text).group(1)
+    drive = load_rig_config(path).drive
+    client = ModbusTcpClient(drive.host, port=drive.port, timeout=2)
+    assert client.connect()
+    try:
+        reply = client.write_registers(LOADING_DRIVE_MAP["setpoint"].address,
+                                       encode_float32(10 * drive.torque_limit_Nm),
+                                       device_id=drive.device_id)
+        assert reply.isError()  # refused: the fault is latched, nothing moved
+    finally:
+        client.close()
+
+
+def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    with rig_serve(tmp_path / "store") as (url, link), sync_playwright() as pw:
+        browser = launch_browser(pw)
+        page = browser.new_page(viewport={"width": 1440, "height": 900})
+        errors: list[str] = []
+        page.on("pageerror", lambda exc: errors.append(str(exc)))
+        page.goto(link)
+        expect(page.locator("#state")).to_have_text("idle", timeout=90_000)
+        page.fill("#setup input[name=operator]", "A. Operator")
+
+        # one completed run for the history, with a limit it fails
+        page.click("#lock")
+        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        page.click("#start")
+        expect(page.locator("#state")).to_have_text("completed", timeout=120_000)
+        first = get_json(url + "api/runs")[0]
+
+        # 1. a latched drive fault: badge "fault", start and preview refused, reset clears
+        latch_drive_fault_from_outside(url)
+        expect(page.locator("#state")).to_have_text("fault", timeout=10_000)
+        expect(page.locator("#fault")).to_be_visible()
+        expect(page.locator("#fault-action")).to_contain_text("loading drive")
+        expect(page.locator("#reset-faults")).to_be_visible()
+        expect(page.locator("#start")).to_be_disabled()
+        page.screenshot(path=str(ARTIFACTS / "operator-fault-latched.png"))
+        body = {"unit": get_json(url + "api/units")[0]["unit"],
+                "plan": {"rated_torque_Nm": 10.0, "steps_per_quarter": 2}}
+        code, answer = post(url + "api/control/start", body)
+        assert code == 409 and "fault is latched" in answer["detail"], answer
+        assert "loading drive" in answer["detail"]
+        code, answer = post(url + "api/plan/preview", body)
+        assert code == 409 and "fault is latched" in answer["detail"], answer
+        page.click("#reset-faults")
+        expect(page.locator("#state")).to_have_text("idle", timeout=10_000)
+        expect(page.locator("#fault")).to_be_hidden()
+        expect(page.locator("#notice")).to_contain_text("faults reset")
+
+        # the reset is in the store's audit trail with who and when
+        audit = [a for a in Store(tmp_path / "store").audit() if a["action"] == "fault reset"]
+        assert audit and "A. Operator" in json.dumps(audit[-1]["detail"])
+        assert "SETPOINT_OVER_LIMIT" in json.dumps(audit[-1]["detail"])
+
+        # 2. an E-stop while idle: never "idle" until acknowledged
+        page.click("#estop")
+        expect(page.locator("#state")).to_have_text("fault", timeout=10_000)
+        expect(page.locator("#fault-action")).to_contain_text("E-stop")
+        page.click("#reset-faults")
+        expect(page.locator("#state")).to_have_text("idle", timeout=10_000)
+
+        # 3. history: the numbers beside a stored loop are that run's, after the poll too
+        # (the second run at 180 deg: the runout gives it another lost motion)
+        page.fill("#lock-angle", "180")
+        page.click("#lock")
+        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        page.click("#start")
+        expect(page.locator("#state")).to_have_text("completed", timeout=120_000)
+        latest = get_json(url + "api/runs")[0]
+        assert latest["run_id"] != first["run_id"]
+        labels = {r["run_id"]: Store(tmp_path / "store").load_run(r["run_id"]).meta["label"]
+                  for r in (first, latest)}
+        assert labels[latest["run_id"]].startswith("pos180-"), labels
+        assert labels[first["run_id"]].startswith("pos000-"), labels
+        page.click(f"a[data-run='{first['run_id']}']")
+        expect(page.locator("#loop-title")).to_contain_text(first["run_id"])
+        page.wait_for_timeout(2500)  # two status polls later
+        shown = float(page.locator("#m-lost").inner_text())
+        assert shown == pytest.approx(first["metrics"]["lost_motion_arcmin"], abs=0.0005)
+        assert shown != pytest.approx(latest["metrics"]["lost_motion_arcmin"], abs=0.0005)
+        expect(page.locator("#m-verdict")).to_have_text("OK")
+        page.screenshot(path=str(ARTIFACTS / "operator-history.png"))
+        assert not errors, errors
+        browser.close()

@@ -54,7 +54,8 @@ def _print_graded(summary: dict[str, Any], verbose: bool) -> None:
         for r in summary["results"]:
             got = (f"<{r['status']}>" if r["status"] != "ok"
                    else r["verdict"] + "".join("+" + a for a in r["also"]))
-            console.print(f"  {r['case']:<16} {r['category']:<12} {r['truth_key']:<42} -> "
+            form = f"{r['form']}/" if r.get("form") else ""
+            console.print(f"  {r['case']:<16} {form + r['category']:<20} {r['truth_key']:<42} -> "
                           f"{got:<40} {'ok' if r['correct'] else '--'}"
                           + (f"  {r['error']}" if r.get("error") else ""))
     console.print(f"[bold]{summary_line(summary)}[/bold]", soft_wrap=True)

@@ -10,7 +10,8 @@ is not one simulator's forms:
   power law; runout once (eq. 4 eccentricities) or twice per revolution; bearing clearance as
   a two-stage stiffness or a smooth take-up; thermal play linear or quadratic in temperature;
   torque offset on the reading, or with the drive regulating on the offset reading; tooth
-  spacing as thickness and pitch errors or pitch errors alone;
+  spacing as tooth-to-tooth thickness and pitch scatter or a smooth thickness pattern of
+  order 2-4 around each gear;
 - loading profiles (:data:`LOADINGS`): stepped with dwells, constant-rate ramps, sinusoid;
 - sensor artifacts: a coarse encoder (2^19..2^23 counts per revolution), a lag of the torque
   channel behind the angles, ringing after the impact at the play crossing
@@ -69,7 +70,7 @@ FORMS: dict[str, tuple[str, ...]] = {
     "thermal_expansion": ("linear", "quadratic"),
     "torque_sensor_offset": ("reading", "regulated"),
     "shaft_compliance": ("linear",),
-    "tooth_spacing_error": ("thickness_pitch", "pitch"),
+    "tooth_spacing_error": ("thickness_pitch", "harmonic"),
     "none": ("-",), "creep": ("-",), "direction_gain": ("-",),
 }
 #: Loading profiles: stepped with dwells, constant-rate ramps, sinusoid.
@@ -287,10 +288,19 @@ def widen(case: Case, rng: np.random.Generator) -> Case:
     elif kind == "torque_sensor_offset" and form == "regulated":
         offset = float(truth["offset_Nm"])
         truth = {**truth, "drive_regulates_on_measured_torque": True}
-    elif kind == "tooth_spacing_error" and form == "pitch":
-        truth = {"thickness_error_um_rms": 0.0, "pitch_error_um_rms": float(rng.uniform(3.0, 6.0)),
-                 "seed": int(rng.integers(1e6))}
-        config = config.with_effect(kind, **truth)
+    elif kind == "tooth_spacing_error" and form == "harmonic":
+        # a smooth thickness pattern around each gear (order 2-4, like an accumulated
+        # cutting error) instead of tooth-to-tooth scatter; pitch errors alone would only
+        # shift the loop, which a locked-input loop cannot see
+        z = (int(config.unit["z_internal"]), int(config.unit["z_external"]))
+        amp = (float(rng.uniform(3.0, 6.0)), float(rng.uniform(0.0, 3.0)))
+        order = (int(rng.integers(2, 5)), int(rng.integers(2, 5)))
+        phase = (float(rng.uniform(0, 2 * math.pi)), float(rng.uniform(0, 2 * math.pi)))
+        tables = [[round(a * math.cos(2 * math.pi * h * i / n + ph), 4) for i in range(n)]
+                  for a, h, ph, n in zip(amp, order, phase, z, strict=True)]
+        truth = {"thickness_internal_um": tables[0], "thickness_external_um": tables[1],
+                 "pitch_error_um_rms": 0.0, "orders": list(order)}
+        config = config.with_effect(kind, **{k: v for k, v in truth.items() if k != "orders"})
     loading = str(LOADINGS[int(rng.integers(len(LOADINGS)))])
     if rng.random() < 0.5:
         counts = int(COARSE_COUNTS[int(rng.integers(len(COARSE_COUNTS)))])

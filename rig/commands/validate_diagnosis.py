@@ -57,7 +57,7 @@ def _print_graded(summary: dict[str, Any], verbose: bool) -> None:
             form = f"{r['form']}/" if r.get("form") else ""
             console.print(f"  {r['case']:<16} {form + r['category']:<20} {r['truth_key']:<42} -> "
                           f"{got:<40} {'ok' if r['correct'] else '--'}"
-                          + (f"  {r['error']}" if r.get("error") else ""))
+                          + (f"  {r['error']}" if r.get("error") else ""), soft_wrap=True)
     console.print(f"[bold]{summary_line(summary)}[/bold]", soft_wrap=True)
 
 

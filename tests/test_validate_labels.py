@@ -4,6 +4,8 @@ development sets' graders' semantics on hand-written reports, and malformed labe
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import pytest
 
@@ -90,3 +92,21 @@ def test_malformed_labels_name_file_line_column_or_key(tmp_path) -> None:
 def test_generator_name_from_the_folder(tmp_path) -> None:
     assert generator_name(tmp_path / "devset-a" / "cases") == "devset-a"
     assert generator_name(tmp_path / "mine") == "mine"
+
+
+def _rig(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "rig", *args], capture_output=True, text=True,
+                          timeout=120)
+
+
+def test_cli_refuses_unpaired_or_malformed_labels_in_one_line(tmp_path) -> None:
+    (tmp_path / "cases").mkdir()
+    out = _rig("validate-diagnosis", "--cases-dir", str(tmp_path / "cases"))
+    assert out.returncode == 2 and "--labels" in out.stderr
+    bad = tmp_path / "labels.json"
+    bad.write_text("{\n  \"c1\": [}\n")
+    out = _rig("validate-diagnosis", "--cases-dir", str(tmp_path / "cases"), "--labels", str(bad))
+    assert out.returncode == 2 and "labels.json: line 2, column" in out.stderr
+    bad.write_text(json.dumps({"c1": {"effect": "runout"}}))
+    out = _rig("validate-diagnosis", "--cases-dir", str(tmp_path / "cases"), "--labels", str(bad))
+    assert out.returncode == 2 and "no folder for labelled case(s) c1" in out.stderr

@@ -6,7 +6,7 @@ outside the vocabulary (creep, direction-dependent torque gain). Widened (issue 
 is not one simulator's forms:
 
 - more than one functional form per effect (:data:`FORMS`): friction Coulomb, Dahl or
-  Stribeck-like (LuGre); stiffening exponential (non-saturating over the range) or a Hertzian
+  Stribeck-like (LuGre); stiffening exponential (still hardening at rated) or a Hertzian
   power law; runout once (eq. 4 eccentricities) or twice per revolution; bearing clearance as
   a two-stage stiffness or a smooth take-up; thermal play linear or quadratic in temperature;
   torque offset on the reading, or with the drive regulating on the offset reading; tooth

@@ -418,6 +418,11 @@ class CanopenEncoder:
             raise DeviceTimeout(self.device, "a position PDO", "none yet")
         return self._latest
 
+    @property
+    def dropped(self) -> int:
+        """Samples lost to a full queue since the driver opened (never reset)."""
+        return self._dropped
+
     def readings(self, max_n: int | None = None) -> list[EncoderReading]:
         """Take every queued sample, oldest first (at most ``max_n``).
 

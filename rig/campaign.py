@@ -17,6 +17,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from rig.errors import RigError
+from rig.outcome import campaign_outcome, run_outcome
 from rig.plans import CampaignAxes, LoopParams, Plan, campaign_plan
 from rig.toml_files import describe_validation_error, read_toml
 
@@ -36,25 +37,13 @@ class Limits(BaseModel):
     stiffness_Nm_per_arcmin_min: float | None = Field(None, gt=0)
 
     def check(self, run: dict[str, Any]) -> list[str]:
-        """The causes of failure of one run's metrics (empty: passed)."""
-        causes = []
-        label = run.get("label") or run.get("run_id")
-        if run.get("status") != "completed":
-            return [f"run {label}: {run.get('status')}: {run.get('reason')}"]
-        for key, bound, worse in (
-            ("lost_motion_arcmin", self.lost_motion_arcmin_max, "above"),
-            ("backlash_arcmin", self.backlash_arcmin_max, "above"),
-            ("stiffness_Nm_per_arcmin", self.stiffness_Nm_per_arcmin_min, "below"),
-        ):
-            if bound is None:
-                continue
-            value = run.get(key)
-            if value is None:
-                why = (run.get("errors") or {}).get(key, "not measured")
-                causes.append(f"run {label}: {key} unavailable ({why})")
-            elif (value > bound) if worse == "above" else (value < bound):
-                causes.append(f"run {label}: {key} = {value:.4g} is {worse} the limit {bound:g}")
-        return causes
+        """The causes of failure of one run's metrics (empty: passed; a metric the run's
+        design cannot measure is not applicable, not a cause: rig/outcome.py)."""
+        return run_outcome(run, self.model_dump())[1]
+
+    def outcome(self, run: dict[str, Any]) -> str:
+        """"ok", "not_ok" or "incomplete" (rig/outcome.py)."""
+        return run_outcome(run, self.model_dump())[0]
 
 
 class UnitSection(BaseModel):
@@ -211,6 +200,8 @@ def summarise(runs: list[dict[str, Any]], limits: Limits) -> dict[str, Any]:
     means = [float(np.mean(v)) for v in by_position.values()]
     model = next((r.get("model") for r in done if r.get("model")), None)
     causes = [c for r in runs for c in limits.check(r)]
+    for r in runs:
+        r["outcome"], r["limits"] = limits.outcome(r), limits.model_dump()
     if not runs:
         causes.append("no run was measured")
     return {
@@ -223,6 +214,7 @@ def summarise(runs: list[dict[str, Any]], limits: Limits) -> dict[str, Any]:
         "model": model,
         "limits": limits.model_dump(),
         "passed": not causes,
+        "outcome": campaign_outcome([r["outcome"] for r in runs], "completed"),
         "failures": causes,
         "n_runs": len(runs),
         "n_completed": len(done),

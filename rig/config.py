@@ -47,6 +47,8 @@ class RigSection(BaseModel):
 
     ``master_timeout_s``: the drive keepalive of :class:`rig.devices.RigDevices` stops when
     the measuring program has not called ``alive()`` for this long (None: never stops).
+    ``realtime_priority`` (1-99, optional): SCHED_FIFO for the measuring process when the
+    system permits it (rig/realtime.py); None: the normal scheduler.
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -56,6 +58,7 @@ class RigSection(BaseModel):
     sample_rate_Hz: float = Field(default=100.0, gt=0, le=2000)
     keepalive_period_s: float = Field(default=0.1, gt=0, le=10)
     master_timeout_s: float | None = Field(default=2.0, gt=0)
+    realtime_priority: int | None = Field(default=None, ge=1, le=99, strict=True)
 
 
 class RigConfig(BaseModel):

@@ -36,6 +36,7 @@ from rig.engine_merge import ChannelMerger, MergedRow
 from rig.engine_record import OpenRun, RunOutcome
 from rig.engine_safety import check_command, check_measured, preflight
 from rig.errors import RigError
+from rig.outcome import LIMIT_KEYS
 from rig.plan_estimate import PlanEstimate, estimate
 from rig.plan_steps import (
     BeginRun,
@@ -53,7 +54,7 @@ from rig.plan_steps import (
     WaitTemperature,
     describe,
 )
-from rig.plans import Plan
+from rig.plans import Plan, run_label
 from rig.store import Store
 
 log = logging.getLogger(__name__)
@@ -86,6 +87,9 @@ class EngineOptions:
     drain_timeout_s: float = 1.0
     profile: str | None = None
     extra_meta: dict[str, Any] = field(default_factory=dict)
+    limits: dict[str, Any] | None = None
+    """The limits of the runs (rig/outcome.py keys): run.json ``limits``, and ``outcome``
+    against them."""
 
 
 class Engine:
@@ -118,6 +122,7 @@ class Engine:
         self._pause_requested = False
         self._stopping: str | None = None
         self._merger = ChannelMerger()
+        self._dropped_at_begin = 0
         self._recent: deque[MergedRow] = deque()
         self._open: OpenRun | None = None
         self._setpoint = 0.0
@@ -272,6 +277,7 @@ class Engine:
         with self._lock:
             open_run, self._open = self._open, None
         if open_run is not None:
+            open_run.samples_dropped = self._dropped_total() - self._dropped_at_begin
             self.outcomes.append(open_run.finish_aborted(reason))
             self._publish("run_finished", message=f"run {open_run.label} aborted: {reason}",
                           data=self.outcomes[-1].to_dict())
@@ -514,8 +520,20 @@ class Engine:
         self._ramp(0.0, step.rate_Nm_per_s, 0.02)
         self._sleep_until(time.monotonic() + step.settle_s)
         t0 = time.monotonic()
-        self._sleep_until(t0 + step.window_s)
-        rows = [r for r in self._recent_rows(step.window_s + 0.5) if r.t_mono_s >= t0]
+        t_end = t0 + step.window_s
+        self._sleep_until(t_end)
+        # The window's rows may reach us late when the PC is busy (the receiving thread
+        # waits for the CPU): wait for them, up to the tolerance of the stale-sample trip.
+        deadline = t_end + self.options.stale_timeout_s
+        while True:
+            rows = [r for r in self._recent_rows(step.window_s + deadline - t0)
+                    if r.t_mono_s >= t0]
+            if (rows and rows[-1].t_mono_s >= t_end) or time.monotonic() >= deadline:
+                break
+            self._sleep_until(min(deadline, time.monotonic() + 0.01))
+        # at zero command the torque is steady: rows stamped just after the window (late
+        # delivery) are as good as the window's own
+        rows = [r for r in rows if r.t_mono_s <= t_end] or rows
         if not rows:
             raise DeviceTimeout("acquisition", f"torque samples over {step.window_s:g} s "
                                 "for the torque zero", "none")
@@ -561,14 +579,21 @@ class Engine:
         if self._open is not None:
             raise RigError(f"plan error: run {step.label} begun inside run {self._open.label}")
         test = dict(step.test)
+        label = step.label
+        if step.label_from_input:
+            angle = self._measured_input_angle()
+            if angle is not None:
+                test["input_angle_deg"] = angle
+                label = relabel_position(label, angle)
         if self._zero_before is not None:
             test["torque_zero_before_Nm"] = self._zero_before
         if self._temperature is not None:
             test.setdefault("temperature_C", self._temperature)
-        meta = {**self.meta, **self.options.extra_meta, "label": step.label, "test": test,
+        meta = {**self.meta, **self.options.extra_meta, "label": label, "test": test,
                 "sensors": self.io.sensors_meta(),
                 "plan": self._plan.meta() if self._plan else {"name": "ad hoc"},
-                "acquisition": acquisition_meta(self.io)}
+                "acquisition": acquisition_meta(self.io),
+                "limits": limits_dict(self.options.limits)}
         columns = ["t_s", "torque_Nm", "output_angle_deg"]
         if self.io.has_input_encoder:
             columns.append("input_angle_deg")
@@ -576,11 +601,29 @@ class Engine:
             columns.append("temperature_C")
         columns += ["torque_command_Nm", "step", "sample_window"]
         recorder = self.store.begin_run(meta, columns, campaign_id=self.campaign_id)
-        open_run = OpenRun(recorder, step.label, time.monotonic(), profile=self.options.profile)
+        open_run = OpenRun(recorder, label, time.monotonic(), profile=self.options.profile,
+                           limits=limits_dict(self.options.limits))
+        self._dropped_at_begin = self._dropped_total()
         with self._lock:
             self._open = open_run
         self._zero_before = None
         self._publish("run_started", message=f"run {step.label} ({recorder.run_id}) started")
+
+    def _measured_input_angle(self) -> float | None:
+        """The input angle now (deg, modulo 360, 0.01 deg), from the input encoder's merged
+        rows; None without an input encoder."""
+        if not self.io.has_input_encoder:
+            return None
+        values = [r.input_angle_deg for r in self._recent_rows(0.2)
+                  if math.isfinite(r.input_angle_deg)]
+        if not values:
+            return None
+        return round(float(np.median(values)) % 360.0, 2) % 360.0
+
+    def _dropped_total(self) -> int:
+        """Encoder samples lost so far: full driver queues plus merge drops (count)."""
+        counter = getattr(self.io, "samples_dropped", None)
+        return (0 if counter is None else int(counter())) + self._merger.dropped_before_torque
 
     def _stop_recording(self) -> None:
         """Wait until the rows up to now are in the open run, then stop appending rows."""
@@ -601,10 +644,27 @@ class Engine:
         self._stop_recording()
         with self._lock:
             self._open = None
+        open_run.samples_dropped = self._dropped_total() - self._dropped_at_begin
         outcome = open_run.finish_completed()
         self.outcomes.append(outcome)
         self._publish("run_finished", message=f"run {open_run.label} completed",
                       data=outcome.to_dict())
+
+
+def limits_dict(limits: dict[str, Any] | None) -> dict[str, Any]:
+    """Every limit key (rig/outcome.py), None where not checked."""
+    return {key: (limits or {}).get(key) for key in LIMIT_KEYS}
+
+
+def relabel_position(label: str, angle_deg: float) -> str:
+    """``label`` with its ``posNNN`` part naming ``angle_deg`` (rounded to 0.1 deg)."""
+    parts = label.split("-")
+    for i, part in enumerate(parts):
+        if part.startswith("pos"):
+            value = round(angle_deg, 1)
+            parts[i] = run_label(value if value != 360.0 else 0.0, 0, 0).split("-")[0]
+            break
+    return "-".join(parts)
 
 
 def acquisition_meta(io: RigIO) -> dict[str, Any]:

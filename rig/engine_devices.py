@@ -65,6 +65,13 @@ class DevicesIO:
         with contextlib.suppress(DeviceError, OSError, RuntimeError):
             self.devices.transducer.stop_stream()
 
+    def samples_dropped(self) -> int:
+        """Encoder samples the drivers had to drop (full queues) since they opened."""
+        total = self.devices.encoder.dropped
+        if self.devices.input_encoder is not None:
+            total += self.devices.input_encoder.dropped
+        return total
+
     def take_output(self) -> list[tuple[float, float]]:
         shift = self._can_to_monotonic()
         return [(r.t_s - shift, r.angle_deg) for r in self.devices.encoder.readings()]

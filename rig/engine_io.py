@@ -40,6 +40,10 @@ class RigIO(Protocol):
         """New input-encoder samples (t_s, angle_deg); empty without an input encoder."""
         ...
 
+    def samples_dropped(self) -> int:
+        """Encoder samples the drivers dropped (full queues) since they opened (count)."""
+        ...
+
     def take_torque(self, timeout_s: float) -> list[tuple[float, float]]:
         """New streamed torque samples (t_s, torque_Nm); blocks up to ``timeout_s`` for one."""
         ...

@@ -18,6 +18,7 @@ from analysis.errors import AnalysisError
 from rig.analyse import METRIC_KEYS, analyse_run
 from rig.engine_merge import MergedRow
 from rig.errors import RigError
+from rig.outcome import run_outcome
 from rig.runformat import Run
 from rig.store import RunRecorder
 
@@ -51,6 +52,9 @@ class RunOutcome:
     test: dict[str, Any]
     analysis: dict[str, Any] = field(default_factory=dict)
     result: dict[str, Any] = field(default_factory=dict)
+    outcome: str = "incomplete"
+    """"ok", "not_ok" or "incomplete" against ``limits`` (rig/outcome.py)."""
+    limits: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The ``rig analyse --json`` keys plus status, reason, label, position and path."""
@@ -67,9 +71,11 @@ class RunOutcome:
         out["input_angle_deg"] = self.test.get("input_angle_deg")
         out["amplitude_pct"] = self.test.get("amplitude_pct")
         out["path"] = str(self.path)
-        for key in ("torque_zero", "crosscheck_max_diff_Nm", "engine_notes"):
+        for key in ("torque_zero", "crosscheck_max_diff_Nm", "engine_notes", "samples_dropped"):
             if key in self.result:
                 out[key] = self.result[key]
+        out["outcome"] = self.outcome
+        out["limits"] = self.limits
         return json_safe(out)
 
 
@@ -77,8 +83,9 @@ class OpenRun:
     """The run being recorded: appends rows to the store, keeps a copy for the analysis."""
 
     def __init__(self, recorder: RunRecorder, label: str, t0_mono: float,
-                 profile: str | None = None) -> None:
+                 profile: str | None = None, limits: dict[str, Any] | None = None) -> None:
         self.recorder = recorder
+        self.limits = limits
         self.label = label
         self.t0 = t0_mono
         self.profile = profile
@@ -93,6 +100,8 @@ class OpenRun:
         self.last_t_mono = -math.inf
         self._last_t_s = -math.inf
         self.recording = True
+        self.samples_dropped = 0
+        """Encoder samples lost during this run (driver queues, merge), set by the engine."""
 
     def note(self, text: str) -> None:
         self.notes.append(text)
@@ -127,7 +136,8 @@ class OpenRun:
 
     def _base_result(self) -> dict[str, Any]:
         result: dict[str, Any] = {"torque_zero": dict(self.torque_zero),
-                                  "crosscheck_max_diff_Nm": self.crosscheck_max_diff_Nm}
+                                  "crosscheck_max_diff_Nm": self.crosscheck_max_diff_Nm,
+                                  "samples_dropped": self.samples_dropped}
         if self.notes:
             result["engine_notes"] = list(self.notes)
         return result
@@ -137,10 +147,16 @@ class OpenRun:
         data = {c: np.asarray(v, dtype=float) for c, v in self.data.items()}
         return Run(meta=meta, columns=list(self.columns), data=data, path=self.recorder.path)
 
+    def _verdict(self, status: str, reason: str | None, result: dict[str, Any]) -> str:
+        test = self.recorder.meta.get("test", {})
+        return run_outcome({"status": status, "reason": reason, "label": self.label,
+                            "test": test, "result": result}, self.limits)[0]
+
     def _outcome(self, status: str, reason: str | None, analysis: dict[str, Any],
-                 result: dict[str, Any]) -> RunOutcome:
+                 result: dict[str, Any], verdict: str) -> RunOutcome:
         return RunOutcome(self.recorder.run_id, self.label, status, reason, self.recorder.path,
-                          dict(self.recorder.meta.get("test", {})), analysis, result)
+                          dict(self.recorder.meta.get("test", {})), analysis, result,
+                          outcome=verdict, limits=self.limits)
 
     def finish_completed(self) -> RunOutcome:
         """Analyse the run and close it as completed (metrics in run.json ``result``)."""
@@ -157,11 +173,13 @@ class OpenRun:
         except (AnalysisError, RigError, ValueError) as exc:
             result["analysis_error"] = str(exc)
             log.warning("run %s: not analysed: %s", self.recorder.run_id, exc)
-        self.recorder.finish("completed", result=json_safe(result))
-        return self._outcome("completed", None, analysis, result)
+        verdict = self._verdict("completed", None, result)
+        self.recorder.finish("completed", result=json_safe(result), extra={"outcome": verdict})
+        return self._outcome("completed", None, analysis, result, verdict)
 
     def finish_aborted(self, reason: str) -> RunOutcome:
         """Close the run as aborted with ``reason``; every sample recorded is kept."""
         result = json_safe(self._base_result())
-        self.recorder.finish("aborted", reason=reason, result=result)
-        return self._outcome("aborted", reason, {}, result)
+        self.recorder.finish("aborted", reason=reason, result=result,
+                             extra={"outcome": "incomplete"})
+        return self._outcome("aborted", reason, {}, result, "incomplete")

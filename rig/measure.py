@@ -24,7 +24,9 @@ from rig.engine_devices import DevicesIO
 from rig.engine_events import ProgressEvent
 from rig.engine_record import json_safe
 from rig.errors import RigError
+from rig.outcome import campaign_outcome, run_outcome
 from rig.plans import Plan
+from rig.realtime import apply_realtime_priority
 from rig.store import Store
 from simulators.plant_config import (
     DEFAULT_PLANT_TOML,
@@ -109,6 +111,7 @@ def open_session(*, rig: Path | None = None, simulated: bool = False,
             rig = sim.rig_config_path
         assert rig is not None
         config = load_rig_config(rig)
+        apply_realtime_priority(config.rig.realtime_priority)
         if simulated:
             config = relaxed_heartbeats(config)
         devices = stack.enter_context(open_rig(config))
@@ -170,9 +173,11 @@ def measure_plan(session: RigSession, store: Store, plan: Plan, meta: dict[str, 
 
 def run_result(outcome_dict: dict[str, Any], limits: Limits) -> dict[str, Any]:
     """A single run's JSON (``rig measure --json``): the ``rig analyse --json`` keys, status,
-    reason, and the limit verdict."""
-    causes = limits.check(outcome_dict)
-    return {**outcome_dict, "passed": not causes, "failures": causes}
+    reason, the limit verdict and the ``outcome`` ("ok", "not_ok", "incomplete") with the
+    ``limits`` in force."""
+    outcome, causes, notes = run_outcome(outcome_dict, limits.model_dump())
+    return {**outcome_dict, "passed": outcome == "ok", "outcome": outcome,
+            "limits": limits.model_dump(), "failures": causes, "not_applicable": notes}
 
 
 def run_campaign(camp: CampaignFile, session: RigSession, store: Store, *,
@@ -186,7 +191,8 @@ def run_campaign(camp: CampaignFile, session: RigSession, store: Store, *,
              "profile": camp.profile}
     campaign_id = store.create_campaign(camp.name, meta=json_safe(cmeta))
     options = EngineOptions(torque_limit_Nm=camp.torque_limit_Nm, profile=camp.profile,
-                            stale_timeout_s=session.stale_timeout_s)
+                            stale_timeout_s=session.stale_timeout_s,
+                            limits=camp.limits.model_dump())
     try:
         engine, outcomes = measure_plan(
             session, store, plan, run_meta(unit, session, camp.operator),
@@ -194,7 +200,8 @@ def run_campaign(camp: CampaignFile, session: RigSession, store: Store, *,
     except BaseException as exc:  # refused before it ran, Ctrl-C, a bug: close the campaign
         with contextlib.suppress(Exception):
             store.finish_campaign(campaign_id, "aborted",
-                                  {"reason": f"{type(exc).__name__}: {exc}"})
+                                  {"reason": f"{type(exc).__name__}: {exc}"},
+                                  extra={"outcome": "incomplete"})
         raise
     runs = [o.to_dict() for o in outcomes]
     summary = summarise(runs, camp.limits)
@@ -202,10 +209,12 @@ def run_campaign(camp: CampaignFile, session: RigSession, store: Store, *,
                                   PROFILES.get(camp.profile, 3.0))
     status = "completed" if engine.state == "completed" else "aborted"
     reason = engine.stopping_reason
+    summary["outcome"] = campaign_outcome([r["outcome"] for r in runs], status)
     if status == "aborted":
         summary["passed"] = False
         summary["failures"].append(f"campaign aborted: {reason}")
-    store.finish_campaign(campaign_id, status, summary=json_safe({**summary, "reason": reason}))
+    store.finish_campaign(campaign_id, status, summary=json_safe({**summary, "reason": reason}),
+                          extra={"outcome": summary["outcome"]})
     info = store.get_campaign(campaign_id)
     return json_safe({"campaign": camp.name, "campaign_id": campaign_id, "path": str(info.path),
                       "status": status, "reason": reason, **summary, "runs": runs})

@@ -22,6 +22,10 @@ class BeginRun:
 
     label: str
     test: dict[str, Any] = field(default_factory=dict)
+    label_from_input: bool = False
+    """The plan does not set the input angle (a single run without ``--position``): the engine
+    records the input angle it measures (input encoder, deg, modulo 360) as
+    ``test.input_angle_deg`` and names the run after it (``pos090-...``)."""
 
 
 @dataclass(frozen=True)

@@ -227,12 +227,12 @@ def preload(p: LoopParams) -> Iterator[Step]:
     yield Checkpoint("preloaded to -T")
 
 
-def hysteresis_run(p: LoopParams, label: str, test: dict[str, Any] | None = None
-                   ) -> Iterator[Step]:
+def hysteresis_run(p: LoopParams, label: str, test: dict[str, Any] | None = None,
+                   *, label_from_input: bool = False) -> Iterator[Step]:
     """One recorded run: torque zero, preload, the loop, back to zero and torque zero."""
     yield ReadTorqueZero("before", p.zero_window_s, p.rate_Nm_per_s)
     yield from preload(p)
-    yield BeginRun(label, {**p.test_meta(), **(test or {})})
+    yield BeginRun(label, {**p.test_meta(), **(test or {})}, label_from_input=label_from_input)
     yield from hysteresis_loop(p)
     yield ReadTorqueZero("after", p.zero_window_s, p.rate_Nm_per_s)
     yield EndRun()
@@ -282,7 +282,7 @@ def hysteresis_plan(loop: LoopParams, position_deg: float | None = None) -> Plan
             yield LockInput(position_deg)
             test["input_angle_deg"] = position_deg
         label = run_label(position_deg or 0.0, loop.amplitude_pct, 0)
-        yield from hysteresis_run(loop, label, test)
+        yield from hysteresis_run(loop, label, test, label_from_input=position_deg is None)
 
     params = {"loop": loop.model_dump(), "position_deg": position_deg}
     return Plan("hysteresis", params, build)

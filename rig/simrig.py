@@ -83,6 +83,7 @@ class SimulatedRig:
         sync_period_s: float = 0.002,
         stream_rate_Hz: float = 500.0,
         watchdog_s: float = 0.5,
+        realtime_priority: int | None = None,
     ) -> None:
         if transducer not in ("pty", "tcp"):
             raise ValueError(f"transducer must be 'pty' or 'tcp', got {transducer!r}")
@@ -101,6 +102,12 @@ class SimulatedRig:
         self.sync_period_s = sync_period_s
         self.stream_rate_Hz = stream_rate_Hz
         self.watchdog_s = watchdog_s
+        env_priority = os.environ.get(REALTIME_ENV, "").strip()
+        self.realtime_priority = (realtime_priority if realtime_priority is not None
+                                  else int(env_priority) if env_priority else None)
+        """SCHED_FIFO for the simulated devices (they stand in for hardware, which a busy PC
+        cannot starve) and ``[rig] realtime_priority`` of the rig configuration written;
+        default from ``RIG_SIM_REALTIME_PRIORITY``; None: normal scheduling."""
         self._rig_config_arg = Path(rig_config_path) if rig_config_path is not None else None
         self.rig_config_path: Path | None = None
         self.addresses: dict[str, Any] = {}
@@ -246,7 +253,9 @@ class SimulatedRig:
         timeout = {"timeout_s": 1.0}
         tables: dict[str, dict[str, Any]] = {
             "rig": {"rig_id": "simulated", "torque_limit_Nm": limit, "sample_rate_Hz": 100.0,
-                    "keepalive_period_s": 0.1, "master_timeout_s": 2.0},
+                    "keepalive_period_s": 0.1, "master_timeout_s": 2.0,
+                    **({} if self.realtime_priority is None
+                       else {"realtime_priority": self.realtime_priority})},
             "can": {"interface": "slcan", "channel": self.addresses["encoder_slcan"],
                     "bitrate": 500000, "sync_period_s": self.sync_period_s,
                     "bus_options": {"sleep_after_open": 0}},
@@ -302,6 +311,8 @@ class SimulatedRig:
             cmd.append("--no-input-encoder")
         if self._rig_config_arg is not None:
             cmd += ["--rig-config", str(self._rig_config_arg)]
+        if self.realtime_priority is not None:
+            cmd += ["--realtime-priority", str(self.realtime_priority)]
         return cmd
 
     def _start_process(self) -> None:
@@ -349,14 +360,30 @@ def _terminate(proc: subprocess.Popen, timeout_s: float = 20.0) -> int:
     return proc.returncode
 
 
+REALTIME_ENV = "RIG_SIM_REALTIME_PRIORITY"
+
+
+def _write_stats(sim: SimulatedRig, path: Path) -> None:
+    """The simulated devices' own figures (the drive's watchdog) as JSON, replaced atomically:
+    what a load test reads from outside (``RIG_SIM_STATS``)."""
+    server = getattr(sim, "modbus_server", None)
+    if server is None:
+        return
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(server.drive.stats()), encoding="utf-8")
+    os.replace(tmp, path)
+
+
 def serve_until_signalled(sim: SimulatedRig, poll_s: float = 0.2) -> int:
     """Run ``sim`` (started) until SIGTERM/SIGINT; then stop cleanly and return 0."""
     done = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: done.set())
                 for sig in (signal.SIGTERM, signal.SIGINT)}
+    stats_path = os.environ.get("RIG_SIM_STATS")
     try:
         while not done.wait(poll_s):
-            pass
+            if stats_path:
+                _write_stats(sim, Path(stats_path))
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)

@@ -360,7 +360,7 @@ class Store:
                     record["read_error"] = str(e)
                 if self._finalize_run(
                     run_id, folder, "aborted", RECOVERED_REASON, None, n_samples,
-                    {"recovery": record},
+                    {"recovery": record, "outcome": "incomplete"},
                 ):
                     recovered.append(run_id)
                     log.warning("run %s: marked aborted: %s", run_id, RECOVERED_REASON)
@@ -458,9 +458,11 @@ class Store:
         return campaign_id
 
     def finish_campaign(
-        self, campaign_id: str, status: str, summary: dict[str, Any] | None = None
+        self, campaign_id: str, status: str, summary: dict[str, Any] | None = None,
+        extra: dict[str, Any] | None = None,
     ) -> None:
-        """Close a running campaign as "completed" or "aborted" with a JSON-able summary."""
+        """Close a running campaign as "completed" or "aborted" with a JSON-able summary;
+        ``extra``: more top-level keys of campaign.json (``outcome``)."""
         if status not in FINAL_STATUSES:
             raise ValueError(f"status must be one of {FINAL_STATUSES}, got {status!r}")
         to_json(summary)
@@ -470,7 +472,8 @@ class Store:
         def update(_row: Any) -> dict[str, Any]:
             cjson = camp.path / CAMPAIGN_JSON
             cmeta = _read_json_or(cjson, {"format": CAMPAIGN_FORMAT, "name": camp.name})
-            cmeta.update(status=status, finished_at=finished_at, summary=summary)
+            cmeta.update(status=status, finished_at=finished_at, summary=summary,
+                         **(extra or {}))
             write_json_atomic(cjson, cmeta)
             return {"status": status, "finished_at": finished_at, "summary": summary,
                     "audit": {"at": finished_at, "action": f"campaign {status}",

@@ -77,6 +77,7 @@ class RunRecorder:
         status: str = "completed",
         reason: str | None = None,
         result: dict[str, Any] | None = None,
+        extra: dict[str, Any] | None = None,
     ) -> RunInfo:
         """Close the samples file and record the end of the run; return its index row.
 
@@ -84,7 +85,8 @@ class RunRecorder:
         ``result``: the run's metrics (a JSON-able dict, e.g. ``{"lost_motion_arcmin": 1.2}``),
         stored in run.json under "result" and in the index as ``metrics``.
         run.json is rewritten atomically with "status", "reason", "result", "finished_at"
-        and "n_samples". A bad argument raises ValueError and leaves the run open.
+        and "n_samples" (and the top-level keys of ``extra``, e.g. ``outcome``). A bad argument
+        raises ValueError and leaves the run open.
         """
         if self._finished:
             raise StoreError(f"run {self.run_id} is already finished")
@@ -97,10 +99,12 @@ class RunRecorder:
         if result is not None and not isinstance(result, dict):
             raise ValueError(f"result must be a dict of metrics, got {type(result).__name__}")
         to_json(result)
+        to_json(extra)
         self.samples.close()
         try:
             changed = self._store._finalize_run(
-                self.run_id, self.path, status, reason, result, self.n_samples, {}
+                self.run_id, self.path, status, reason, result, self.n_samples,
+                dict(extra or {}),
             )
         finally:
             self._finished = True

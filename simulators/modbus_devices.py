@@ -165,6 +165,10 @@ class LoadingDriveModel:
         self.watchdog_tripped = False
         self.keepalive_value = 0
         self.last_write_s = now()
+        self.max_write_gap_s = 0.0
+        """The longest silence of the master while the drive was enabled (s): what a load
+        test compares with the watchdog."""
+        self.watchdog_trips = 0
         self.plant.enable_drive(False)
         self.plant.command_torque(0.0)
 
@@ -183,11 +187,19 @@ class LoadingDriveModel:
         """Trip the watchdog if the master has been silent too long; True if it tripped now."""
         if self.enabled and self.now() - self.last_write_s > self.watchdog_ms / 1000.0:
             self.watchdog_tripped = True
+            self.watchdog_trips += 1
+            self.max_write_gap_s = max(self.max_write_gap_s, self.now() - self.last_write_s)
             self._latch(DriveFaultCode.WATCHDOG_TIMEOUT)
             return True
         return False
 
     # -- register faces ------------------------------------------------------------------
+    def stats(self) -> dict[str, float]:
+        """The watchdog's figures: longest master silence while enabled (s), trips, watchdog (s)."""
+        return {"drive_max_write_gap_s": self.max_write_gap_s,
+                "drive_watchdog_trips": self.watchdog_trips,
+                "drive_watchdog_s": self.watchdog_ms / 1000.0}
+
     def status_bits(self) -> DriveStatusBits:
         bits = DriveStatusBits(0)
         if self.enabled:
@@ -224,7 +236,10 @@ class LoadingDriveModel:
         parts = _writes(LOADING_DRIVE_MAP, address, words)
         if isinstance(parts, ExcCodes):
             return parts
-        self.last_write_s = self.now()
+        now = self.now()
+        if self.enabled:
+            self.max_write_gap_s = max(self.max_write_gap_s, now - self.last_write_s)
+        self.last_write_s = now
         for reg, chunk in parts:
             if reg.name == "setpoint":
                 value = _float_from(chunk)

@@ -144,3 +144,32 @@ def test_rig_spc_errors(tmp_path):
     out = subprocess.run([*run, "--store", str(tmp_path / "s"), "--since", "yesterday"],
                          cwd=tmp_path, capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "since: 'yesterday' is not an ISO 8601" in out.stderr
+
+
+def test_the_control_page_serves_the_same_quality_view(make_store, tmp_path):
+    """``GET /api/spc`` is ``rig spc --json``'s document; ``GET /spc`` its charts as a page
+    with a way back to the control page (computed in the page's worker process)."""
+    from fastapi.testclient import TestClient
+
+    from rig.web.app import create_app
+    from rig.web.settings import resolve_settings
+
+    root = tmp_path / "store"
+    st = make_store(root)
+    small_line(st)
+    app = create_app(resolve_settings(store_root=st.root, token="spc-page-token"), store=st)
+    with TestClient(app) as client:
+        doc = client.get("/api/spc", params={"design": "SYN-1", "since": "2000-01-01"}).json()
+        page = client.get("/spc", params={"design": "SYN-1"})
+        everything = client.get("/api/spc").json()
+        bad = client.get("/api/spc", params={"since": "yesterday"})
+    (d,) = doc["designs"]
+    lm = d["metrics"]["lost_motion_arcmin"]
+    assert [p["value"] for p in lm["points"]] == pytest.approx(
+        [2.02, 2.22, 2.12, 2.62, 2.32], abs=1e-12)
+    assert lm["chart"]["individuals"]["ucl"] == pytest.approx(2.9913830, abs=1e-7)
+    assert lm["capability"]["cpk"] == pytest.approx(1.0117818, abs=1e-7)
+    assert page.status_code == 200 and page.text.count("data:image/png;base64,") == 3
+    assert 'href="/"' in page.text and "3.909 .. 6.411 arcmin" in page.text
+    assert {x["design"] for x in everything["designs"]} == {"SYN-1", "SYN-2"}
+    assert bad.status_code == 422

@@ -1,8 +1,9 @@
 """``rig campaign run FILE``: a campaign (positions, amplitudes, temperatures, repeats) into a
 rig-campaign/1 folder of the store, with pass/fail against the file's limits.
 
-Exit codes: 0 every limit passed, 1 a limit failed, 2 an error (bad file, device fault,
-an aborted campaign).
+Exit codes: 0 every limit passed (outcome OK), 1 a limit failed (NOT OK, also when the
+campaign was then aborted), 2 an error or an incomplete campaign (bad file, device fault,
+an aborted campaign, a limited metric that could not be measured).
 """
 
 from __future__ import annotations
@@ -111,11 +112,14 @@ def register(app: typer.Typer) -> None:
             out.print(f"production batch of this design (seed 000 tolerances, 95 %): "
                       f"{band[0]:.3f} .. {band[1]:.3f} arcmin")
         out.print(f"campaign folder: {result['path']}")
+        words = {"ok": "OK", "not_ok": "NOT OK", "incomplete": "INCOMPLETE"}
         if result["status"] != "completed":
             out.print(f"[red]campaign aborted: {result['reason']}[/red]")
-            raise typer.Exit(2)
+            out.print(f"outcome: {words[result['outcome']]}")
+            raise typer.Exit(1 if result["outcome"] == "not_ok" else 2)
         for cause in result["failures"]:
             out.print(f"[red]FAIL[/red] {cause}")
         if not result["passed"] and not result["failures"]:
             raise RigError("campaign failed without a cause (a bug)")
-        raise typer.Exit(0 if result["passed"] else 1)
+        out.print(f"outcome: {words[result['outcome']]}")
+        raise typer.Exit({"ok": 0, "not_ok": 1}.get(result["outcome"], 2))

@@ -1,7 +1,8 @@
 """``rig measure``: one hysteresis run on the real or the simulated rig, into the store.
 
-Exit codes (scripts rely on them): 0 every limit passed, 1 a limit failed, 2 an error
-(bad input, a device fault, an aborted run).
+Exit codes (scripts rely on them): 0 every limit passed (outcome OK), 1 a limit failed
+(NOT OK), 2 an error or an incomplete run (bad input, a device fault, an aborted run, a
+limited metric that could not be measured).
 """
 
 from __future__ import annotations
@@ -191,7 +192,8 @@ def register(app: typer.Typer) -> None:
                 progress_bar(out, est.total_s) as on_event:
             from rig.engine import EngineOptions
 
-            options = EngineOptions(profile=profile, stale_timeout_s=session.stale_timeout_s)
+            options = EngineOptions(profile=profile, stale_timeout_s=session.stale_timeout_s,
+                                    limits=limits.model_dump())
             try:
                 engine, outcomes = measure_plan(session, st, plan, run_meta(unit_data, session),
                                                 options=options, progress=on_event)
@@ -207,7 +209,12 @@ def register(app: typer.Typer) -> None:
         out.print(f"run {result['run_id']} {result['status']} in {st.root}")
         if result["status"] != "completed":
             out.print(f"[red]aborted: {result['reason']}[/red]")
+            out.print("outcome: INCOMPLETE")
             raise typer.Exit(2)
         for cause in result["failures"]:
             out.print(f"[red]FAIL[/red] {cause}")
-        raise typer.Exit(0 if result["passed"] else 1)
+        for note in result["not_applicable"]:
+            out.print(f"n/a {note}")
+        words = {"ok": "OK", "not_ok": "NOT OK", "incomplete": "INCOMPLETE"}
+        out.print(f"outcome: {words[result['outcome']]}")
+        raise typer.Exit({"ok": 0, "not_ok": 1}.get(result["outcome"], 2))

@@ -38,15 +38,14 @@ def register(app: typer.Typer) -> None:
         Prints the page's address and the operator token; stops on Ctrl-C (the rig is left
         in its safe state).
         """
+        from rig.engine_host import EngineHost, EngineSpec
         from rig.errors import RigError
-        from rig.measure import open_session
         from rig.store import Store, default_store_root
         from rig.web.app import create_app
-        from rig.web.controller import RigController
         from rig.web.live import LiveHub
         from rig.web.server import bind, uvicorn_server
         from rig.web.settings import resolve_settings
-        from rig.web.simulated import simulated_session_factory
+        from rig.web.simulated import example_unit
 
         if simulated == (rig is not None):
             raise RigError("say which rig: --simulated (start the simulated rig) or --rig FILE "
@@ -56,17 +55,16 @@ def register(app: typer.Typer) -> None:
         settings = resolve_settings(host, port, store_root=the_store.root, token=token)
         hub = LiveHub()
         if simulated:
-            factory = simulated_session_factory(unit)
+            example_unit(unit)  # an unknown unit is refused here, before anything starts
             description = f"simulated rig (plant: example unit {unit})"
         else:
-            rig_path = rig
-
-            def factory():  # noqa: ANN202 - a context manager of the rig session
-                return open_session(rig=rig_path)
-
             description = f"rig {rig}"
-        controller = RigController(the_store, hub, factory, simulated=simulated,
-                                   description=description)
+        # The rig runs in the engine's own process (rig/engine_host.py): no page request,
+        # SSE client or analysis of this server can hold up its keepalive or acquisition.
+        controller = EngineHost(EngineSpec(
+            store=str(root), samples=None if samples is None else str(samples),
+            simulated_unit=unit if simulated else None,
+            rig_path=None if rig is None else str(rig), description=description), the_store, hub)
         web_app = create_app(settings, controller)
 
         try:

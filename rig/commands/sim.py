@@ -42,6 +42,10 @@ def register(app: typer.Typer) -> None:
             min=0.0005, max=1.0, help="SYNC period written in the rig config, s.")] = 0.002,
         stream_rate: Annotated[float, typer.Option(
             min=1.0, help="Transducer stream rate written in the rig config, Hz.")] = 500.0,
+        realtime_priority: Annotated[int | None, typer.Option(
+            min=1, max=99, help="SCHED_FIFO priority of the simulated devices (they stand in "
+            "for hardware a busy PC cannot starve), also written as [rig] realtime_priority "
+            "into the rig config. Default: $RIG_SIM_REALTIME_PRIORITY, else none.")] = None,
     ) -> None:
         """Start the simulated rig on 127.0.0.1 and serve until SIGINT/SIGTERM.
 
@@ -55,11 +59,15 @@ def register(app: typer.Typer) -> None:
             sim_rig = SimulatedRig(config, in_process=True, transducer=transducer.value,
                                    modbus=modbus.value, port_base=port_base, seed=seed,
                                    input_encoder=input_encoder, rig_config_path=rig_config,
-                                   sync_period_s=sync_period, stream_rate_Hz=stream_rate)
+                                   sync_period_s=sync_period, stream_rate_Hz=stream_rate,
+                                   realtime_priority=realtime_priority)
             addresses = sim_rig.start()
         except (PlantConfigError, ValueError, OSError) as exc:  # bad file, port taken, ...
             for line in str(exc).splitlines():
                 print(f"rig: error: {line}", file=sys.stderr)
             raise typer.Exit(2) from exc
+        from rig.realtime import apply_realtime_priority
+
+        apply_realtime_priority(sim_rig.realtime_priority, what="simulated rig")
         print(json.dumps(addresses), flush=True)
         raise typer.Exit(serve_until_signalled(sim_rig))

@@ -22,6 +22,7 @@ from rig.store import Store
 from rig.web.controller import RigController
 from rig.web.live import LiveHub
 from rig.web.settings import WebSettings
+from rig.web.workers import shutdown_workers
 
 STATIC = resources.files("rig.web") / "static"
 
@@ -52,6 +53,7 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
         finally:
             await asyncio.to_thread(controller.close)
             await hub.stop()
+            shutdown_workers()
 
     app = FastAPI(title="backlash-rig control page", version=__version__,
                   description=DESCRIPTION, lifespan=lifespan)
@@ -65,6 +67,9 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
     app.include_router(routes_control.router)
     app.include_router(routes_history.router)
     app.include_router(routes_live.router)
+    from rig.web import routes_spc
+
+    app.include_router(routes_spc.router)
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
 
     @app.get("/", include_in_schema=False)

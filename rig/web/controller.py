@@ -30,6 +30,7 @@ from rig.engine_record import json_safe
 from rig.engine_safety import PlanRejected, preflight
 from rig.errors import RigError
 from rig.measure import RigSession, measure_plan, run_campaign, run_meta, run_result
+from rig.outcome import campaign_outcome
 from rig.plan_estimate import estimate
 from rig.plans import Plan, campaign_plan, hysteresis_plan
 from rig.store import Store
@@ -427,7 +428,8 @@ class RigController:
         self.hub.add_event({"type": "state", "state": state, "result": self._last_result})
 
     def _options(self, req: RunRequest) -> EngineOptions:
-        return EngineOptions(torque_limit_Nm=req.torque_limit_Nm, profile=req.profile)
+        return EngineOptions(torque_limit_Nm=req.torque_limit_Nm, profile=req.profile,
+                             limits=req.limits.limits().model_dump())
 
     def _measure_run(self, req: RunRequest, session: RigSession, tap: TapStore
                      ) -> tuple[dict[str, Any], str, str | None]:
@@ -440,11 +442,13 @@ class RigController:
         runs = [run_result(o.to_dict(), limits) for o in outcomes]
         state = "completed" if engine.state == "completed" else "aborted"
         passed = state == "completed" and bool(runs) and all(r["passed"] for r in runs)
+        outcome = campaign_outcome([r["outcome"] for r in runs], state)
         failures = [c for r in runs for c in r["failures"]]
         if state == "aborted" and engine.stopping_reason:
             failures.append(f"run aborted: {engine.stopping_reason}")
         return ({"kind": "run", "status": state, "reason": engine.stopping_reason,
-                 "passed": passed, "failures": failures, "runs": runs},
+                 "passed": passed, "outcome": outcome, "limits": limits.model_dump(),
+                 "failures": failures, "runs": runs},
                 state, engine.stopping_reason)
 
     def _measure_campaign(self, req: RunRequest, session: RigSession, tap: TapStore

@@ -193,6 +193,7 @@ def _diagnosis(store: Store, campaign_id: str, suffix: str) -> str:
     """The campaign's diagnosis as ``suffix`` ("json" or "html"), computed once and cached
     beside the store (``<store>/web/diagnosis/``)."""
     from rig.web.report import diagnose_campaign_folder
+    from rig.web.workers import run_in_worker
 
     try:
         info = store.get_campaign(campaign_id)
@@ -204,7 +205,7 @@ def _diagnosis(store: Store, campaign_id: str, suffix: str) -> str:
     cache = folder / f"{campaign_id}.{suffix}"
     if not cache.is_file():
         try:
-            report, page = diagnose_campaign_folder(info.path)
+            report, page = run_in_worker(diagnose_campaign_folder, info.path)
         except Exception as exc:  # too few runs, unreadable runs: said, not a 500
             raise HTTPException(409, f"campaign {campaign_id} cannot be diagnosed: "
                                      f"{exc}") from exc

@@ -1,0 +1,44 @@
+"""Load: a campaign on the simulated rig started from the control page while 3 busy
+processes, a diagnosis and 20 live-stream clients run beside it (bench/load_scenario.py).
+
+Figures (issue 12's names): ``load_campaign_completed`` (1 or 0), ``load_samples_lost``,
+``load_max_keepalive_gap_s`` (the longest silence the simulated drive saw while enabled),
+``load_watchdog_s``, ``load_acquisition_jitter_p99_ms``; also ``load_missing_periods``.
+Target: completed, 0 samples lost, keepalive gap under half the watchdog.
+
+Then the same with real-time priority (``[rig] realtime_priority`` = 20 for the engine, the
+same for the simulated devices), the names prefixed ``load_rt_``: what SCHED_FIFO buys.
+``BENCH_LOAD_REPEATS`` (default 1) repeats the normal-scheduler scenario;
+``load_completed_runs`` counts the completed ones. ``BENCH_LOAD_RT=0`` skips the RT pass.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from typing import Any
+
+from bench.load_scenario import run_load_scenario
+
+UNITS = {"load_campaign_completed": "1/0", "load_samples_lost": "samples",
+         "load_missing_periods": "periods", "load_max_keepalive_gap_s": "s",
+         "load_watchdog_s": "s", "load_acquisition_jitter_p99_ms": "ms"}
+RT_PRIORITY = 20
+
+
+def run() -> Iterator[dict[str, Any]]:
+    repeats = int(os.environ.get("BENCH_LOAD_REPEATS", "1"))
+    completed = 0
+    for i in range(repeats):
+        figures = run_load_scenario()
+        completed += figures["load_campaign_completed"]
+        for name, unit in UNITS.items():
+            yield {"name": name, "value": figures[name], "unit": unit, "repeat": i,
+                   "state": figures["load_state"], "rows": figures["load_rows"]}
+    if repeats > 1:
+        yield {"name": "load_completed_runs", "value": completed, "unit": f"of {repeats}"}
+    if os.environ.get("BENCH_LOAD_RT", "1") != "0":
+        figures = run_load_scenario(realtime_priority=RT_PRIORITY)
+        for name, unit in UNITS.items():
+            yield {"name": name.replace("load_", "load_rt_", 1), "value": figures[name],
+                   "unit": unit, "priority": RT_PRIORITY, "state": figures["load_state"]}

@@ -1,0 +1,144 @@
+"""OK / not OK / incomplete with the limits in every record (issue 11, defects 3 and 4).
+
+Runs are measured on the simulated rig over the real protocols (``rig campaign run`` and
+``rig measure`` as processes; the Python API with a session for the locked input); the verdict
+is read back from run.json, campaign.json and ``--json``.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+from rig.campaign import SimulationSection
+from rig.measure import measure_plan, open_session, plant_config_for, run_meta
+from rig.outcome import campaign_outcome, run_outcome
+from rig.plans import LoopParams, hysteresis_plan
+from rig.store import Store
+from tests.test_measure_cli import TINY
+
+ROOT = Path(__file__).resolve().parents[1]
+RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
+UNIT = json.loads((ROOT / "rig/examples/units/seed000-pair1.json").read_text())
+
+
+def _rig(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([*RIG, *args], capture_output=True, text=True, cwd=cwd, timeout=180)
+
+
+@pytest.mark.parametrize(("run", "limits", "expected"), [
+    ({"status": "completed", "lost_motion_arcmin": 2.0}, {"lost_motion_arcmin_max": 3.0},
+     "ok"),
+    ({"status": "completed", "lost_motion_arcmin": 4.0}, {"lost_motion_arcmin_max": 3.0},
+     "not_ok"),
+    ({"status": "aborted", "reason": "E-stop"}, {"lost_motion_arcmin_max": 3.0}, "incomplete"),
+    ({"status": "aborted", "reason": "E-stop"}, {}, "incomplete"),
+    ({"status": "completed", "lost_motion_arcmin": None,
+      "errors": {"lost_motion_arcmin": "no loop"}}, {"lost_motion_arcmin_max": 3.0},
+     "incomplete"),
+    # a 50 % run cannot measure the stiffness (50..100 % of the rated torque): not applicable
+    ({"status": "completed", "stiffness_Nm_per_arcmin": None, "amplitude_pct": 50.0,
+      "lost_motion_arcmin": 2.0},
+     {"stiffness_Nm_per_arcmin_min": 20.0, "lost_motion_arcmin_max": 3.0}, "ok"),
+    ({"status": "completed", "stiffness_Nm_per_arcmin": 10.0, "amplitude_pct": 100.0},
+     {"stiffness_Nm_per_arcmin_min": 20.0}, "not_ok"),
+])
+def test_run_outcome_rules(run, limits, expected):
+    assert run_outcome(run, limits)[0] == expected
+
+
+def test_campaign_outcome_rules():
+    assert campaign_outcome(["ok", "ok"], "completed") == "ok"
+    assert campaign_outcome(["ok", "not_ok"], "aborted") == "not_ok"  # a known failure
+    assert campaign_outcome(["ok", "incomplete"], "completed") == "incomplete"
+    assert campaign_outcome(["ok"], "aborted") == "incomplete"
+    assert campaign_outcome([], "completed") == "incomplete"
+
+
+def test_every_record_carries_limits_and_outcome(tmp_path: Path):
+    store = tmp_path / "store"
+    docs = {}
+    for limit, code in (("9.0", 0), ("1.0", 1)):
+        camp = tmp_path / f"tiny-{code}.toml"
+        camp.write_text(TINY.replace("LIMIT", limit))
+        out = tmp_path / f"r{code}.json"
+        res = _rig("campaign", "run", str(camp), "--simulated", "--store", str(store),
+                   "--json", str(out), cwd=tmp_path)
+        assert res.returncode == code, res.stderr[-2000:]
+        assert ("outcome: OK" if code == 0 else "outcome: NOT OK") in res.stdout + res.stderr
+        docs[code] = json.loads(out.read_text())
+    for code, outcome in ((0, "ok"), (1, "not_ok")):
+        doc = docs[code]
+        assert doc["outcome"] == outcome
+        assert doc["limits"]["lost_motion_arcmin_max"] == (9.0 if code == 0 else 1.0)
+        (run,) = doc["runs"]
+        assert run["outcome"] == outcome and run["limits"] == doc["limits"]
+        run_json = json.loads((Path(run["path"]) / "run.json").read_text())
+        assert run_json["outcome"] == outcome and run_json["limits"] == doc["limits"]
+        campaign_json = json.loads((Path(doc["path"]) / "campaign.json").read_text())
+        assert campaign_json["outcome"] == outcome
+        assert campaign_json["limits"] == doc["limits"]
+
+
+def test_part_amplitude_run_stiffness_not_applicable(tmp_path: Path):
+    out = tmp_path / "run.json"
+    res = _rig("measure", "--simulated", "--store", str(tmp_path / "store"), "--rated-torque",
+               "10", "--amplitude", "50", "--steps", "2", "--pre-cycles", "0",
+               "--min-stiffness", "20", "--max-lost-motion", "9", "--json", str(out),
+               cwd=tmp_path)
+    doc = json.loads(out.read_text())
+    assert res.returncode == 0, (res.stdout[-1500:], res.stderr[-1500:])
+    assert doc["outcome"] == "ok" and doc["failures"] == []
+    assert any("stiffness" in n and "not applicable" in n for n in doc["not_applicable"])
+    stored = json.loads((Path(doc["path"]) / "run.json").read_text())
+    assert stored["outcome"] == "ok"
+    assert stored["limits"]["stiffness_Nm_per_arcmin_min"] == 20.0
+
+
+def test_an_estopped_run_is_incomplete_and_a_locked_input_names_the_run(tmp_path: Path):
+    """No --position: the input locked by hand at 90 deg is measured and recorded (the run is
+    pos090, test.input_angle_deg 90), and an E-stop leaves the run incomplete, not FAIL."""
+    store = Store(tmp_path / "store")
+    loop = LoopParams(rated_torque_Nm=10.0, steps_per_quarter=2, dwell_s=0.0, pre_cycles=0,
+                      extra_levels_pct=[3.0])
+    limits = {"lost_motion_arcmin_max": 9.0}
+    from rig.engine import EngineOptions
+
+    plant = plant_config_for(UNIT, SimulationSection(plant={"effects": {"friction": {
+        "enabled": True, "model": "lugre", "viscous_Nms_per_arcmin": 0.002}}}))
+    with open_session(simulated=True, plant=plant) as session:
+        session.io.lock_input(90.0, 30.0)  # as an operator would before a single run
+        _, outcomes = measure_plan(session, store, hysteresis_plan(loop), run_meta(
+            UNIT, session), options=EngineOptions(limits=limits, profile="nabtesco"))
+        (done,) = outcomes
+        started = threading.Event()
+        box = {}
+
+        def on_engine(engine):
+            box["engine"] = engine
+
+        def progress(event):
+            if event.kind == "run_started":
+                started.set()
+
+        thread = threading.Thread(target=lambda: box.setdefault("result", measure_plan(
+            session, store, hysteresis_plan(loop), run_meta(UNIT, session),
+            options=EngineOptions(limits=limits, profile="nabtesco"), progress=progress, on_engine=on_engine)),
+            daemon=True)
+        thread.start()
+        assert started.wait(60)
+        box["engine"].estop("operator E-stop")
+        thread.join(60)
+    run_json = json.loads((done.path / "run.json").read_text())
+    assert run_json["label"].startswith("pos090-") and done.label.startswith("pos090-")
+    assert run_json["test"]["input_angle_deg"] == pytest.approx(90.0, abs=0.05)
+    assert run_json["outcome"] == "ok" and run_json["limits"]["lost_motion_arcmin_max"] == 9.0
+    (stopped,) = box["result"][1]
+    stopped_json = json.loads((stopped.path / "run.json").read_text())
+    assert stopped.status == "aborted" and stopped.outcome == "incomplete"
+    assert stopped_json["outcome"] == "incomplete" and stopped_json["status"] == "aborted"

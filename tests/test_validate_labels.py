@@ -4,8 +4,10 @@ development sets' graders' semantics on hand-written reports, and malformed labe
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -110,3 +112,22 @@ def test_cli_refuses_unpaired_or_malformed_labels_in_one_line(tmp_path) -> None:
     bad.write_text(json.dumps({"c1": {"effect": "runout"}}))
     out = _rig("validate-diagnosis", "--cases-dir", str(tmp_path / "cases"), "--labels", str(bad))
     assert out.returncode == 2 and "no folder for labelled case(s) c1" in out.stderr
+
+
+def test_cli_reports_each_generator_apart(tmp_path) -> None:
+    """Our generator (one case) beside a labelled folder (one none trap of set B): two summary
+    lines and the JSON keyed by generator."""
+    src = Path(__file__).resolve().parent / "data" / "devset" / "b"
+    labels = json.loads((src / "labels.json").read_text())
+    shutil.copytree(src / "cases" / "ca1e0aa0a1e", tmp_path / "lab" / "cases" / "ca1e0aa0a1e")
+    lab = tmp_path / "lab" / "labels.json"
+    lab.write_text(json.dumps({"ca1e0aa0a1e": labels["ca1e0aa0a1e"]}))
+    out = _rig("validate-diagnosis", "--with-generator", "--cases", "1", "--cases-dir",
+               str(tmp_path / "lab" / "cases"), "--labels", str(lab), "--json",
+               str(tmp_path / "s.json"))
+    assert out.returncode == 0, out.stderr
+    gens = json.loads((tmp_path / "s.json").read_text())["generators"]
+    assert set(gens) == {"ours", "lab"} and gens["lab"]["cases"] == gens["ours"]["cases"] == 1
+    assert gens["lab"]["results"][0]["truth"] == "none"
+    assert "each generator apart:" in out.stdout
+    assert "  ours: " in out.stdout and "  lab: " in out.stdout

@@ -49,7 +49,7 @@ def _print_graded(summary: dict[str, Any], verbose: bool) -> None:
     ms = summary["median_shrink"]
     console.print(f"median shrink of correct verdicts: {'n/a' if ms is None else f'{ms:.2f}'} "
                   f"over {summary['shrinks']}; failures {summary['failures']}; median "
-                  f"{summary['median_seconds_per_case'] or 0.0:.2f} s per case")
+                  f"{summary['median_seconds_per_case'] or 0.0:.2f} s per case", soft_wrap=True)
     if verbose:
         for r in summary["results"]:
             got = (f"<{r['status']}>" if r["status"] != "ok"
@@ -77,7 +77,7 @@ def _ours(cases: int, seed: int, jobs: int, verbose: bool) -> dict[str, Any]:
             d["n"] += 1
             d["correct"] += int(r.correct)
     console.print("our generator by form and loading: " + ", ".join(
-        f"{k} {d['correct']}/{d['n']}" for k, d in sorted(by_form.items())))
+        f"{k} {d['correct']}/{d['n']}" for k, d in sorted(by_form.items())), soft_wrap=True)
 
     def pct(x: float | None) -> str:
         return "n/a" if x is None else f"{x:.1%}"
@@ -85,7 +85,8 @@ def _ours(cases: int, seed: int, jobs: int, verbose: bool) -> dict[str, Any]:
     console.print(f"correct verdicts (in vocabulary + null): {pct(old['correct_share'])}"
                   f" (target >= 95 %); false alarms on null cases: "
                   f"{pct(old['false_alarm_share'])} (target 0); out-of-vocabulary "
-                  f"unexplained/ambiguous: {pct(old['oov_unexplained_or_ambiguous_share'])}")
+                  f"unexplained/ambiguous: {pct(old['oov_unexplained_or_ambiguous_share'])}",
+                  soft_wrap=True)
     console.print("targets met" if meets_targets(old) else "[red]targets NOT met[/red]")
     missing = [k for k in KINDS if k not in old["confusion"]]
     if missing:

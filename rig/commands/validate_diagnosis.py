@@ -1,64 +1,150 @@
-"""``rig validate-diagnosis [--cases N] [--seed S]``: the diagnosis on withheld effects."""
+"""``rig validate-diagnosis``: the diagnosis on withheld effects, ours or a labelled folder.
+
+    rig validate-diagnosis [--cases N] [--seed S] [--jobs J] [--json SUMMARY.json]
+    rig validate-diagnosis --cases-dir DIR --labels LABELS.json [--cases-dir ... --labels ...]
+                           [--with-generator] [--jobs J] [--json SUMMARY.json]
+"""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
+from rig.errors import RigError
+
 console = Console()
+
+
+def _print_graded(summary: dict[str, Any], verbose: bool) -> None:
+    """Per-effect confusion, per-category accuracy, false alarms, also, shrink, summary line."""
+    from rig.validate_cases import summary_line
+
+    name = summary["generator"]
+    table = Table(title=f"{name}: confusion (true effect[+also] -> verdict[+also])")
+    for col in ("true", "cases", "correct", "verdicts"):
+        table.add_column(col)
+    for key in sorted(summary["confusion"]):
+        pe = summary["per_effect"][key]
+        row = summary["confusion"][key]
+        table.add_row(key, str(pe["n"]), f"{pe['correct']}/{pe['n']}", ", ".join(
+            f"{v} x{n}" for v, n in sorted(row.items(), key=lambda kv: -kv[1])))
+    console.print(table)
+    cats = summary["per_category"]
+    if len(cats) > 1 or "-" not in cats:
+        console.print("by category: " + ", ".join(
+            f"{c} {d['correct']}/{d['n']}" for c, d in sorted(cats.items())))
+    ac = summary["also_counts"]
+    console.print(f"false alarms on none: {summary['false_alarms']}/{summary['none_cases']} "
+                  "(any verdict other than none, or any also entry)")
+    if summary["two_effect_cases"]:
+        console.print(f"also on {summary['two_effect_cases']} two-effect cases: "
+                      f"{ac['listed']}/{ac['labelled']} listed, "
+                      f"{ac['reported_true']}/{ac['reported']} reported entries true")
+    ms = summary["median_shrink"]
+    console.print(f"median shrink of correct verdicts: {'n/a' if ms is None else f'{ms:.2f}'} "
+                  f"over {summary['shrinks']}; failures {summary['failures']}; median "
+                  f"{summary['median_seconds_per_case'] or 0.0:.2f} s per case", soft_wrap=True)
+    if verbose:
+        for r in summary["results"]:
+            got = (f"<{r['status']}>" if r["status"] != "ok"
+                   else r["verdict"] + "".join("+" + a for a in r["also"]))
+            form = f"{r['form']}/" if r.get("form") else ""
+            console.print(f"  {r['case']:<16} {form + r['category']:<20} {r['truth_key']:<42} -> "
+                          f"{got:<40} {'ok' if r['correct'] else '--'}"
+                          + (f"  {r['error']}" if r.get("error") else ""), soft_wrap=True)
+    console.print(f"[bold]{summary_line(summary)}[/bold]", soft_wrap=True)
+
+
+def _ours(cases: int, seed: int, jobs: int, verbose: bool) -> dict[str, Any]:
+    from rig.validate import KINDS, graded_validation, meets_targets, summarise
+
+    with Progress(console=console, transient=True) as progress:
+        task = progress.add_task("our generator: diagnosing campaigns", total=cases)
+        results, graded = graded_validation(cases, seed, jobs,
+                                            progress=lambda _r: progress.advance(task))
+    old = summarise(results)
+    _print_graded(graded, verbose)
+    by_form: dict[str, dict[str, int]] = {}
+    for r in results:
+        for key in (f"form {r.case.kind}:{r.case.form}", f"loading {r.case.loading}"):
+            d = by_form.setdefault(key, {"n": 0, "correct": 0})
+            d["n"] += 1
+            d["correct"] += int(r.correct)
+    console.print("our generator by form and loading: " + ", ".join(
+        f"{k} {d['correct']}/{d['n']}" for k, d in sorted(by_form.items())), soft_wrap=True)
+
+    def pct(x: float | None) -> str:
+        return "n/a" if x is None else f"{x:.1%}"
+
+    console.print(f"correct verdicts (in vocabulary + null): {pct(old['correct_share'])}"
+                  f" (target >= 95 %); false alarms on null cases: "
+                  f"{pct(old['false_alarm_share'])} (target 0); out-of-vocabulary "
+                  f"unexplained/ambiguous: {pct(old['oov_unexplained_or_ambiguous_share'])}",
+                  soft_wrap=True)
+    console.print("targets met" if meets_targets(old) else "[red]targets NOT met[/red]")
+    missing = [k for k in KINDS if k not in old["confusion"]]
+    if missing:
+        console.print(f"(kinds not drawn at {cases} cases: {', '.join(missing)})")
+    return {**graded, "by_form": by_form, "figures": old}
 
 
 def register(app: typer.Typer) -> None:
     @app.command("validate-diagnosis")
     def validate_diagnosis(
-        cases: Annotated[int, typer.Option(min=1, help="Number of simulated campaigns.")] = 33,
-        seed: Annotated[int, typer.Option(help="Seed of the case draws.")] = 0,
+        cases: Annotated[int, typer.Option(
+            min=1, help="Number of campaigns from our generator.")] = 33,
+        seed: Annotated[int, typer.Option(help="Seed of our generator's case draws.")] = 0,
+        cases_dir: Annotated[list[Path] | None, typer.Option(
+            "--cases-dir", help="A folder of labelled campaigns (one folder per case); "
+            "repeatable, each with its --labels.")] = None,
+        labels: Annotated[list[Path] | None, typer.Option(
+            "--labels", help="labels.json of the --cases-dir in the same place "
+            "({case_id: {effect, acceptable, also, category, ...}}).")] = None,
+        with_generator: Annotated[bool, typer.Option(
+            "--with-generator", help="Also run our generator beside the --cases-dir sets.")
+        ] = False,
+        jobs: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 1,
+        verbose: Annotated[bool, typer.Option("--verbose", help="One line per case.")] = False,
         json_file: Annotated[
             Path | None, typer.Option("--json", help="Write the summary as JSON.")
         ] = None,
     ) -> None:
-        """Generate campaigns with one effect withheld (plus null and out-of-vocabulary cases),
-        diagnose them blind, print the confusion matrix and the four figures."""
-        from rig.validate import KINDS, iter_validation, meets_targets, summarise
+        """Diagnose labelled campaigns blind and grade them: per-effect confusion, false alarms,
+        also recall/precision, median shrink, one summary line per generator. Without
+        --cases-dir: campaigns from our own generator (rig/validate.py)."""
+        from rig.validate_cases import generator_name, grade_folder, summarise_graded
 
-        results = []
-        with Progress(console=console) as progress:
-            task = progress.add_task("diagnosing campaigns", total=cases)
-            for res in iter_validation(cases, seed):
-                results.append(res)
-                progress.advance(task)
-        summary = summarise(results)
-        verdicts = sorted({r.verdict for r in results})
-        table = Table(title="Confusion matrix (true effect -> verdict)")
-        table.add_column("true")
-        for v in verdicts:
-            table.add_column(v, justify="right")
-        for kind in KINDS:
-            row = summary["confusion"].get(kind)
-            if row:
-                table.add_row(kind, *[str(row.get(v, "")) for v in verdicts])
-        console.print(table)
+        dirs, labs = list(cases_dir or []), list(labels or [])
+        if len(dirs) != len(labs):
+            raise RigError(f"--cases-dir given {len(dirs)} time(s), --labels {len(labs)}: "
+                           "give one labels.json per folder of cases")
+        summaries = []
+        if not dirs or with_generator:
+            summaries.append(_ours(cases, seed, jobs, verbose))
+        for d, lab in zip(dirs, labs, strict=True):
+            name = generator_name(d)
+            with Progress(console=console, transient=True) as progress:
+                task = progress.add_task(f"{name}: diagnosing campaigns")
+                records = grade_folder(d, lab, jobs,
+                                       progress=lambda _r, t=task: progress.advance(t))
+            summary = summarise_graded(name, records)
+            summary["cases_dir"], summary["labels"] = str(d), str(lab)
+            _print_graded(summary, verbose)
+            summaries.append(summary)
+        if len(summaries) > 1:
+            from rig.validate_cases import summary_line
 
-        def pct(x: float | None) -> str:
-            return "n/a" if x is None else f"{x:.1%}"
-
-        console.print(f"correct verdicts (in vocabulary + null): {pct(summary['correct_share'])}"
-                      " (target >= 95 %)")
-        console.print(f"false alarms on null cases: {pct(summary['false_alarm_share'])}"
-                      " (target <= 5 %)")
-        console.print("out-of-vocabulary called unexplained/ambiguous: "
-                      f"{pct(summary['oov_unexplained_or_ambiguous_share'])} (target >= 80 %)")
-        ms = summary["median_shrink"]
-        console.print(f"median held-out shrink: {'n/a' if ms is None else f'{ms:.3f}'}"
-                      " (target >= 0.7)")
-        console.print(f"mean diagnosis time per case: {summary['seconds_per_case']:.2f} s")
-        console.print("targets met" if meets_targets(summary) else "[red]targets NOT met[/red]")
+            console.print("each generator apart:")
+            for s in summaries:
+                console.print("  " + summary_line(s), soft_wrap=True)
         if json_file is not None:
             json_file.parent.mkdir(parents=True, exist_ok=True)
-            json_file.write_text(json.dumps(summary, indent=2) + "\n")
+            out = summaries[0] if len(summaries) == 1 else {
+                "generators": {s["generator"]: s for s in summaries}}
+            json_file.write_text(json.dumps(out, indent=2) + "\n")

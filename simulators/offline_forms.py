@@ -1,0 +1,81 @@
+"""Other functional forms and sensor artifacts for generated campaigns (outside the plant).
+
+The plant (simulators/plant_model.py) has one law per effect. A validation that only ever saw
+those laws would test self-recognition, so the generator (rig/validate.py) adds, on the
+plant's output columns, other forms a lab's data may hold: a Hertzian power-law stiffening, a
+smooth clearance take-up, loading profiles other than steps, a delayed torque channel, the
+ringing of an impact at the play crossing, a coarse encoder. Each function names the equation
+it follows. Units: torque N*m, angle deg (columns) or arcmin/arcsec (effect sizes), time s.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def sine_profile(rated_Nm: float, n: int, periods: float = 1.5) -> np.ndarray:
+    """Sinusoidal loading ``T(t) = T_rated sin(2 pi periods k / n)`` (N*m), one value per
+    sample: 0 -> +T -> -T -> +T -> 0 over 1.5 periods (a GB/T-style continuous cycle)."""
+    k = np.arange(n)
+    return rated_Nm * np.sin(2.0 * math.pi * periods * k / max(n - 1, 1))
+
+
+def ramp_profile(rated_Nm: float, n: int) -> np.ndarray:
+    """Constant-rate triangular loading (N*m): 0 -> +T -> -T -> +T -> 0 at one torque rate
+    ``dT/dt = 6 T_rated / duration`` (the path is 6 T_rated long), no dwell."""
+    u = np.linspace(0.0, 6.0, n)
+    knots = np.array([0.0, 1.0, 3.0, 5.0, 6.0])
+    return rated_Nm * np.interp(u, knots, [0.0, 1.0, -1.0, 1.0, 0.0])
+
+
+def power_law_twist_arcmin(flange_Nm: np.ndarray, rated_Nm: float, twist_at_rated_arcmin: float,
+                           exponent: float) -> np.ndarray:
+    """Hertzian contact hardening: extra flank twist ``sign(T) d (|T| / T_rated)^p`` (arcmin),
+    concave for p < 1 like a Hertzian contact (deflection ~ load^(2/3), Johnson, Contact
+    Mechanics, eq. 4.23); never saturates. Applied to the flange torque, which is zero inside
+    the play, so the term is continuous."""
+    t = np.asarray(flange_Nm, dtype=float)
+    return np.sign(t) * twist_at_rated_arcmin * (np.abs(t) / rated_Nm) ** exponent
+
+
+def smooth_takeup_twist_arcmin(flange_Nm: np.ndarray, clearance_arcmin: float,
+                               knee_Nm: float) -> np.ndarray:
+    """A bearing clearance taken up smoothly: extra twist ``sign(T) c tanh(|T| / T_k)``
+    (arcmin), ``c`` the clearance seen at the output, ``T_k`` the take-up torque; above a few
+    T_k the clearance is closed and the nominal slope is left (a saturating take-up, unlike
+    a Hertzian hardening)."""
+    t = np.asarray(flange_Nm, dtype=float)
+    return np.sign(t) * clearance_arcmin * np.tanh(np.abs(t) / knee_Nm)
+
+
+def delayed(t_s: np.ndarray, values: np.ndarray, lag_s: float) -> np.ndarray:
+    """A channel that lags by ``lag_s`` (s): ``x(t - lag)``, linearly interpolated, held at
+    the first value before the start (a sensor / acquisition delay between channels)."""
+    return np.interp(np.asarray(t_s) - lag_s, t_s, values)
+
+
+def impact_ringing_arcsec(t_s: np.ndarray, flange_Nm: np.ndarray, amplitude_arcsec: float,
+                          frequency_Hz: float, decay_s: float, contact_Nm: float = 1e-9
+                          ) -> np.ndarray:
+    """Ringing after each impact at the play crossing (arcsec): at every sample where the
+    flange torque leaves zero (contact after a float), a damped oscillation
+    ``s A exp(-t/tau) sin(2 pi f t)`` of the output (the impulse response of the
+    output inertia on the mesh spring), ``s`` the flank's sign."""
+    t = np.asarray(t_s, dtype=float)
+    f = np.asarray(flange_Nm, dtype=float)
+    touching = np.abs(f) > contact_Nm
+    onsets = np.flatnonzero(touching[1:] & ~touching[:-1]) + 1
+    out = np.zeros_like(t)
+    for k in onsets:
+        dt = t[k:] - t[k]
+        ring = np.exp(-dt / decay_s) * np.sin(2.0 * math.pi * frequency_Hz * dt)
+        out[k:] += math.copysign(amplitude_arcsec, f[k]) * ring
+    return out
+
+
+def center_distance_change_mm(play_change_um: float, pressure_angle_deg: float) -> float:
+    """The center-distance change (mm) that changes the circumferential play by
+    ``play_change_um``: ``dj = -2 tan(alpha) da`` (seed 000 eq. (3))."""
+    return -play_change_um / 1000.0 / (2.0 * math.tan(math.radians(pressure_angle_deg)))

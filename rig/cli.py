@@ -3,8 +3,14 @@
 from __future__ import annotations
 
 import importlib
+import os
 import pkgutil
+import signal
 import sys
+import tempfile
+import time
+import traceback
+from pathlib import Path
 
 import typer
 
@@ -60,8 +66,36 @@ def main() -> None:
     Usage errors exit 2 (click's rule); the project's own errors (bad files, device faults,
     metrics that cannot be computed) are printed as one line on stderr and exit 2.
     """
+    signal.signal(signal.SIGTERM, _terminate_like_ctrl_c)
     try:
         app()
     except (RigError, DeviceError, AnalysisError) as exc:
         print(f"rig: error: {exc}", file=sys.stderr)
         sys.exit(2)
+    except Exception as exc:  # a bug: one line, exit 2 (never 1, "a limit failed"), a log
+        log_file = _write_crash_log()
+        print(f"rig: internal error: {type(exc).__name__}: {exc} (a bug; the traceback is "
+              f"in {log_file})", file=sys.stderr)
+        sys.exit(2)
+
+
+def _terminate_like_ctrl_c(signum: int, frame: object) -> None:
+    """SIGTERM (a service manager, ``kill``) stops a measurement as Ctrl-C does: the rig goes
+    to its safe state at once and the run and campaign are closed as aborted."""
+    raise KeyboardInterrupt(f"signal {signum} (SIGTERM)")
+
+
+def _write_crash_log() -> Path:
+    """The current exception's traceback in ``$RIG_LOG_DIR`` (default
+    ``~/.cache/backlash-rig/logs``, else the temporary folder); its path."""
+    folder = Path(os.environ.get("RIG_LOG_DIR") or Path.home() / ".cache" / "backlash-rig"
+                  / "logs")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        folder = Path(tempfile.gettempdir())
+    stamp = time.strftime("%Y%m%dT%H%M%S")
+    path = folder / f"rig-crash-{stamp}-{os.getpid()}.log"
+    path.write_text(f"rig {' '.join(sys.argv[1:])}\n{traceback.format_exc()}",
+                    encoding="utf-8")
+    return path

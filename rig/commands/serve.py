@@ -52,7 +52,8 @@ def register(app: typer.Typer) -> None:
                            "(a rig configuration)")
         root = store if store is not None else default_store_root()
         the_store = Store(root, samples=samples)
-        settings = resolve_settings(host, port, store_root=the_store.root, token=token)
+        settings = resolve_settings(host, port, store_root=the_store.root, token=token,
+                                    check_host=True)
         hub = LiveHub()
         if simulated:
             example_unit(unit)  # an unknown unit is refused here, before anything starts

@@ -20,9 +20,10 @@ from fastapi.staticfiles import StaticFiles
 from rig import __version__
 from rig.store import Store
 from rig.web.controller import RigController
+from rig.web.guard import GuardMiddleware
 from rig.web.live import LiveHub
 from rig.web.settings import WebSettings
-from rig.web.workers import shutdown_workers
+from rig.web.workers import shutdown_workers, warm_up
 
 STATIC = resources.files("rig.web") / "static"
 
@@ -48,6 +49,7 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         hub.start()
         controller.start()
+        warm_up("preview")
         try:
             yield
         finally:
@@ -70,6 +72,7 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
     from rig.web import routes_spc
 
     app.include_router(routes_spc.router)
+    app.add_middleware(GuardMiddleware, loopback_only=settings.check_host)
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
 
     @app.get("/", include_in_schema=False)

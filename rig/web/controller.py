@@ -60,6 +60,42 @@ def build_plan(req: RunRequest) -> Plan:
     return campaign_plan(loop, req.axes.axes())
 
 
+def compute_preview(req: RunRequest, facts: dict[str, Any]) -> dict[str, Any]:
+    """Steps, duration estimate and whether the plan fits the rig described by ``facts``
+    (:meth:`RigController.preview_facts`); ControlError while a fault is latched."""
+    faults = facts.get("faults") or []
+    if faults:
+        listed = "; ".join(f"{f['device']}: {f['detail']}" for f in faults)
+        raise ControlError(f"preview refused: a fault is latched ({listed}). Remove its "
+                           f"cause, then Reset faults (POST /api/devices/reset-faults)")
+    plan = build_plan(req)
+    steps = list(plan.steps())
+    est = estimate(steps)
+    problems: list[str] = []
+    limit = None
+    if facts.get("connected"):
+        limit = facts["torque_limit_Nm"]
+        if req.torque_limit_Nm is not None:
+            limit = min(limit, req.torque_limit_Nm)
+        try:
+            preflight(steps, limit, has_input_motor=facts["has_input_motor"],
+                      has_climate=facts["has_climate"])
+        except PlanRejected as exc:
+            problems.append(str(exc))
+    else:
+        problems.append("no rig connected: the plan cannot be checked against a rig")
+    model, assumptions = model_summary(req)
+    listing = [line.strip() for line in plan.listing()[:PREVIEW_LINES]]
+    return json_safe({
+        "name": plan.name, "n_steps": len(steps), "n_runs": est.n_runs,
+        "estimated_s": est.total_s, "dwell_s": est.dwell_s, "steps": listing,
+        "truncated": len(steps) > len(listing), "torque_limit_Nm": limit,
+        "amplitude_Nm": req.plan.loop_params().amplitude_Nm,
+        "fits": not problems, "problems": problems, "assumptions": assumptions,
+        "model": model,
+    })
+
+
 def model_summary(req: RunRequest) -> tuple[dict[str, Any] | None, list[str]]:
     """The reference nominal model's loop for the unit (arcmin, N*m/arcmin), or None."""
     from rig.analyse import nominal_model_for_unit, resolve_profile
@@ -383,36 +419,20 @@ class RigController:
 
     # ------------------------------------------------------------------ preview
 
+    def preview_facts(self) -> dict[str, Any]:
+        """What a plan preview needs of the rig (cheap: no plan is built here, so previews
+        can be computed outside the engine's process): the torque limit (N*m), the input
+        motor and climate chamber, and the latched faults."""
+        session = self.session
+        return {"connected": session is not None,
+                "torque_limit_Nm": None if session is None else session.io.torque_limit_Nm,
+                "has_input_motor": bool(session is not None and session.io.has_input_motor),
+                "has_climate": bool(session is not None and session.io.has_climate),
+                "faults": self.faults()}
+
     def preview(self, req: RunRequest) -> dict[str, Any]:
         """Steps, duration estimate and whether the plan fits the rig (nothing moves)."""
-        self._refuse_if_faulted("preview")
-        plan = build_plan(req)
-        steps = list(plan.steps())
-        est = estimate(steps)
-        problems: list[str] = []
-        session = self.session
-        limit = None
-        if session is not None:
-            limit = session.io.torque_limit_Nm
-            if req.torque_limit_Nm is not None:
-                limit = min(limit, req.torque_limit_Nm)
-            try:
-                preflight(steps, limit, has_input_motor=session.io.has_input_motor,
-                          has_climate=session.io.has_climate)
-            except PlanRejected as exc:
-                problems.append(str(exc))
-        else:
-            problems.append("no rig connected: the plan cannot be checked against a rig")
-        model, assumptions = model_summary(req)
-        listing = [line.strip() for line in plan.listing()[:PREVIEW_LINES]]
-        return json_safe({
-            "name": plan.name, "n_steps": len(steps), "n_runs": est.n_runs,
-            "estimated_s": est.total_s, "dwell_s": est.dwell_s, "steps": listing,
-            "truncated": len(steps) > len(listing), "torque_limit_Nm": limit,
-            "amplitude_Nm": req.plan.loop_params().amplitude_Nm,
-            "fits": not problems, "problems": problems, "assumptions": assumptions,
-            "model": model,
-        })
+        return compute_preview(req, self.preview_facts())
 
     # ------------------------------------------------------------------ commands
 

@@ -7,14 +7,20 @@ its safe state, and a stop must never wait for a login.
 
 from __future__ import annotations
 
+import asyncio
 import json
+import threading
+import time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from importlib import resources
 from typing import Any
 
 from fastapi import APIRouter, HTTPException, Request
 
+from rig.errors import RigError
 from rig.web.auth import Operator, is_operator
-from rig.web.controller import ControlError, RigController
+from rig.web.controller import ControlError, RigController, compute_preview
 from rig.web.models import (
     ErrorBody,
     InputLockRequest,
@@ -27,6 +33,7 @@ from rig.web.models import (
     TareResult,
     UnitExample,
 )
+from rig.web.workers import run_in_worker
 
 router = APIRouter(prefix="/api", tags=["control"])
 
@@ -54,11 +61,55 @@ def status(request: Request) -> dict[str, Any]:
     return _controller(request).status(is_operator(request))
 
 
-@router.post("/plan/preview", response_model=PlanPreview, responses={**BAD_BODY, **CONFLICT},
+PREVIEWS_AT_ONCE = 2
+"""Plan previews computed at the same time (the others wait up to PREVIEW_WAIT_S, then 429)."""
+PREVIEW_WAIT_S = 10.0
+PREVIEW_RATE = (10, 10.0)
+"""At most 10 previews per client in 10 s (429 beyond): a page previews on a click."""
+_preview_slots = threading.BoundedSemaphore(PREVIEWS_AT_ONCE)
+_preview_times: dict[str, deque[float]] = {}
+_preview_lock = threading.Lock()
+TOO_MANY = {429: {"model": ErrorBody, "description": "Too many previews: wait and retry."}}
+
+
+def _preview_allowed(client: str) -> bool:
+    n, window = PREVIEW_RATE
+    now = time.monotonic()
+    with _preview_lock:
+        times = _preview_times.setdefault(client, deque())
+        while times and now - times[0] > window:
+            times.popleft()
+        if len(times) >= n:
+            return False
+        times.append(now)
+        if len(_preview_times) > 1000:  # forget idle clients
+            for key in [k for k, v in _preview_times.items() if not v]:
+                del _preview_times[key]
+        return True
+
+
+@router.post("/plan/preview", response_model=PlanPreview,
+             responses={**BAD_BODY, **CONFLICT, **TOO_MANY},
              summary="Preview a run or campaign: steps, estimated duration, fits the rig "
                      "(409 while a fault is latched)")
 def preview(request: Request, body: RunRequest) -> dict[str, Any]:
-    return _do(lambda: _controller(request).preview(body))
+    """Computed here, in the web server (bounded, rate-limited per client), from the rig's
+    facts: never in the engine's process, never holding up the E-stop."""
+    client = request.client.host if request.client else "?"
+    if not _preview_allowed(client):
+        raise HTTPException(429, f"more than {PREVIEW_RATE[0]} previews in "
+                                 f"{PREVIEW_RATE[1]:g} s from {client}: wait and retry")
+    facts = _do(_controller(request).preview_facts)
+    if not _preview_slots.acquire(timeout=PREVIEW_WAIT_S):
+        raise HTTPException(429, "the page is busy computing other previews: retry")
+    try:
+        # in the preview worker process: a plan of 100,000 steps holds no thread of this
+        # server (and its GIL) for seconds
+        return run_in_worker(compute_preview, body, facts, pool="preview", timeout_s=120)
+    except RigError as exc:
+        raise HTTPException(409, str(exc)) from exc
+    finally:
+        _preview_slots.release()
 
 
 @router.post("/control/start", response_model=Message,
@@ -87,10 +138,16 @@ def abort(request: Request, _token: Operator) -> dict[str, Any]:
     return {"ok": True, "message": _do(_controller(request).abort)}
 
 
+_ESTOP = ThreadPoolExecutor(max_workers=2, thread_name_prefix="estop")
+"""The E-stop's own threads: a full request thread pool (previews, history) never delays it."""
+
+
 @router.post("/control/estop", response_model=Message,
              summary="E-stop: zero torque and the drive disabled, always (no token needed)")
-def estop(request: Request) -> dict[str, Any]:
-    return {"ok": True, "message": _controller(request).estop()}
+async def estop(request: Request) -> dict[str, Any]:
+    controller = _controller(request)
+    message = await asyncio.get_running_loop().run_in_executor(_ESTOP, controller.estop)
+    return {"ok": True, "message": message}
 
 
 @router.post("/devices/tare", response_model=TareResult, responses={**AUTH, **CONFLICT},

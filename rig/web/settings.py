@@ -42,6 +42,9 @@ class WebSettings:
     store_root: Path
     token: str
     token_source: str
+    check_host: bool = False
+    """Refuse requests whose Host is not the loopback (rig serve on 127.0.0.1: DNS
+    rebinding); off for in-process test clients."""
 
     @property
     def url(self) -> str:
@@ -90,7 +93,8 @@ def resolve_token(store_root: Path, token: str | None) -> tuple[str, str]:
 
 
 def resolve_settings(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
-                     store_root: Path, token: str | None = None) -> WebSettings:
+                     store_root: Path, token: str | None = None,
+                     check_host: bool = False) -> WebSettings:
     """Check the address and resolve the token; WebSettingsError says what to change."""
     if not 0 <= port <= 65535:
         raise WebSettingsError(f"--port must be 0..65535, got {port}")
@@ -102,4 +106,4 @@ def resolve_settings(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
             f"Give --token TOKEN (or set ${TOKEN_ENV}), or bind to 127.0.0.1.")
     value, source = resolve_token(store_root, token)
     return WebSettings(host=host, port=port, store_root=store_root, token=value,
-                       token_source=source)
+                       token_source=source, check_host=check_host and is_loopback(host))

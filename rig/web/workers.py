@@ -17,23 +17,33 @@ from typing import Any, TypeVar
 
 from rig.errors import RigError
 
-__all__ = ["run_in_worker", "shutdown_workers"]
+__all__ = ["run_in_worker", "shutdown_workers", "warm_up"]
 
 T = TypeVar("T")
-WORKERS = 1
-"""Worker processes (one is enough: page diagnoses are cached once computed)."""
+POOLS = {"analysis": 1, "preview": 1}
+"""Worker processes per pool: "analysis" (diagnosis, quality view: cached once computed) and
+"preview" (plan previews), so that neither waits for the other."""
 
 _lock = threading.Lock()
-_pool: ProcessPoolExecutor | None = None
+_pools: dict[str, ProcessPoolExecutor] = {}
 
 
-def _executor() -> ProcessPoolExecutor:
-    global _pool
+def _executor(pool: str) -> ProcessPoolExecutor:
     with _lock:
-        if _pool is None:
-            _pool = ProcessPoolExecutor(max_workers=WORKERS,
-                                        mp_context=multiprocessing.get_context("spawn"))
-        return _pool
+        if pool not in _pools:
+            _pools[pool] = ProcessPoolExecutor(max_workers=POOLS[pool],
+                                               mp_context=multiprocessing.get_context("spawn"))
+        return _pools[pool]
+
+
+def _ready() -> bool:
+    return True
+
+
+def warm_up(*pools: str) -> None:
+    """Start the pools' processes now (a first request then does not wait for imports)."""
+    for pool in pools:
+        _executor(pool).submit(_ready)
 
 
 def _call(fn: Callable[..., T], *args: Any) -> tuple[bool, Any]:
@@ -45,19 +55,20 @@ def _call(fn: Callable[..., T], *args: Any) -> tuple[bool, Any]:
         return False, str(exc) or type(exc).__name__
 
 
-def run_in_worker(fn: Callable[..., T], *args: Any, timeout_s: float = 600.0) -> T:
-    """``fn(*args)`` in the worker process; an error there is raised here as a RigError
-    with its message."""
-    ok, value = _executor().submit(_call, fn, *args).result(timeout=timeout_s)
+def run_in_worker(fn: Callable[..., T], *args: Any, timeout_s: float = 600.0,
+                  pool: str = "analysis") -> T:
+    """``fn(*args)`` in a worker process of ``pool``; an error there is raised here as a
+    RigError with its message."""
+    ok, value = _executor(pool).submit(_call, fn, *args).result(timeout=timeout_s)
     if not ok:
         raise RigError(value)
     return value
 
 
 def shutdown_workers() -> None:
-    """Stop the worker process (the app's shutdown)."""
-    global _pool
+    """Stop the worker processes (the app's shutdown)."""
     with _lock:
-        pool, _pool = _pool, None
-    if pool is not None:
+        pools = list(_pools.values())
+        _pools.clear()
+    for pool in pools:
         pool.shutdown(wait=False, cancel_futures=True)

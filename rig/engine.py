@@ -31,6 +31,7 @@ import numpy as np
 
 from drivers.errors import DeviceError, DeviceTimeout
 from rig.engine_events import EventHub, ProgressEvent
+from rig.engine_frozen import FrozenTwistWatch
 from rig.engine_io import RigIO
 from rig.engine_merge import ChannelMerger, MergedRow
 from rig.engine_record import OpenRun, RunOutcome
@@ -123,6 +124,7 @@ class Engine:
         self._stopping: str | None = None
         self._merger = ChannelMerger()
         self._dropped_at_begin = 0
+        self._frozen: FrozenTwistWatch | None = None
         self._recent: deque[MergedRow] = deque()
         self._open: OpenRun | None = None
         self._setpoint = 0.0
@@ -372,6 +374,11 @@ class Engine:
             if self._open is not None:
                 self._open.append(rows, self._setpoint, self._step_index + 1,
                                   self._sample_window)
+            watch = self._frozen if self._open is not None else None
+            frozen = None if watch is None else watch.update(
+                (r.t_mono_s, r.torque_Nm, r.output_angle_deg) for r in rows)
+        if frozen is not None:
+            self._trip(frozen)
 
     def _wait_first_rows(self) -> None:
         deadline = time.monotonic() + max(2.0, self.options.stale_timeout_s)
@@ -604,6 +611,7 @@ class Engine:
         open_run = OpenRun(recorder, label, time.monotonic(), profile=self.options.profile,
                            limits=limits_dict(self.options.limits))
         self._dropped_at_begin = self._dropped_total()
+        self._frozen = frozen_watch(meta, test)
         with self._lock:
             self._open = open_run
         self._zero_before = None
@@ -649,6 +657,25 @@ class Engine:
         self.outcomes.append(outcome)
         self._publish("run_finished", message=f"run {open_run.label} completed",
                       data=outcome.to_dict())
+
+
+def frozen_watch(meta: dict[str, Any], test: dict[str, Any]) -> FrozenTwistWatch | None:
+    """The frozen-twist watch of a run (rig/engine_frozen.py), from its sensors, rated torque
+    and the unit's nominal model; None when the run says too little to judge."""
+    from rig.analyse import nominal_model_for_unit
+
+    counts = (meta.get("sensors") or {}).get("encoder_counts_per_rev")
+    rated = test.get("rated_torque_Nm")
+    if not isinstance(counts, int | float) or not isinstance(rated, int | float) or \
+            counts <= 0 or rated <= 0:
+        return None
+    model, _ = nominal_model_for_unit(meta.get("unit") or {}, float(rated))
+    stiffness = getattr(model, "stiffness_Nm_per_arcmin", None)
+    play = getattr(model, "play_arcmin", None)
+    good = [v if isinstance(v, int | float) and math.isfinite(v) and v > 0 else None
+            for v in (stiffness, play)]
+    device = (meta.get("sensors") or {}).get("output_encoder") or "encoder"
+    return FrozenTwistWatch(float(counts), float(rated), good[0], good[1], str(device))
 
 
 def limits_dict(limits: dict[str, Any] | None) -> dict[str, Any]:

@@ -42,6 +42,7 @@ FAULTS: dict[str, tuple[Inject, tuple[str, ...]]] = {
     "encoder heartbeat loss": (lambda s: s.backdoors["encoder"].lose_heartbeat(),
                                ("encoder",)),
     "encoder EMCY": (lambda s: s.backdoors["encoder"].emergency(0x5000, 0x81), ("encoder",)),
+    "encoder position frozen": (lambda s: s.backdoors["encoder"].stick(), ("encoder",)),
     "SLCAN link dropped": (lambda s: s.backdoors["slcan"].disconnect(),
                            ("encoder", "CAN", "slcan")),
     "Modbus torque sensor exception": (
@@ -119,3 +120,21 @@ def test_fault_at_phase_ends_safe_with_the_run_kept(fault: str, phase: str, tmp_
     assert "expected" in outcome.reason, outcome.reason
     assert "lost_motion_arcmin" not in (run.meta.get("result") or {}) or \
         run.meta["result"]["lost_motion_arcmin"] is None  # no metric from an aborted run
+
+
+def test_encoder_frozen_before_the_start_is_a_fault_not_a_zero_lost_motion(tmp_path: Path):
+    """Outside-probe row 8: the encoder's reading frozen before the run starts. Its PDOs and
+    heartbeats keep coming on time, so only the physics tells: the torque moves, the twist
+    does not. The run ends aborted naming the encoder, at zero torque, with no lost motion."""
+    store = Store(tmp_path / "store")
+    with SimulatedRig(PLANT, seed=3, sync_period_s=0.004, stream_rate_Hz=250.0) as sim:
+        sim.backdoors["encoder"].stick()
+        with open_session(rig=sim.rig_config_path) as session:
+            engine, outcomes = measure_plan(session, store, PLAN, run_meta(UNIT, session))
+        assert _drive_safe(sim)
+    (outcome,) = outcomes
+    assert engine.state == "aborted" and outcome.status == "aborted"
+    assert "encoder" in outcome.reason and "frozen" in outcome.reason, outcome.reason
+    run = read_run(outcome.path)
+    assert run.meta["status"] == "aborted" and run.n_samples > 10
+    assert (run.meta.get("result") or {}).get("lost_motion_arcmin") is None

@@ -399,6 +399,19 @@ def _reach_T3(torque: np.ndarray, branches: Branches) -> float:
     return max(0.0, min(reach)) if reach else 0.0
 
 
+def _branches(torque: np.ndarray, threshold_Nm: float, command_Nm: np.ndarray | None):
+    """Branches of the run: from the torque command when one is recorded for every sample
+    and it moves (noise-free, so 1 % of its amplitude marks a reversal), else from the
+    measured torque with ``threshold_Nm``."""
+    if command_Nm is not None:
+        cmd = np.asarray(command_Nm, dtype=float)
+        if cmd.shape == torque.shape and np.all(np.isfinite(cmd)):
+            span = float(np.max(cmd) - np.min(cmd)) if cmd.size else 0.0
+            if span > 2.0 * threshold_Nm:
+                return split_branches(cmd, threshold_Nm=max(0.005 * span, 1e-9))
+    return split_branches(torque, threshold_Nm=threshold_Nm)
+
+
 def analyse_loop(
     t_s: np.ndarray,
     torque_Nm: np.ndarray,
@@ -411,6 +424,7 @@ def analyse_loop(
     hd_T1_Nm: float | None = None,
     hd_T2_Nm: float | None = None,
     threshold_Nm: float | None = None,
+    command_Nm: np.ndarray | None = None,
 ) -> LoopResult:
     """Metrics of a hysteresis run (see the module docstring for each definition).
 
@@ -420,6 +434,9 @@ def analyse_loop(
     of rated (:data:`PROFILES`); the resolutions (one count / one step) enter the
     uncertainties; ``hd_T1_Nm < hd_T2_Nm`` ask for the Harmonic Drive K1/K2/K3;
     ``threshold_Nm`` overrides the reversal threshold of :func:`split_branches`.
+    ``command_Nm`` (N·m, the rig's torque command per sample, when recorded) decides which
+    samples load and which unload: a transient of the measured torque (the flank impact at
+    the play crossing dips it by several % of the amplitude) is not a reversal of the loading.
     """
     _, torque, twist = _validate(t_s, torque_Nm, twist_arcmin)
     if not (np.isfinite(rated_torque_Nm) and rated_torque_Nm > 0):
@@ -440,7 +457,7 @@ def analyse_loop(
     torque_noise = white_noise_std(torque)
     if threshold_Nm is None:
         threshold_Nm = default_threshold_Nm(torque, torque_resolution_Nm, torque_noise)
-    branches = split_branches(torque, threshold_Nm=threshold_Nm)
+    branches = _branches(torque, threshold_Nm, command_Nm)
     setup = _Setup(
         rated=float(rated_torque_Nm),
         p_Nm=lost_motion_pct / 100.0 * rated_torque_Nm,

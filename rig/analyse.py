@@ -134,6 +134,36 @@ def resolve_profile(profile: str | None, percent: float | None) -> tuple[str, fl
     return name, float(PROFILES[name])
 
 
+MIN_LOOP_SAMPLES = 20
+"""Fewest samples of a hysteresis loop: four quarters of at least a few readings each."""
+TORQUE_READING_MAX = 1000.0
+"""A torque reading beyond this multiple of the rated torque is no reading (a sensor
+overload or a corrupt cell), whatever its sign: nothing in the run may rest on it."""
+
+
+def check_samples(run: Run, rated_torque_Nm: float) -> None:
+    """RigError when the samples cannot be a measured loop: too few rows, a torque beyond
+    :data:`TORQUE_READING_MAX` x rated (naming its row), or an output angle that never moves."""
+    where = f"{run.path / 'samples.csv' if run.path else run.run_id}"
+    if run.n_samples < MIN_LOOP_SAMPLES:
+        raise RigError(f"{where}: {run.n_samples} samples; a hysteresis loop needs at least "
+                       f"{MIN_LOOP_SAMPLES}")
+    torque = np.asarray(run.torque_Nm, dtype=float)
+    with np.errstate(invalid="ignore"):
+        wild = np.flatnonzero(np.abs(torque) > TORQUE_READING_MAX * rated_torque_Nm)
+    if wild.size:
+        k = int(wild[0])
+        raise RigError(f"{where}: torque_Nm of sample {k + 1} (t = {run.t_s[k]:g} s) is "
+                       f"{torque[k]:g} N·m, beyond {TORQUE_READING_MAX:g} x the rated "
+                       f"{rated_torque_Nm:g} N·m: not a reading ({wild.size} such samples)")
+    angle = np.asarray(run.output_angle_deg, dtype=float)
+    finite = angle[np.isfinite(angle)]
+    if finite.size < MIN_LOOP_SAMPLES or float(np.ptp(finite)) == 0.0:
+        raise RigError(f"{where}: output_angle_deg never moves"
+                       f"{f' (always {finite[0]:g} deg)' if finite.size else ''}: an angle "
+                       "that never moves under a moving torque is no measurement")
+
+
 def analyse_run(
     run: Run,
     *,
@@ -156,6 +186,7 @@ def analyse_run(
     rated = float(rated)
     if not rated > 0:
         raise RigError(f"run {run.run_id!r}: rated torque must be > 0 N·m, got {rated}")
+    check_samples(run, rated)
 
     ratio = test.get("ratio")
     if run.input_angle_deg is not None and ratio:
@@ -185,6 +216,7 @@ def analyse_run(
         twist_resolution_arcmin=resolution,
         hd_T1_Nm=None if t1 is None else float(t1),
         hd_T2_Nm=None if t2 is None else float(t2),
+        command_Nm=_numeric_column(run, "torque_command_Nm"),
     )
 
     model, model_assumptions = nominal_model_for_unit(run.unit, rated)
@@ -199,3 +231,9 @@ def analyse_run(
         lost_motion_pct=pct,
         profile=name,
     )
+
+
+def _numeric_column(run: Run, name: str) -> np.ndarray | None:
+    """A numeric extra column of the run (e.g. the rig's torque command), None if absent."""
+    col = run.data.get(name)
+    return col if isinstance(col, np.ndarray) else None

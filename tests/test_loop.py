@@ -128,6 +128,32 @@ def test_dead_zone_linear_closed_form(profile):
     assert m["torque_offset_Nm"].value == pytest.approx(0.0, abs=0.01)
 
 
+def test_impact_dip_is_no_reversal_when_the_command_is_recorded():
+    """A part-amplitude run (50 % of rated) whose measured torque dips by 6 % of its amplitude
+    for a few samples on the loading branch (the flank impact at the play crossing): split on
+    the measured torque the dip starts a new branch and the loading branch loses its +3 %
+    window; split on the recorded command the closed-form lost motion is recovered."""
+    command = 0.5 * triangle_profile(RATED, 2000, phase=0.5)
+    torque = command.copy()
+    rising = np.flatnonzero((np.diff(command, prepend=command[0]) > 0) & (command > 0.06 * RATED))
+    dip = rising[:6]
+    torque[dip] -= 0.03 * RATED  # 6 % of the 0.5 * RATED amplitude, for 6 samples
+    twist = dead_zone_twist(torque, PLAY, K)
+    t = np.arange(torque.size) * 1e-3
+    plain = analyse_loop(t, torque, twist, rated_torque_Nm=RATED)
+    assert plain.branches.turning_points.size > command_turns(command)
+    r = analyse_loop(t, torque, twist, rated_torque_Nm=RATED, command_Nm=command)
+    assert r.errors.get("lost_motion_arcmin") is None
+    assert r.metrics["lost_motion_arcmin"].value == pytest.approx(lost_motion_truth(3.0), abs=1e-6)
+
+
+def command_turns(command: np.ndarray) -> int:
+    """Number of reversals of a noise-free command."""
+    d = np.sign(np.diff(command))
+    d = d[d != 0]
+    return int(np.count_nonzero(d[1:] != d[:-1]))
+
+
 def test_percent_is_configurable():
     T = triangle_profile(RATED, 1000, phase=0.5)
     r = run(T, dead_zone_twist(T, PLAY, K), lost_motion_pct=7.5)

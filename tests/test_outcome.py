@@ -94,6 +94,9 @@ def test_part_amplitude_run_stiffness_not_applicable(tmp_path: Path):
     doc = json.loads(out.read_text())
     assert res.returncode == 0, (res.stdout[-1500:], res.stderr[-1500:])
     assert doc["outcome"] == "ok" and doc["failures"] == []
+    # the flank impact at the play crossing dips the measured torque by more than 5 % of a
+    # part amplitude; the branches follow the command, so the lost motion is still measured
+    assert 3.5 < doc["lost_motion_arcmin"] < 5.5
     assert any("stiffness" in n and "not applicable" in n for n in doc["not_applicable"])
     stored = json.loads((Path(doc["path"]) / "run.json").read_text())
     assert stored["outcome"] == "ok"

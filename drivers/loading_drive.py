@@ -18,7 +18,7 @@ import math
 import time
 from dataclasses import dataclass
 
-from pydantic import Field
+from pydantic import ConfigDict, Field
 
 from drivers.errors import DeviceError, DeviceFault, DeviceOutOfRange, DeviceProtocolError
 from drivers.modbus_link import ModbusHealth, ModbusLink, ModbusLinkConfig
@@ -44,8 +44,10 @@ _SETPOINT = LOADING_DRIVE_MAP["setpoint"].address
 class LoadingDriveConfig(ModbusLinkConfig):
     """Loading drive settings: ``torque_limit_Nm`` (N*m, required), ``watchdog_s`` (s)."""
 
+    model_config = ConfigDict(frozen=True)
+
     device_id: int = Field(default=DRIVE_DEVICE_ID, ge=1, le=247)
-    torque_limit_Nm: float = Field(gt=0)
+    torque_limit_Nm: float = Field(gt=0, allow_inf_nan=False)
     watchdog_s: float = Field(default=0.5, ge=0.01, le=60.0)
 
 
@@ -89,13 +91,23 @@ class LoadingDrive:
         self.name = f"loading drive (Modbus unit {config.device_id} on {self.link.where()})"
         self._keepalive = 0
         try:
-            self.drive_limit_Nm = self._read_drive_limit()
+            self._drive_limit_Nm = self._read_drive_limit()
             watchdog_ms = max(10, round(config.watchdog_s * 1000))
             self._write(LOADING_DRIVE_MAP["watchdog_ms"].address, [watchdog_ms])
         except DeviceError:
             self.close(safe=False)
             raise
-        self.torque_limit_Nm = min(config.torque_limit_Nm, self.drive_limit_Nm)
+
+    @property
+    def drive_limit_Nm(self) -> float:
+        """The drive's own ``torque_limit`` register (N*m), read when the driver opened."""
+        return self._drive_limit_Nm
+
+    @property
+    def torque_limit_Nm(self) -> float:
+        """The most this driver commands (N*m): the configured limit within the drive's own.
+        Read-only, like the frozen configuration it comes from (fault-matrix row 13)."""
+        return min(self.config.torque_limit_Nm, self._drive_limit_Nm)
 
     def _write(self, address: int, words: list[int]) -> None:
         self.link.write(self.name, self.config.device_id, address, words)

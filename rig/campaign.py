@@ -8,18 +8,23 @@ once-per-revolution sine fitted over the input angle) and pass/fail with the cau
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from analysis.loop import PROFILES
 from rig.errors import RigError
+from rig.json_files import read_json_file
 from rig.outcome import campaign_outcome, run_outcome
-from rig.plans import CampaignAxes, LoopParams, Plan, campaign_plan
+from rig.plans import CampaignAxes, LoopParams, Plan, campaign_plan, check_plan_size
+from rig.run_meta_check import unit_problems
 from rig.toml_files import describe_validation_error, read_toml
+
+PROFILE_NAMES = tuple(PROFILES)
+"""The lost-motion definitions a campaign may name (analysis/loop.py PROFILES)."""
 
 
 class CampaignError(RigError):
@@ -30,7 +35,7 @@ class Limits(BaseModel):
     """Pass/fail limits; None = not checked. Lost motion and backlash in arcmin (at most),
     stiffness in N*m/arcmin (at least)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 
     lost_motion_arcmin_max: float | None = Field(None, gt=0)
     backlash_arcmin_max: float | None = Field(None, gt=0)
@@ -60,7 +65,7 @@ class SimulationSection(BaseModel):
     """Used only with ``--simulated``: the plant's tables beyond the unit (``effects``,
     ``noise``, ``housing``, ``rig``; docs/plant.md) and its noise ``seed``."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
 
     seed: int | None = None
     plant: dict[str, Any] = Field(default_factory=dict)
@@ -74,14 +79,21 @@ class CampaignFile(BaseModel):
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
     description: str = ""
     operator: str | None = None
-    profile: str = "nabtesco"
-    torque_limit_Nm: float | None = Field(None, gt=0)
+    profile: Literal[PROFILE_NAMES] = "nabtesco"  # type: ignore[valid-type]
+    torque_limit_Nm: float | None = Field(None, gt=0, allow_inf_nan=False, strict=True)
     unit: UnitSection
     plan: LoopParams
     axes: CampaignAxes = Field(default_factory=CampaignAxes)
     limits: Limits = Field(default_factory=Limits)
     simulation: SimulationSection = Field(default_factory=SimulationSection)
     source: str = "<memory>"
+
+    @model_validator(mode="after")
+    def _small_enough(self) -> CampaignFile:
+        a = self.axes
+        check_plan_size(self.plan, len(a.positions_deg) * len(a.amplitudes_pct)
+                        * max(1, len(a.temperatures_C)) * a.repeats)
+        return self
 
     def unit_data(self) -> dict[str, Any]:
         """The run.json ``unit`` mapping: the file's keys, then the inline ones."""
@@ -91,13 +103,12 @@ class CampaignFile(BaseModel):
             if not path.is_absolute() and self.source != "<memory>":
                 path = Path(self.source).parent / path
             try:
-                data = json.loads(path.read_text(encoding="utf-8"))
-            except OSError as exc:
-                raise CampaignError(f"{self.source}: unit.file: cannot read {path} "
-                                    f"({exc.strerror or exc})") from exc
-            except json.JSONDecodeError as exc:
-                raise CampaignError(f"{path}:{exc.lineno}:{exc.colno}: {exc.msg} "
-                                    f"(named by {self.source}: unit.file)") from exc
+                data = read_json_file(path, CampaignError, "unit file")
+            except CampaignError as exc:
+                text = str(exc)
+                raise CampaignError(f"{self.source}: unit.file: {text}"
+                                    if text.startswith("cannot read")
+                                    else f"{text} (named by {self.source}: unit.file)") from None
             if not isinstance(data, dict):
                 raise CampaignError(f"{path}: a unit must be a JSON object (unit.file)")
         inline = {k: v for k, v in (self.unit.model_extra or {}).items()}
@@ -105,6 +116,9 @@ class CampaignFile(BaseModel):
         if self.unit.serial is not None:
             data["serial"] = self.unit.serial
         data.setdefault("serial", self.name)
+        problems = unit_problems(data)
+        if problems:
+            raise CampaignError(f"{self.source}: {problems[0]}")
         return data
 
     def build_plan(self) -> Plan:

@@ -51,7 +51,7 @@ class RigSection(BaseModel):
     system permits it (rig/realtime.py); None: the normal scheduler.
     """
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", frozen=True)
 
     rig_id: str = Field(min_length=1)
     torque_limit_Nm: float = Field(gt=0, allow_inf_nan=False)
@@ -64,7 +64,7 @@ class RigSection(BaseModel):
 class RigConfig(BaseModel):
     """A whole rig configuration (validated). ``source`` names the file it came from."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", frozen=True)
 
     rig: RigSection
     can: CanBusConfig = Field(default_factory=CanBusConfig)
@@ -153,10 +153,10 @@ def rig_config_from_mapping(data: dict[str, Any], source: str = "<memory>") -> R
         config = RigConfig.model_validate({**prepared, "source": source})
     except ValidationError as exc:
         raise RigConfigError(describe_validation_error(exc, source)) from exc
-    for name in ("encoder", "input_encoder"):
-        enc = getattr(config, name)
-        if enc is not None:
-            setattr(config, name, enc.model_copy(update={"bus": config.can}))
+    config = config.model_copy(update={
+        name: enc.model_copy(update={"bus": config.can})
+        for name in ("encoder", "input_encoder")
+        if (enc := getattr(config, name)) is not None})
     _cross_check(config, source)
     return config
 

@@ -9,7 +9,6 @@ same verdict (tests/test_diagnosis_blind.py).
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +19,7 @@ from analysis.diagnosis_data import RunInput
 from analysis.errors import AnalysisError
 from analysis.loop import twist_arcmin
 from rig.errors import RigError
+from rig.json_files import finite_for_json
 from rig.runformat import Campaign, Run, read_run_or_campaign
 
 
@@ -78,17 +78,6 @@ def write_json(report: dict[str, Any], path: str | Path) -> Path:
     """Write the report as JSON (NaN/inf are not JSON: written as null)."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(_finite(report), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    text = json.dumps(finite_for_json(report), indent=2, allow_nan=False)
+    p.write_text(text + "\n", encoding="utf-8")
     return p
-
-
-def _finite(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _finite(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_finite(v) for v in obj]
-    if isinstance(obj, float | np.floating):
-        return float(obj) if math.isfinite(obj) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    return obj

@@ -84,6 +84,12 @@ class EngineOptions:
     check_period_s: float = 0.1
     temperature_period_s: float = 1.0
     crosscheck_period_s: float = 0.2
+    crosscheck_window_s: float = 0.05
+    crosscheck_limit_share: float | None = 0.1
+    """The cross-check torque sensor may read at most this share of the run's rated torque
+    beside the transducer's readings of the same instant (±``crosscheck_window_s``): beyond
+    it one channel is late, mis-scaled or broken, and the run is stopped (None: recorded
+    only)."""
     recent_s: float = 5.0
     drain_timeout_s: float = 1.0
     profile: str | None = None
@@ -110,7 +116,7 @@ class Engine:
         limit = io.torque_limit_Nm
         if self.options.torque_limit_Nm is not None:
             limit = min(limit, self.options.torque_limit_Nm)
-        self.torque_limit_Nm = float(limit)
+        self._torque_limit_Nm = float(limit)
         self.trip_Nm = self.torque_limit_Nm + self.options.measured_trip_margin_Nm
         self.hub = EventHub()
         self.state = "idle"
@@ -132,6 +138,8 @@ class Engine:
         self._step_index = 0
         self._temperature: float | None = None
         self._crosscheck_max_diff = 0.0
+        self._cross_pending: deque[tuple[float, float]] = deque(maxlen=200)
+        self._cross_limit_Nm: float | None = None
         self._last_row_mono = time.monotonic()
         self._zero_before: float | None = None
         self._plan: Plan | None = None
@@ -141,6 +149,11 @@ class Engine:
 
     # ------------------------------------------------------------------ control (any thread)
 
+
+    @property
+    def torque_limit_Nm(self) -> float:
+        """The most this engine commands (N*m), fixed when it was made (read-only)."""
+        return self._torque_limit_Nm
     def subscribe(self, callback) -> Any:
         """Call ``callback(ProgressEvent)`` for every event; returns an unsubscribe function."""
         return self.hub.subscribe(callback)
@@ -345,16 +358,45 @@ class Engine:
             self._stop_threads.wait(opt.poll_period_s)
 
     def _crosscheck(self) -> None:
+        t0 = time.monotonic()
         torque = self.io.read_crosscheck_torque()
         if torque is None:
             return
+        t_read = 0.5 * (t0 + time.monotonic())
         reason = check_measured(torque, self.trip_Nm, "cross-check torque sensor")
         if reason is not None:
             self._trip(reason)
         with self._lock:
-            latest = self._recent[-1].torque_Nm if self._recent else None
-            if latest is not None and self._open is not None:
-                self._open.note_crosscheck(abs(torque - latest))
+            self._cross_pending.append((t_read, torque))
+
+    def _compare_crosscheck(self) -> str | None:
+        """Compare each pending cross-check reading with the transducer's torque of the same
+        instant, once merged rows cover it: the distance (N*m) to the range the transducer
+        read within ±``crosscheck_window_s`` (a ramp moves the torque between the two reads;
+        comparing with the newest merged row, which lags, read 14-22 % of rated apart on a
+        healthy rig). Returns a trip reason beyond the limit. Called holding ``_lock``."""
+        w = self.options.crosscheck_window_s
+        pending = self._cross_pending
+        if not pending or not self._recent or self._open is None:
+            if self._open is None:
+                pending.clear()
+            return None
+        t_end = self._recent[-1].t_mono_s
+        reason = None
+        while pending and pending[0][0] + w <= t_end:
+            t_read, value = pending.popleft()
+            near = [r.torque_Nm for r in self._recent if abs(r.t_mono_s - t_read) <= w]
+            if not near:
+                continue
+            diff = max(0.0, min(near) - value, value - max(near))
+            self._open.note_crosscheck(diff)
+            limit = self._cross_limit_Nm
+            if limit is not None and diff > limit and reason is None:
+                reason = (f"torque channels: expected the cross-check torque sensor within "
+                          f"{limit:.3g} N*m of the torque transducer at the same instant, got "
+                          f"{value:+.3g} N*m beside {min(near):+.3g}..{max(near):+.3g} N*m "
+                          f"(one channel late, mis-scaled or broken: check both sensors)")
+        return reason
 
     def _merge(self, out: list[tuple[float, float]], inp: list[tuple[float, float]]) -> None:
         with self._lock:
@@ -374,11 +416,14 @@ class Engine:
             if self._open is not None:
                 self._open.append(rows, self._setpoint, self._step_index + 1,
                                   self._sample_window)
+            mismatch = self._compare_crosscheck()
             watch = self._frozen if self._open is not None else None
             frozen = None if watch is None else watch.update(
                 (r.t_mono_s, r.torque_Nm, r.output_angle_deg) for r in rows)
         if frozen is not None:
             self._trip(frozen)
+        if mismatch is not None:
+            self._trip(mismatch)
 
     def _wait_first_rows(self) -> None:
         deadline = time.monotonic() + max(2.0, self.options.stale_timeout_s)
@@ -612,6 +657,9 @@ class Engine:
                            limits=limits_dict(self.options.limits))
         self._dropped_at_begin = self._dropped_total()
         self._frozen = frozen_watch(meta, test)
+        share, rated = self.options.crosscheck_limit_share, test.get("rated_torque_Nm")
+        self._cross_limit_Nm = (share * float(rated) if share is not None
+                                and isinstance(rated, int | float) and rated > 0 else None)
         with self._lock:
             self._open = open_run
         self._zero_before = None

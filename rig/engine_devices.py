@@ -28,11 +28,16 @@ class DevicesIO:
                               "drive to measure with", f"missing: {', '.join(missing)}")
         self.devices = devices
         self.description = f"rig {devices.config.rig.rig_id} ({devices.config.source})"
-        self.torque_limit_Nm = devices.torque_limit_Nm
         self.has_input_encoder = devices.input_encoder is not None
         self.has_input_motor = devices.input_motor is not None
         self.has_climate = devices.climate is not None
         self._bad_lines = 0
+        self._commanding = False
+
+    @property
+    def torque_limit_Nm(self) -> float:
+        """The rig's torque limit (N*m): the frozen configuration's within the drive's."""
+        return self.devices.torque_limit_Nm
 
     @staticmethod
     def _can_to_monotonic() -> float:
@@ -107,8 +112,10 @@ class DevicesIO:
 
     def enable_drive(self) -> None:
         self.devices.drive.enable()
+        self._commanding = True
 
     def safe_state(self) -> None:
+        self._commanding = False
         if not self.devices.safe_state():
             raise DeviceFault(self.devices.drive.name, "the safe state confirmed",
                               "no reply (the drive watchdog disables it)")
@@ -125,6 +132,13 @@ class DevicesIO:
         if status.faulted:
             raise DeviceFault(d.drive.name, "no latched drive fault",
                               f"fault {int(status.fault_code)} {status.fault_code.name}")
+        if self._commanding and not status.enabled:
+            # fault-matrix row 2: the commanded torque can no longer be reached; whatever
+            # the loop measures from here is not the unit's
+            raise DeviceFault(d.drive.name, "the power stage enabled while the rig commands "
+                              f"torque ({status.setpoint_Nm:+.3g} N*m)",
+                              "disabled by someone else (another Modbus master, the drive's "
+                              "panel or its enable input): interlock, the run is incomplete")
 
     def lock_input(self, angle_deg: float, timeout_s: float) -> float:
         motor = self.devices.input_motor

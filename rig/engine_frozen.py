@@ -17,7 +17,12 @@ expects a twist of
   torque (the flanks change there),
 
 and trips when that expected twist is at least :data:`MIN_COUNTS` encoder counts while not a
-single count changed. Without a stiffness or play from the unit data, that term is left out
+single count changed, the stretch has lasted :data:`MIN_STILL_S` and the torque has either
+crossed the play or moved by :data:`MIN_SPAN_SHARE` of the rated torque. The last two keep it
+from tripping on what a working encoder also shows briefly: the lag between the torque and
+the encoder channels when the torque changes fast (a drive switched off), and a friction hold
+at a load reversal, where the twist stays while the torque changes by twice the friction
+torque. Without a stiffness or play from the unit data, that term is left out
 (no guess); with neither, the watch cannot judge and never trips.
 """
 
@@ -27,12 +32,17 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-__all__ = ["FrozenTwistWatch", "MIN_COUNTS"]
+__all__ = ["FrozenTwistWatch", "MIN_COUNTS", "MIN_SPAN_SHARE", "MIN_STILL_S"]
 
 MIN_COUNTS = 8.0
 """Expected twist (encoder counts) that must show before a still encoder is a fault: far
 above the one or two counts of noise, quantisation and a stick-slip hold."""
 BAND_SHARE = 0.05
+MIN_STILL_S = 0.5
+"""Shortest still stretch (s) that can trip: far longer than the channels' lag (~10 ms)."""
+MIN_SPAN_SHARE = 0.3
+"""Torque change (share of rated) that no friction hold of a reducer spans (a friction
+torque of 15 % of rated is already a defective unit)."""
 
 
 @dataclass
@@ -81,7 +91,9 @@ class FrozenTwistWatch:
             self._lo = min(self._lo, torque)
             self._hi = max(self._hi, torque)
             expected = self.expected_counts()
-            if expected >= MIN_COUNTS:
+            crossed = self._lo < -self.band_Nm and self._hi > self.band_Nm
+            spanned = self._hi - self._lo >= MIN_SPAN_SHARE * self.rated_torque_Nm
+            if expected >= MIN_COUNTS and t - self._t0 >= MIN_STILL_S and (crossed or spanned):
                 return (f"{self.device}: expected the output twist to follow the torque "
                         f"({self._lo:+.3g} .. {self._hi:+.3g} N*m: at least "
                         f"{expected:.0f} counts), got the same position for "

@@ -132,6 +132,7 @@ def relaxed_heartbeats(config: RigConfig) -> RigConfig:
     of 100 ms (0.25 s), and a position PDO may be missing for 400 periods (1.6 s at the
     simulated 4 ms SYNC) instead of 100, so that a scheduling stall of a loaded machine is
     not taken for a lost device. A real rig keeps its configuration's values."""
+    copies: dict[str, Any] = {}
     for name in ("encoder", "input_encoder"):
         enc = getattr(config, name)
         if enc is None:
@@ -140,8 +141,8 @@ def relaxed_heartbeats(config: RigConfig) -> RigConfig:
             "missed_periods": max(enc.missed_periods, SIMULATED_MISSED_PERIODS)}
         if 0 < enc.heartbeat_ms < SIMULATED_HEARTBEAT_MS:
             update.update(heartbeat_ms=SIMULATED_HEARTBEAT_MS, heartbeat_timeout_periods=3.0)
-        setattr(config, name, enc.model_copy(update=update))
-    return config
+        copies[name] = enc.model_copy(update=update)
+    return config.model_copy(update=copies)
 
 
 def run_meta(unit: dict[str, Any], session: RigSession, operator: str | None = None

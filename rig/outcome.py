@@ -18,7 +18,8 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["OUTCOMES", "LIMIT_KEYS", "run_outcome", "campaign_outcome", "not_applicable"]
+__all__ = ["OUTCOMES", "LIMIT_KEYS", "run_outcome", "campaign_outcome", "impossible_metrics",
+           "not_applicable"]
 
 OUTCOMES = ("ok", "not_ok", "incomplete")
 LIMIT_KEYS = {
@@ -40,6 +41,31 @@ def not_applicable(run: dict[str, Any], metric: str) -> str | None:
     return None
 
 
+IMPOSSIBLE_BELOW_ZERO = ("lost_motion_arcmin", "backlash_arcmin", "stiffness_Nm_per_arcmin",
+                         "stiffness_pos_Nm_per_arcmin", "stiffness_neg_Nm_per_arcmin")
+"""Metrics that no gear unit can have below zero: a negative stiffness or play means the
+torque and twist were not of the same instant or one channel's sign is wrong."""
+
+
+def impossible_metrics(run: dict[str, Any]) -> list[str]:
+    """Metrics that are physically impossible (below zero beyond three of their standard
+    uncertainties; a stiffness at or below zero always), one line each."""
+    metrics = {**run, **(run.get("result") or {})}
+    sigma = metrics.get("uncertainty") or {}
+    label = run.get("label") or run.get("run_id") or "run"
+    out = []
+    for key in IMPOSSIBLE_BELOW_ZERO:
+        value = metrics.get(key)
+        if not isinstance(value, int | float):
+            continue
+        u = sigma.get(key) if isinstance(sigma.get(key), int | float) else 0.0
+        if (key.startswith("stiffness") and value <= 0) or value + 3.0 * u < 0:
+            out.append(f"run {label}: {key} = {value:.4g} is physically impossible (torque and "
+                       "twist not of the same instant, or a channel's sign reversed): "
+                       "no verdict")
+    return out
+
+
 def run_outcome(run: dict[str, Any], limits: dict[str, Any] | None
                 ) -> tuple[str, list[str], list[str]]:
     """(outcome, failures, not-applicable notes) of one run.
@@ -51,6 +77,9 @@ def run_outcome(run: dict[str, Any], limits: dict[str, Any] | None
     label = run.get("label") or run.get("run_id") or "run"
     if run.get("status") != "completed":
         return "incomplete", [f"run {label}: {run.get('status')}: {run.get('reason')}"], []
+    impossible = impossible_metrics(run)
+    if impossible:
+        return "incomplete", impossible, []
     failures: list[str] = []
     missing: list[str] = []
     notes: list[str] = []

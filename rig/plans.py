@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -47,10 +47,36 @@ PLAN_VERSION = "1"
 LoadingMode = Literal["equal_torque", "equal_position", "constant_rate"]
 
 
+MAX_PLAN_STEPS = 200_000
+"""The largest plan the rig accepts (about 2 days of stepped loading): a bigger one is a typo
+(10,000 positions, 1,000 repeats x 100 cycles) and is refused before anything moves."""
+
+_STRICT = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
+"""Campaign files and the page's API: a boolean is not a number, NaN and inf are no value."""
+
+
+def plan_size(loop: Any, n_runs: int) -> int:
+    """An upper bound of the steps of ``n_runs`` runs of ``loop`` (a :class:`LoopParams` or
+    the page's plan settings: a few steps per level and quarter)."""
+    per_quarter = 4 * (loop.steps_per_quarter + 2 * len(loop.extra_levels_pct)) + 5
+    return n_runs * (loop.cycles * 4 * per_quarter + 2 * loop.pre_cycles + 12)
+
+
+def check_plan_size(loop: Any, n_runs: int) -> None:
+    """ValueError naming the size when the plan exceeds :data:`MAX_PLAN_STEPS`."""
+    size = plan_size(loop, n_runs)
+    if size > MAX_PLAN_STEPS:
+        raise ValueError(f"the plan would have about {size} steps (at most "
+                         f"{MAX_PLAN_STEPS}): fewer positions, repeats, cycles or steps")
+
+
+ExtraLevel = Annotated[float, Field(gt=0, lt=100)]
+
+
 class LoopParams(BaseModel):
     """Parameters of one hysteresis run (units in the names; pct of the rated torque)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = _STRICT
 
     rated_torque_Nm: float = Field(gt=0)
     amplitude_pct: float = Field(100.0, gt=0, le=100)
@@ -65,7 +91,7 @@ class LoopParams(BaseModel):
     settle_hold_s: float = Field(0.1, gt=0)
     settle_timeout_s: float = Field(3.0, gt=0)
     sample_s: float = Field(0.05, ge=0)
-    extra_levels_pct: list[float] = Field(default_factory=list)
+    extra_levels_pct: list[ExtraLevel] = Field(default_factory=list, max_length=20)
     zero_band_Nm: float = Field(0.0, ge=0)
     zero_rate_Nm_per_s: float | None = Field(None, gt=0)
     zero_window_s: float = Field(0.2, gt=0)
@@ -104,11 +130,13 @@ class CampaignAxes(BaseModel):
     """What a campaign varies: input angles (deg), amplitudes (% of rated), housing
     temperatures (deg C; empty: no climate control) and repeats."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = _STRICT
 
-    positions_deg: list[float] = Field(default_factory=lambda: [0.0], min_length=1)
-    amplitudes_pct: list[float] = Field(default_factory=lambda: [100.0], min_length=1)
-    temperatures_C: list[float] = Field(default_factory=list)
+    positions_deg: list[float] = Field(default_factory=lambda: [0.0], min_length=1,
+                                       max_length=10_000)
+    amplitudes_pct: list[float] = Field(default_factory=lambda: [100.0], min_length=1,
+                                        max_length=100)
+    temperatures_C: list[float] = Field(default_factory=list, max_length=100)
     repeats: int = Field(1, ge=1, le=1000)
     temperature_tolerance_C: float = Field(0.5, gt=0)
     temperature_timeout_s: float = Field(3600.0, gt=0)

@@ -734,6 +734,9 @@ def _parse_json_object(path: Path, text: str) -> dict[str, Any]:
         obj = json.loads(text, object_pairs_hook=no_duplicates)
     except json.JSONDecodeError as e:
         raise RunFormatError(path, f"invalid JSON: {e.msg}", e.lineno, e.colno) from None
+    except RecursionError:
+        raise RunFormatError(path, "JSON nested too deeply (more levels than any run has)") \
+            from None
     except _DuplicateKey as e:
         line, col = _locate_duplicate(text, e.key)
         message = f"key {e.key!r} appears twice in one object"
@@ -784,6 +787,13 @@ def _read_run_json(path: Path) -> dict[str, Any]:
             raise RunFormatError(
                 path, f"{key!r} must be an object, got {type(meta[key]).__name__}", line, col
             )
+    from rig.run_meta_check import meta_problems
+
+    problems = meta_problems(meta)
+    if problems:
+        key = problems[0].split(":", 1)[0].split(".")[-1]
+        line, col = _locate_key(text, key) or (None, None)
+        raise RunFormatError(path, "; ".join(problems), line, col)
     return meta
 
 

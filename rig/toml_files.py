@@ -7,6 +7,7 @@ value that fails validation, the dotted key (``file: drive.torque_limit_Nm: ...`
 from __future__ import annotations
 
 import re
+import stat
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -15,12 +16,24 @@ from pydantic import ValidationError
 
 from rig.errors import RigError
 
+MAX_TOML_BYTES = 1024 * 1024
+"""A rig configuration or a campaign is a few kB; 1 MB refuses the absurd before reading."""
 _TOML_POSITION = re.compile(r"\(at line (\d+), column (\d+)\)")
 
 
 def read_toml(path: str | Path, error: type[RigError], what: str) -> dict[str, Any]:
     """Parse ``path``; any failure raises ``error`` naming the file (and line:column)."""
     file = Path(path)
+    try:
+        info = file.stat()
+    except OSError as exc:
+        raise error(f"{file}: cannot read the {what} ({exc.strerror or exc})") from exc
+    if not stat.S_ISREG(info.st_mode):
+        raise error(f"{file}: the {what} must be a regular file, not a device, FIFO or "
+                    "directory")
+    if info.st_size > MAX_TOML_BYTES:
+        raise error(f"{file}: the {what} is {info.st_size} bytes, more than the "
+                    f"{MAX_TOML_BYTES} a {what} can be")
     try:
         text = file.read_text(encoding="utf-8")
     except OSError as exc:
@@ -35,6 +48,9 @@ def read_toml(path: str | Path, error: type[RigError], what: str) -> dict[str, A
         where = f"{file}:{match.group(1)}:{match.group(2)}" if match else str(file)
         reason = _TOML_POSITION.sub("", message).strip()
         raise error(f"{where}: TOML syntax error: {reason}") from exc
+    except RecursionError:
+        raise error(f"{file}: TOML nested too deeply (more levels than any {what} has)") \
+            from None
 
 
 def describe_validation_error(exc: ValidationError, source: str) -> str:
@@ -44,5 +60,6 @@ def describe_validation_error(exc: ValidationError, source: str) -> str:
         key = ".".join(str(p) for p in err["loc"]) or "(top level)"
         got = err.get("input")
         shown = "" if isinstance(got, dict) else f" (got {got!r})"
-        lines.append(f"{source}: {key}: {err['msg']}{shown}")
+        message = str(err["msg"]).removeprefix("Value error, ")
+        lines.append(f"{source}: {key}: {message}{shown}")
     return "\n".join(lines)

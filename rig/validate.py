@@ -412,7 +412,7 @@ def validate_one(args: tuple[int, int, str]) -> CaseResult:
     """Case ``index`` of kind ``kind`` drawn by the widened generator from its own stream
     ``default_rng([seed, index])`` (the same case whatever the number of jobs), simulated and
     diagnosed blind."""
-    from rig.diagnose import _finite
+    from rig.json_files import finite_for_json as _finite
 
     seed, index, kind = args
     case = make_case(index, kind, np.random.default_rng([seed, index]), load_plant_config(),

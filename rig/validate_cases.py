@@ -27,7 +27,8 @@ from rig.validate_labels import Label, grade, read_labels
 def diagnose_report(folder: str) -> dict[str, Any]:
     """The ``rig-diagnosis/1`` report of one campaign folder as ``rig diagnose --json`` writes
     it (non-finite numbers as null); on failure ``{"error": ...}``. Returns also ``seconds``."""
-    from rig.diagnose import _finite, diagnose_path, report_dict
+    from rig.diagnose import diagnose_path, report_dict
+    from rig.json_files import finite_for_json as _finite
 
     t0 = time.perf_counter()
     try:

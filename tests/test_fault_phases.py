@@ -43,6 +43,7 @@ FAULTS: dict[str, tuple[Inject, tuple[str, ...]]] = {
                                ("encoder",)),
     "encoder EMCY": (lambda s: s.backdoors["encoder"].emergency(0x5000, 0x81), ("encoder",)),
     "encoder position frozen": (lambda s: s.backdoors["encoder"].stick(), ("encoder",)),
+    "drive disabled by another master": (lambda s: _outside_disable(s), ("loading drive",)),
     "SLCAN link dropped": (lambda s: s.backdoors["slcan"].disconnect(),
                            ("encoder", "CAN", "slcan")),
     "Modbus torque sensor exception": (
@@ -59,6 +60,23 @@ PHASES = {
     "ramp to +T": lambda msg: msg.startswith("torque to +10"),
     "settled sample": lambda msg: msg.startswith("sample"),
 }
+
+
+def _outside_disable(sim: SimulatedRig) -> None:
+    """Another Modbus master (a plain pymodbus client, not our driver) writes 0 to the
+    drive's control register mid-run: fault-matrix row 2."""
+    from pymodbus.client import ModbusTcpClient
+
+    from drivers.modbus_map import DRIVE_DEVICE_ID, LOADING_DRIVE_MAP
+
+    host, port = sim.modbus_server.address.rsplit(":", 1)
+    client = ModbusTcpClient(host, port=int(port), timeout=1.0, retries=0)
+    try:
+        assert client.connect()
+        client.write_register(LOADING_DRIVE_MAP["control"].address, 0,
+                              device_id=DRIVE_DEVICE_ID)
+    finally:
+        client.close()
 
 
 def _drive_safe(sim: SimulatedRig) -> bool:
@@ -138,3 +156,22 @@ def test_encoder_frozen_before_the_start_is_a_fault_not_a_zero_lost_motion(tmp_p
     run = read_run(outcome.path)
     assert run.meta["status"] == "aborted" and run.n_samples > 10
     assert (run.meta.get("result") or {}).get("lost_motion_arcmin") is None
+
+
+def test_a_late_torque_channel_stops_the_run_instead_of_passing(tmp_path: Path):
+    """Outside-probe row 7: the torque transducer's stream delayed 0.8 s from the start. The
+    loop paired each twist with the torque of 0.8 s before and passed with a negative
+    stiffness; the cross-check torque sensor, compared at the same instant, disagrees by
+    more than 10 % of rated during the first ramp: the run stops, safe, incomplete."""
+    store = Store(tmp_path / "store")
+    with SimulatedRig(PLANT, seed=3, sync_period_s=0.004, stream_rate_Hz=250.0) as sim:
+        sim.backdoors["transducer"].delay(0.8)
+        with open_session(rig=sim.rig_config_path) as session:
+            engine, outcomes = measure_plan(session, store, PLAN, run_meta(UNIT, session))
+        assert _drive_safe(sim)
+    (outcome,) = outcomes
+    assert engine.state == "aborted" and outcome.status == "aborted", outcome.reason
+    assert "cross-check torque sensor" in outcome.reason and "expected" in outcome.reason
+    run = read_run(outcome.path)
+    assert run.meta["outcome"] == "incomplete"
+    assert (run.meta.get("result") or {}).get("stiffness_Nm_per_arcmin") is None

@@ -10,6 +10,7 @@ from __future__ import annotations
 import time
 
 import pytest
+from pydantic import ValidationError
 from pymodbus.client import ModbusTcpClient
 
 from drivers.errors import DeviceDisconnected, DeviceFault, DeviceOutOfRange, DeviceTimeout
@@ -72,6 +73,21 @@ def test_effective_limit_is_the_smaller_of_config_and_drive(rig):
             loose.set_torque(20.5)
     finally:
         loose.close()
+
+
+def test_limits_cannot_be_raised_after_load(rig):
+    """Fault-matrix row 13: a script assigning a higher limit to the driver or to its
+    configuration is refused; the setpoint is checked against the loaded limit still."""
+    server, drive, plant = rig
+    with pytest.raises(AttributeError):
+        drive.torque_limit_Nm = 1000.0
+    with pytest.raises(ValidationError, match="frozen"):
+        drive.config.torque_limit_Nm = 1000.0
+    drive.set_torque(1.0)
+    drive.enable()
+    with pytest.raises(DeviceOutOfRange):
+        drive.set_torque(15.0)
+    assert server.drive.setpoint_Nm == 1.0 and plant.snapshot().true_torque_Nm == 1.0
 
 
 @pytest.mark.parametrize("value", [12.001, -12.5, float("nan"), float("inf"), 1e9])

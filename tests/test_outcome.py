@@ -47,6 +47,14 @@ def _rig(*args: str, cwd: Path) -> subprocess.CompletedProcess:
      {"stiffness_Nm_per_arcmin_min": 20.0, "lost_motion_arcmin_max": 3.0}, "ok"),
     ({"status": "completed", "stiffness_Nm_per_arcmin": 10.0, "amplitude_pct": 100.0},
      {"stiffness_Nm_per_arcmin_min": 20.0}, "not_ok"),
+    # fault-matrix row 7: what a late torque channel produced never passes, limits or not
+    ({"status": "completed", "stiffness_Nm_per_arcmin": -66.8, "backlash_arcmin": -2.64,
+      "lost_motion_arcmin": 1.0}, {"lost_motion_arcmin_max": 3.0}, "incomplete"),
+    ({"status": "completed", "backlash_arcmin": -2.64, "uncertainty": {"backlash_arcmin": 0.1}},
+     {}, "incomplete"),
+    # a play of zero measured a hair below zero, within its uncertainty, is a measurement
+    ({"status": "completed", "backlash_arcmin": -0.01, "uncertainty": {"backlash_arcmin": 0.01},
+      "lost_motion_arcmin": 0.5}, {"lost_motion_arcmin_max": 3.0}, "ok"),
 ])
 def test_run_outcome_rules(run, limits, expected):
     assert run_outcome(run, limits)[0] == expected

@@ -43,7 +43,8 @@ def _wait(devices, seconds: float, alive: bool = True) -> None:
 
 
 def test_keepalive_holds_the_drive_while_the_program_is_alive(sim, config):
-    config.rig.master_timeout_s = 0.6
+    config = config.model_copy(update={"rig": config.rig.model_copy(
+        update={"master_timeout_s": 0.6})})
     with open_rig(config) as rig:
         rig.drive.set_torque(2.0)
         rig.drive.enable()

@@ -137,3 +137,17 @@ def test_rig_devices_exits_2_on_a_bad_config(tmp_path):
     assert proc.returncode == 2
     assert f"rig: error: {path}: drive.torque_limit_Nm: Input should be greater than 0" \
         in proc.stderr
+
+
+def test_the_loaded_limits_are_immutable(tmp_path: Path):
+    """Fault-matrix row 13: assigning a limit after load_rig_config is refused."""
+    from pydantic import ValidationError
+
+    config = load_rig_config(_write(tmp_path, _tables()))
+    limit = config.torque_limit_Nm
+    for assign in (lambda: setattr(config.rig, "torque_limit_Nm", 1000.0),
+                   lambda: setattr(config.drive, "torque_limit_Nm", 1000.0),
+                   lambda: setattr(config, "drive", None)):
+        with pytest.raises(ValidationError, match="frozen"):
+            assign()
+    assert config.torque_limit_Nm == limit

@@ -10,6 +10,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from rig.json_files import finite_for_json
+
 if TYPE_CHECKING:
     from rig.analyse import RunAnalysis
 
@@ -121,7 +123,8 @@ def register(app: typer.Typer) -> None:
                     "runs": [item.to_dict() for item in items],
                 }
             json_file.parent.mkdir(parents=True, exist_ok=True)
-            json_file.write_text(json.dumps(payload, indent=2, allow_nan=False) + "\n")
+            text = json.dumps(finite_for_json(payload), indent=2, allow_nan=False)
+            json_file.write_text(text + "\n")
             console.print(f"metrics written to {json_file}")
         if plot is not None:
             from rig.plots import plot_loops

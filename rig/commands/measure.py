@@ -77,7 +77,10 @@ def _print_run(out: Console, data: dict[str, Any]) -> None:
 
 
 def write_json(path: Path, payload: dict[str, Any]) -> None:
-    text = json.dumps(payload, indent=2, allow_nan=False, ensure_ascii=False) + "\n"
+    from rig.json_files import finite_for_json
+
+    text = json.dumps(finite_for_json(payload), indent=2, allow_nan=False,
+                      ensure_ascii=False) + "\n"
     if str(path) == "-":
         sys.stdout.write(text)
         return
@@ -170,12 +173,11 @@ def register(app: typer.Typer) -> None:
             return
         unit_data: dict[str, Any] = {}
         if unit is not None:
-            try:
-                unit_data = json.loads(unit.read_text(encoding="utf-8"))
-            except OSError as exc:
-                raise RigError(f"{unit}: cannot read the unit data ({exc.strerror})") from exc
-            except json.JSONDecodeError as exc:
-                raise RigError(f"{unit}:{exc.lineno}:{exc.colno}: {exc.msg}") from exc
+            from rig.json_files import read_json_file
+
+            unit_data = read_json_file(unit, RigError, "unit data")
+            if not isinstance(unit_data, dict):
+                raise RigError(f"{unit}: the unit data must be a JSON object")
         if serial:
             unit_data["serial"] = serial
         plant_cfg = None

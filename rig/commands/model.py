@@ -13,26 +13,23 @@ from rich.table import Table
 from analysis.errors import AnalysisError
 from analysis.models.seed000 import Seed000Design, design_chain, format_arcmin
 from rig.errors import RigError, RunFormatError
+from rig.json_files import read_json_file
 
 console = Console()
 
 
 def load_unit_mapping(path: Path) -> dict[str, Any]:
     """The ``unit`` object from a unit file or a whole run.json (errors name file, line, col)."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise RigError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        raise RunFormatError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise RunFormatError(path, f"invalid JSON: {exc.msg}", exc.lineno, exc.colno) from None
+    data = read_json_file(path, RigError, "unit file")
     if isinstance(data, dict) and isinstance(data.get("unit"), dict):
         data = data["unit"]
     if not isinstance(data, dict):
         raise RunFormatError(path, "expected a JSON object (a unit or a run.json)")
+    from rig.run_meta_check import unit_problems
+
+    problems = unit_problems(data)
+    if problems:
+        raise RigError(f"{path}: {problems[0]}")
     return data
 
 

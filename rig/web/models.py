@@ -13,11 +13,10 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from rig.campaign import Limits
-from rig.plans import CampaignAxes, LoopParams
+from rig.plans import CampaignAxes, LoopParams, check_plan_size
 
 ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_-]{0,99}$"
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,79}$"
-MAX_PLAN_STEPS = 200_000
 """A plan longer than this is refused (its preview alone would take seconds)."""
 
 _strict = ConfigDict(extra="forbid", strict=True)
@@ -132,12 +131,6 @@ class AxesSettings(BaseModel):
         return CampaignAxes(**self.model_dump())
 
 
-def _plan_size(plan: PlanSettings, n_runs: int) -> int:
-    """An upper bound of the steps of the plan (a few steps per level and quarter)."""
-    per_quarter = 4 * (plan.steps_per_quarter + 2 * len(plan.extra_levels_pct)) + 5
-    return n_runs * (plan.cycles * 4 * per_quarter + 2 * plan.pre_cycles + 12)
-
-
 class RunRequest(BaseModel):
     """Set up a single run (``kind`` "run") or a campaign (``kind`` "campaign": runs over
     ``axes``). ``position_deg`` (run only) locks the input there first (needs an input
@@ -162,10 +155,7 @@ class RunRequest(BaseModel):
         n_runs = 1 if self.kind == "run" else (
             len(a.positions_deg) * len(a.amplitudes_pct) * max(1, len(a.temperatures_C))
             * a.repeats)
-        size = _plan_size(self.plan, n_runs)
-        if size > MAX_PLAN_STEPS:
-            raise ValueError(f"the plan would have about {size} steps (at most "
-                             f"{MAX_PLAN_STEPS}): fewer positions, repeats, cycles or steps")
+        check_plan_size(self.plan, n_runs)
         return self
 
 

@@ -7,7 +7,6 @@ import os
 import pkgutil
 import signal
 import sys
-import tempfile
 import time
 import traceback
 from pathlib import Path
@@ -67,6 +66,9 @@ def main() -> None:
     metrics that cannot be computed) are printed as one line on stderr and exit 2.
     """
     signal.signal(signal.SIGTERM, _terminate_like_ctrl_c)
+    from rig.logs import configure_cli_logging
+
+    configure_cli_logging()
     try:
         app()
     except (RigError, DeviceError, AnalysisError) as exc:
@@ -88,12 +90,9 @@ def _terminate_like_ctrl_c(signum: int, frame: object) -> None:
 def _write_crash_log() -> Path:
     """The current exception's traceback in ``$RIG_LOG_DIR`` (default
     ``~/.cache/backlash-rig/logs``, else the temporary folder); its path."""
-    folder = Path(os.environ.get("RIG_LOG_DIR") or Path.home() / ".cache" / "backlash-rig"
-                  / "logs")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        folder = Path(tempfile.gettempdir())
+    from rig.logs import log_dir
+
+    folder = log_dir()
     stamp = time.strftime("%Y%m%dT%H%M%S")
     path = folder / f"rig-crash-{stamp}-{os.getpid()}.log"
     path.write_text(f"rig {' '.join(sys.argv[1:])}\n{traceback.format_exc()}",

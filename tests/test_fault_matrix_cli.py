@@ -85,3 +85,46 @@ def test_an_unexpected_error_exits_2_with_one_line_and_a_log(tmp_path: Path,
     if "internal error" in lines[0]:  # a bug caught at the top: its traceback is kept
         (log,) = logs.glob("rig-crash-*.log")
         assert "Traceback" in log.read_text() and str(log) in lines[0]
+
+
+def test_a_killed_simulator_gives_one_line_naming_the_device(tmp_path: Path,
+                                                             record_property: Any):
+    """Row 15: ``rig sim`` killed (-9) mid-run. The measurement stops with one line naming
+    the device; python-can's and pymodbus's tracebacks go to the log file, not the terminal."""
+    sim = subprocess.Popen([*RIG, "sim", "--seed", "3"], stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    logs = tmp_path / "logs"
+    try:
+        addresses = json.loads(sim.stdout.readline())
+        store = tmp_path / "store"
+        proc = subprocess.Popen(
+            [*RIG, "measure", "--rig", addresses["rig_config"], "--store", str(store),
+             "--rated-torque", "10", "--steps", "4"], stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+            env={**os.environ, "RIG_LOG_DIR": str(logs)})
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not list(store.glob("runs/*/samples.csv")):
+            time.sleep(0.1)
+        time.sleep(0.5)
+        t_kill = time.monotonic()
+        sim.kill()
+        out, err = proc.communicate(timeout=60)
+        stopped_s = time.monotonic() - t_kill
+    finally:
+        for p in (sim,):
+            if p.poll() is None:
+                p.kill()
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    record_property("fault", "rig sim killed (-9)")
+    record_property("phase", "during a run")
+    record_property("outcome", f"exit {proc.returncode}")
+    record_property("safe_s", f"{stopped_s:.3f} (devices gone; the drive's watchdog)")
+    record_property("samples_kept", "")
+    record_property("message", lines[-1] if lines else "")
+    assert proc.returncode == 2, (out[-800:], err[-2000:])
+    assert "Traceback" not in err, err[-3000:]
+    logged = [ln[:30] for ln in lines if ln.startswith("rig: ")]
+    assert len(logged) == len(set(logged)) <= 4, err  # each kind of warning once
+    assert not any(ln.startswith(("can.", "pymodbus", "canopen")) for ln in lines), err
+    assert any(word in err for word in ("encoder", "transducer", "drive", "sensor")), err
+    assert list(logs.glob("rig-*.log")), "the library noise goes to a log file"

@@ -140,3 +140,40 @@ def test_estop_pressed_as_a_run_starts_stops_it(page):
     new = [r for r in store.list_runs() if r.run_id not in before]
     assert all(r.status == "aborted" for r in new)  # the loop never completed
     assert client.post("/api/devices/reset-faults", headers=AUTH).json()["ok"]
+
+
+def test_a_drive_enabled_behind_the_idle_page_is_made_safe(tmp_path):
+    """Fault-matrix row 12: another Modbus master enables the loading drive at 3 N*m while
+    the page idles. The page's idle polling feeds the drive's watchdog, so the watchdog would
+    never take it off: the page brings the drive to the safe state and says so."""
+    from pymodbus.client import ModbusTcpClient
+
+    from drivers.modbus_map import (
+        DRIVE_DEVICE_ID,
+        LOADING_DRIVE_MAP,
+        DriveControl,
+        encode_float32,
+    )
+
+    store = Store(tmp_path)
+    controller = RigController(store, LiveHub(), simulated_session_factory(), simulated=True)
+    app = create_app(resolve_settings(store_root=tmp_path, token=TOKEN), controller)
+    with TestClient(app) as client:
+        wait_for(client, lambda s: s["state"] != "starting", 90.0)
+        cfg = controller.session.devices.config.drive
+        outsider = ModbusTcpClient(cfg.host, port=cfg.port, timeout=1.0, retries=0)
+        assert outsider.connect()
+        try:
+            outsider.write_registers(LOADING_DRIVE_MAP["setpoint"].address,
+                                     encode_float32(3.0), device_id=DRIVE_DEVICE_ID)
+            outsider.write_register(LOADING_DRIVE_MAP["control"].address,
+                                    int(DriveControl.ENABLE), device_id=DRIVE_DEVICE_ID)
+            t0 = time.monotonic()
+            status = wait_for(client, lambda s: s["safe"] is True and
+                              "brought to the safe state" in s["message"], 10.0)
+            made_safe_s = time.monotonic() - t0
+        finally:
+            outsider.close()
+        assert status["live"]["drive_enabled"] is False and made_safe_s < 5.0
+        drive_status = controller.session.devices.drive.status()
+        assert not drive_status.enabled and drive_status.setpoint_Nm == 0.0

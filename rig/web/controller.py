@@ -243,6 +243,8 @@ class RigController:
         if drive is not None:
             try:
                 st = drive.status()
+                if not busy and (st.enabled or st.setpoint_Nm != 0) and not st.faulted:
+                    st = self._unexpected_drive(drive, st)
                 live.update(setpoint_Nm=st.setpoint_Nm, drive_enabled=st.enabled)
                 self._safe = (not st.enabled) and st.setpoint_Nm == 0
                 rows.append({"name": "loading drive", "connected": True, "ok": not st.faulted,
@@ -376,6 +378,28 @@ class RigController:
             + " (the cause is still there)")
         self.hub.add_event({"type": "state", "state": self.state})
         return {"ok": not after, "message": message, "cleared": cleared, "still": after}
+
+    def _unexpected_drive(self, drive: Any, st: Any) -> Any:
+        """Fault-matrix row 12: the drive enabled (or a setpoint set) while this station
+        commands nothing, by hand or by another master. The idle page feeds the watchdog, so
+        the drive's own watchdog would never take it off: bring it to the safe state now
+        and say so; its status after."""
+        if not self._device_lock.acquire(timeout=1.0):
+            return st
+        try:
+            drive.safe_state()
+            after = drive.status()
+        except DeviceError as exc:
+            log.error("drive found enabled while idle; safe state not confirmed: %s", exc)
+            return st
+        finally:
+            self._device_lock.release()
+        self.message = (f"the loading drive was enabled ({st.setpoint_Nm:+.3g} N*m) while this "
+                        "station commanded nothing: brought to the safe state (zero torque, "
+                        "disabled)")
+        log.warning(self.message)
+        self.hub.add_event({"type": "state", "state": self.state})
+        return after
 
     def status(self, operator: bool) -> dict[str, Any]:
         """The page's view of the rig now (the ``Status`` model)."""

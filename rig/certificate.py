@@ -257,12 +257,11 @@ def _position_figure(campaign: Campaign, runs: list[Run], limits: dict[str, Any]
                                "lost_motion_arcmin")})
     model = (summary.get("model") or {}).get("lost_motion_arcmin")
     if model is None:
-        model = next(((r.meta.get("result") or {}).get("model") or {}).get("lost_motion_arcmin")
-                     for r in runs) if runs else None
-    if "batch" in summary:
-        batch = summary["batch"]
-    else:
-        batch = _batch_band(campaign, runs)
+        models = (((r.meta.get("result") or {}).get("model") or {}).get("lost_motion_arcmin")
+                  for r in runs)
+        model = next((m for m in models if m is not None), None)
+    # the band as the campaign stored it (None: the batch model cannot use this unit)
+    batch = summary["batch"] if "batch" in summary else _batch_band(campaign, runs)
     out: dict[str, Any] = {"figure": None, "batch": batch, "model": _fmt(model, ".3f"),
                            "n_points": len(points)}
     if points:

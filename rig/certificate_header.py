@@ -66,7 +66,8 @@ def header_fields(run_meta: dict[str, Any], campaign_meta: dict[str, Any] | None
         unit = run_meta.get("unit") if isinstance(run_meta.get("unit"), dict) else {}
     if campaign_meta is not None:
         subject = f"campaign {_first(camp.get('campaign_id'), camp.get('name'))}"
-        started, finished = camp.get("started_at"), camp.get("finished_at")
+        started = camp.get("started_at") or run_meta.get("started_at")
+        finished = camp.get("finished_at") or run_meta.get("finished_at")
     else:
         subject = f"run {_first(run_meta.get('run_id'))}"
         started, finished = run_meta.get("started_at"), run_meta.get("finished_at")

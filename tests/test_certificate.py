@@ -174,3 +174,34 @@ def test_a_target_that_is_neither_folder_nor_id_is_named(measured: dict, target:
     monkeypatch.chdir(measured["tmp"])
     with pytest.raises(CertificateError, match=re.escape(f"{target}: {message}")):
         resolve_subject(target, measured["tmp"] / "s1")
+
+
+def test_calibration_operator_and_an_aborted_run(measured: dict):
+    """What the record adds is shown: calibration references (list or per-sensor mapping, past
+    due flagged), the operator; an aborted run is INCOMPLETE with its reason."""
+    tmp, run = measured["tmp"], measured["run"]
+    folder = tmp / "edited"
+    shutil.copytree(run["path"], folder)
+    meta = json.loads((folder / "run.json").read_text())
+    meta["operator"] = "B. Tester"
+    meta["calibration"] = [{"sensor": "torque_transducer", "id": "TT-12",
+                            "certificate": "DAkkS D-K-1234 2026-17", "date": "2025-06-01",
+                            "due": "2026-06-01", "uncertainty": "0.05 % of full scale"}]
+    (folder / "run.json").write_text(json.dumps(meta))
+    context = write_certificate(resolve_subject(str(folder), tmp / "s1"),
+                                html=tmp / "edited.html")
+    page = (tmp / "edited.html").read_text()
+    assert context["outcome_word"] == "OK" and "B. Tester" in page
+    for text in ("TT-12", "DAkkS D-K-1234 2026-17", "2026-06-01", "0.05 % of full scale",
+                 "calibration of sensor &#39;torque_transducer&#39; was past due"):
+        assert text in page, text
+    meta["calibration"] = {"output_encoder": {"certificate": "ENC-7", "due": "2099-01-01"}}
+    meta.update(status="aborted", reason="E-stop pressed", outcome="incomplete")
+    del meta["result"]
+    (folder / "run.json").write_text(json.dumps(meta))
+    context = write_certificate(resolve_subject(str(folder), tmp / "s1"),
+                                html=tmp / "aborted.html")
+    page = (tmp / "aborted.html").read_text()
+    assert context["outcome_word"] == "INCOMPLETE"
+    assert "E-stop pressed" in page and "not measured" in page and "ENC-7" in page
+    assert "past due" not in page

@@ -114,8 +114,13 @@ def _plain_words(report: dict[str, Any]) -> str:
     return text
 
 
-def render_html(report: dict[str, Any], diagnosis: Diagnosis) -> str:
-    """The whole page as a string."""
+def render_html(report: dict[str, Any], diagnosis: Diagnosis,
+                header: dict[str, str] | None = None) -> str:
+    """The whole page as a string; ``header``: the certificate's header of the campaign
+    (:func:`rig.certificate_header.header_for_campaign`: unit, serial, operator, date, rig,
+    software), drawn first by the same partial."""
+    from rig.certificate_header import render_header
+
     verdict = report["verdict"]
     effects = (verdict,) if verdict in diagnosis.models else None
     parts = [
@@ -124,6 +129,7 @@ def render_html(report: dict[str, Any], diagnosis: Diagnosis) -> str:
         "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}"
         "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 6px;"
         "font-size:13px}</style></head><body>",
+        render_header(header) if header is not None else "",
         f"<h1>Sim-to-real gap: {html.escape(verdict)}</h1>",
         f"<p>{_plain_words(report)}</p>",
         f"<p>Where: <b>{html.escape(report['localization']['where'])}</b> — "
@@ -157,8 +163,9 @@ def render_html(report: dict[str, Any], diagnosis: Diagnosis) -> str:
     return "\n".join(parts)
 
 
-def write_html(report: dict[str, Any], diagnosis: Diagnosis, path: str | Path) -> Path:
+def write_html(report: dict[str, Any], diagnosis: Diagnosis, path: str | Path,
+               header: dict[str, str] | None = None) -> Path:
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(render_html(report, diagnosis), encoding="utf-8")
+    p.write_text(render_html(report, diagnosis, header), encoding="utf-8")
     return p

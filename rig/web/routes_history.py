@@ -11,7 +11,7 @@ import json
 import tempfile
 import zipfile
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi import Path as PathParam
@@ -231,6 +231,48 @@ def campaign_diagnosis(request: Request, campaign_id: CampaignId) -> JSONRespons
             summary="The diagnosis report of a campaign as an HTML page")
 def campaign_diagnosis_html(request: Request, campaign_id: CampaignId) -> HTMLResponse:
     return HTMLResponse(_diagnosis(_store(request), campaign_id, "html"))
+
+
+CertFormat = Annotated[Literal["pdf", "html"], PathParam(
+    description="pdf (one A4 page, a download) or html (self-contained page)")]
+CERTIFICATE = {**NOT_FOUND, **UNPROCESSABLE, 200: {
+    "content": {"application/pdf": {}, "text/html": {}},
+    "description": "The unit's test certificate (rig certificate)"}}
+
+
+def _certificate(store: Store, kind: str, ident: str, fmt: str) -> Response:
+    """The certificate of a finished run or campaign, drawn in the analysis worker."""
+    from rig.certificate import certificate_bytes
+    from rig.web.workers import run_in_worker
+
+    try:
+        info = store.get_run(ident) if kind == "run" else store.get_campaign(ident)
+    except UnknownIdError as exc:
+        raise HTTPException(404, str(exc)) from exc
+    if info.status == "running":
+        raise HTTPException(409, f"{kind} {ident} is still running")
+    try:
+        data = run_in_worker(certificate_bytes, str(info.path), store.url or str(store.root),
+                             str(store.root) if store.url else None, fmt)
+    except Exception as exc:  # unreadable record, no PDF engine: said, not a 500
+        raise HTTPException(409, f"{kind} {ident} has no certificate: {exc}") from exc
+    if fmt == "html":
+        return HTMLResponse(data.decode("utf-8"))
+    return Response(data, media_type="application/pdf", headers={
+        "Content-Disposition": f'attachment; filename="{ident}-certificate.pdf"'})
+
+
+@router.get("/runs/{run_id}/certificate.{fmt}", response_class=Response, responses=CERTIFICATE,
+            summary="The test certificate of a run (PDF or HTML)")
+def run_certificate(request: Request, run_id: RunId, fmt: CertFormat) -> Response:
+    return _certificate(_store(request), "run", run_id, fmt)
+
+
+@router.get("/campaigns/{campaign_id}/certificate.{fmt}", response_class=Response,
+            responses=CERTIFICATE, summary="The test certificate of a campaign (PDF or HTML)")
+def campaign_certificate(request: Request, campaign_id: CampaignId, fmt: CertFormat
+                         ) -> Response:
+    return _certificate(_store(request), "campaign", campaign_id, fmt)
 
 
 def _read_json(path: Path) -> dict[str, Any]:

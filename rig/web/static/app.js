@@ -436,7 +436,7 @@ async function refreshHistory() {
         `<td>${esc(r.status)}${r.reason ? ": " + esc(r.reason) : ""}</td><td>${esc(r.unit_serial || "")}</td>` +
         `<td>${esc(r.started_at)}</td><td>${lm}</td>` +
         `<td><a href="/api/runs/${id}/run.zip">zip</a> · <a href="/api/runs/${id}/samples.csv">csv</a> · ` +
-        `<a href="/api/runs/${id}/loop.png">png</a></td>`;
+        `<a href="/api/runs/${id}/loop.png">png</a> · <a href="/api/runs/${id}/certificate.pdf">Certificate</a></td>`;
       tb.appendChild(tr);
     }
     const cb = $("campaigns").querySelector("tbody");
@@ -452,7 +452,8 @@ async function refreshHistory() {
       tr.innerHTML = `<td><a href="#" data-campaign="${esc(c.campaign_id)}">${esc(c.campaign_id)}</a></td><td>${esc(c.status)}</td><td>${verdict}</td>` +
         `<td>${byPos}</td><td><a href="/api/campaigns/${id}/diagnosis.html" target="_blank">diagnosis</a>` +
         ` · <a href="/api/campaigns/${id}/diagnosis.html" download="${esc(c.campaign_id)}-diagnosis.html">html</a>` +
-        ` · <a href="/api/campaigns/${id}/diagnosis.json" download>json</a></td>`;
+        ` · <a href="/api/campaigns/${id}/diagnosis.json" download>json</a>` +
+        ` · <a href="/api/campaigns/${id}/certificate.pdf">Certificate</a></td>`;
       cb.appendChild(tr);
     }
   } catch (e) { notice("history: " + e.message, true); }

@@ -1,0 +1,73 @@
+"""The figures of a test certificate, as SVG data URIs (vector in the PDF, no files beside).
+
+The loop is :func:`rig.plots.plot_loops` (the Fig. 6-style loop of ``rig analyse --plot``);
+lost motion against the input position is drawn here, with the nominal model's line and the
+production batch band of the design (:func:`rig.campaign.batch_band`, as stored by a campaign).
+"""
+
+from __future__ import annotations
+
+import base64
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from rig.analyse import RunAnalysis
+
+
+def svg_uri(svg: bytes) -> str:
+    """An SVG document as a ``data:image/svg+xml;base64,...`` URI."""
+    return "data:image/svg+xml;base64," + base64.b64encode(svg).decode("ascii")
+
+
+def loop_svg(analyses: Sequence[RunAnalysis], title: str | None = None) -> str:
+    """The loops (torque vs twist, with the model loop and the ±p % band) as an SVG URI."""
+    from rig.plots import plot_loops
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = plot_loops(analyses, Path(tmp) / "loop.svg", title=title)
+        return svg_uri(path.read_bytes())
+
+
+def position_svg(points: Sequence[dict[str, Any]], model_arcmin: float | None,
+                 batch: dict[str, Any] | None, limit_arcmin: float | None) -> str:
+    """Lost motion (arcmin) against the input (eccentric shaft) angle (deg): each run with its
+    uncertainty, the nominal model (no runout) as a line, the batch's 95 % band shaded, and
+    the limit. ``points``: dicts with input_angle_deg, lost_motion_arcmin, uncertainty."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.0, 3.3))
+    if batch and batch.get("band_95_arcmin"):
+        low, high = batch["band_95_arcmin"]
+        ax.axhspan(low, high, color="0.85", zorder=0,
+                   label="production batch of the design, 95 %")
+        if batch.get("median_arcmin") is not None:
+            ax.axhline(batch["median_arcmin"], color="0.6", lw=0.8, ls=":")
+    if model_arcmin is not None:
+        ax.axhline(model_arcmin, color="black", lw=1.0, ls="--",
+                   label=f"nominal model (no runout) {model_arcmin:.3f}")
+    if limit_arcmin is not None:
+        ax.axhline(limit_arcmin, color="#c00", lw=1.2, label=f"limit {limit_arcmin:g}")
+    xs = [p["input_angle_deg"] for p in points]
+    ys = [p["lost_motion_arcmin"] for p in points]
+    errs = [p.get("uncertainty") or 0.0 for p in points]
+    ax.errorbar(xs, ys, yerr=errs, fmt="o", ms=4, color="tab:blue", capsize=3,
+                label="measured")
+    ax.set_xlabel("input (eccentric shaft) angle, deg")
+    ax.set_ylabel("lost motion, arcmin")
+    ax.set_xlim(-15, 375)
+    ax.set_xticks(range(0, 361, 60))
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="svg")
+    plt.close(fig)
+    return svg_uri(buf.getvalue())

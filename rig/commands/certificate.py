@@ -1,0 +1,42 @@
+"""``rig certificate RUN_OR_CAMPAIGN --pdf FILE [--html FILE]``: the unit's test certificate."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from rig.store_options import DEFAULT_STORE, SamplesOption, StoreOption
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def certificate(
+        target: Annotated[str, typer.Argument(
+            metavar="RUN_OR_CAMPAIGN",
+            help="A run or campaign folder, or a run or campaign id of the --store.")],
+        pdf: Annotated[Path | None, typer.Option(
+            "--pdf", help="Write the certificate as PDF (one A4 page).")] = None,
+        html: Annotated[Path | None, typer.Option(
+            "--html", help="Write the certificate as HTML (self-contained).")] = None,
+        store: StoreOption = DEFAULT_STORE,
+        samples: SamplesOption = None,
+    ) -> None:
+        """The test certificate of a unit from a stored run or campaign: unit, serial,
+        operator, date, rig, software, sensors and calibration, the loop, the metrics with
+        their uncertainties against the limits, OK / NOT OK / INCOMPLETE; for a campaign the
+        lost motion against position with the batch band and the diagnosis verdict if one was
+        made. --store is read only when RUN_OR_CAMPAIGN is not a folder."""
+        from rig.certificate import CertificateError, resolve_subject, write_certificate
+
+        if pdf is None and html is None:
+            raise CertificateError("give --pdf FILE and/or --html FILE: nothing to write")
+        subject = resolve_subject(target, store, samples)
+        context = write_certificate(subject, pdf=pdf, html=html)
+        header = context["header"]
+        typer.echo(f"certificate of {header['subject']} (unit {header['serial']}): "
+                   f"{context['outcome_word']}")
+        for path in (pdf, html):
+            if path is not None:
+                typer.echo(f"written to {path}")

@@ -1,0 +1,207 @@
+"""The test certificate (issue 11): measured on the simulated rig, certified, read back.
+
+A single run (``rig measure``) and a two-position campaign (``rig campaign run``) are measured
+at the same time on two simulated rigs (their own processes, real protocols), then
+``rig certificate`` writes PDF and HTML and ``pdftotext`` (poppler-utils, .ci/install) reads
+the PDF: serial, operator, outcome word, limits and the measured lost motion must be in it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from rig.certificate import CertificateError, resolve_subject, write_certificate
+from rig.certificate_header import software_version
+from tests.test_measure_cli import TINY
+
+ROOT = Path(__file__).resolve().parents[1]
+RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
+UNIT = ROOT / "rig/examples/units/seed000-pair1.json"
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+CAMPAIGN = (TINY.replace("LIMIT", "1.0")
+            .replace('name = "tiny"', 'name = "cert"\noperator = "Q. Inspector"')
+            .replace("[unit]\n", '[unit]\nserial = "SN-CERT-2"\n')
+            .replace("positions_deg = [90.0]", "positions_deg = [0.0, 180.0]"))
+
+
+def _rig(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([*RIG, *args], capture_output=True, text=True, cwd=cwd, env=ENV,
+                          timeout=180)
+
+
+def _pdf_text(path: Path) -> str:
+    if shutil.which("pdftotext") is None:
+        pytest.fail("pdftotext not found: install poppler-utils (.ci/install)")
+    text = subprocess.run(["pdftotext", str(path), "-"], capture_output=True, text=True,
+                          check=True).stdout
+    return " ".join(text.split())  # lines wrap where the page's columns end
+
+
+def _pages(path: Path) -> int:
+    info = subprocess.run(["pdfinfo", str(path)], capture_output=True, text=True,
+                          check=True).stdout
+    return int(re.search(r"^Pages:\s+(\d+)", info, re.M).group(1))
+
+
+@pytest.fixture(scope="module")
+def measured(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """One run (limits 9' lost motion, 8' backlash: OK) and a campaign at 0 and 180 deg
+    (limit 1': NOT OK), measured in parallel."""
+    tmp = tmp_path_factory.mktemp("cert")
+    (tmp / "camp.toml").write_text(CAMPAIGN)
+    run_cmd = ["measure", "--simulated", "--unit", str(UNIT), "--serial", "SN-CERT-1",
+               "--rated-torque", "10", "--steps", "2", "--pre-cycles", "0",
+               "--max-lost-motion", "9", "--max-backlash", "8", "--store", str(tmp / "s1"),
+               "--json", str(tmp / "run.json")]
+    camp_cmd = ["campaign", "run", str(tmp / "camp.toml"), "--simulated", "--store",
+                str(tmp / "s2"), "--json", str(tmp / "camp.json")]
+    procs = [subprocess.Popen([*RIG, *cmd], cwd=tmp, env=ENV, stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True)
+             for cmd in (run_cmd, camp_cmd)]
+    outs = [p.communicate(timeout=180)[0] for p in procs]
+    assert procs[0].returncode == 0, outs[0][-2000:]
+    assert procs[1].returncode == 1, outs[1][-2000:]  # NOT OK against 1 arcmin
+    return {"tmp": tmp, "run": json.loads((tmp / "run.json").read_text()),
+            "campaign": json.loads((tmp / "camp.json").read_text())}
+
+
+def test_run_certificate_by_store_id(measured: dict):
+    tmp, run = measured["tmp"], measured["run"]
+    assert run["outcome"] == "ok"
+    res = _rig("certificate", run["run_id"], "--store", str(tmp / "s1"), "--pdf",
+               str(tmp / "run.pdf"), "--html", str(tmp / "run.html"), cwd=tmp)
+    assert res.returncode == 0, res.stderr
+    assert "(unit SN-CERT-1): OK" in res.stdout
+    text = _pdf_text(tmp / "run.pdf")
+    assert _pages(tmp / "run.pdf") == 1
+    assert "SN-CERT-1" in text and run["run_id"] in text
+    assert re.search(r"\bOK\b", text) and "NOT OK" not in text and "INCOMPLETE" not in text
+    lm, u = run["lost_motion_arcmin"], run["uncertainty"]["lost_motion_arcmin"]
+    assert f"{lm:.3f} ± {u:.3f} arcmin" in text
+    assert f"{run['backlash_arcmin']:.3f} ± {run['uncertainty']['backlash_arcmin']:.3f}" in text
+    assert "≤ 9 arcmin" in text and "≤ 8 arcmin" in text
+    assert "Operator" in text and "not recorded" in text  # no --operator given
+    assert f"backlash-rig {software_version()}" in text and "simulated" in text  # the rig
+    assert "encoder_counts_per_rev" in text and "8388608" in text  # the sensors
+    page = (tmp / "run.html").read_text()
+    assert "data:image/svg+xml;base64," in page  # the loop, inline
+    assert not re.search(r"(src|href)=\"?https?:", page)  # self-contained
+
+
+def test_campaign_certificate_with_position_band_and_diagnosis(measured: dict):
+    tmp, camp = measured["tmp"], measured["campaign"]
+    folder = Path(camp["path"])
+    res = _rig("certificate", str(folder), "--pdf", str(tmp / "camp.pdf"), cwd=tmp)
+    assert res.returncode == 0, res.stderr
+    text = _pdf_text(tmp / "camp.pdf")
+    assert _pages(tmp / "camp.pdf") == 1
+    assert "SN-CERT-2" in text and "Q. Inspector" in text and "NOT OK" in text
+    assert "≤ 1 arcmin" in text
+    assert len(camp["runs"]) == 2
+    for r in camp["runs"]:
+        assert f"{r['lost_motion_arcmin']:.3f} ± {r['uncertainty']['lost_motion_arcmin']:.3f}" \
+            in text
+    assert "Lost motion against input position" in text
+    low, high = camp["batch"]["band_95_arcmin"]
+    assert f"{low:.3f} .. {high:.3f} arcmin" in text
+    assert f"{camp['model']['lost_motion_arcmin']:.3f}" in text  # the nominal model
+    assert "Diagnosis:" not in text  # none was made yet
+
+    res = _rig("diagnose", str(folder), "--json", str(folder / "diagnosis.json"), "--html",
+               str(tmp / "diag.html"), cwd=tmp)
+    assert res.returncode == 0, res.stderr
+    report = json.loads((folder / "diagnosis.json").read_text())
+    page = (tmp / "diag.html").read_text()  # the diagnosis page has the same header
+    assert 'class="cert-head"' in page and "SN-CERT-2" in page and "Q. Inspector" in page
+    # by its id in the store (in this process: the command line was run above)
+    write_certificate(resolve_subject(camp["campaign_id"], tmp / "s2"), pdf=tmp / "camp2.pdf")
+    text = _pdf_text(tmp / "camp2.pdf")
+    assert f"Diagnosis: {report['verdict']}" in text
+
+
+def test_certificate_from_the_page(measured: dict):
+    from fastapi.testclient import TestClient
+
+    from rig.store import Store
+    from rig.web import create_app
+    from rig.web.settings import resolve_settings
+
+    tmp, run = measured["tmp"], measured["run"]
+    store = Store(tmp / "s1")
+    app = create_app(resolve_settings(store_root=store.root, token="cert-operator"),
+                     store=store)
+    with TestClient(app) as client:
+        pdf = client.get(f"/api/runs/{run['run_id']}/certificate.pdf")
+        assert pdf.status_code == 200, pdf.text
+        assert pdf.headers["content-type"] == "application/pdf"
+        (tmp / "web.pdf").write_bytes(pdf.content)
+        assert "SN-CERT-1" in _pdf_text(tmp / "web.pdf")
+        page = client.get(f"/api/runs/{run['run_id']}/certificate.html")
+        assert page.status_code == 200 and "SN-CERT-1" in page.text
+        assert client.get("/api/runs/no-such-run/certificate.pdf").status_code == 404
+        assert client.get("/api/campaigns/no-such/certificate.html").status_code == 404
+        js = client.get("/static/app.js")
+        assert js.status_code == 200 and "/certificate.pdf" in js.text
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["no-such-run", "--pdf", "x.pdf"], "no run or campaign with that id"),
+    (["RUN"], "give --pdf FILE and/or --html FILE"),
+])
+def test_bad_argument_is_one_line_exit_2(measured: dict, args: list[str], message: str):
+    tmp = measured["tmp"]
+    args = [measured["run"]["run_id"] if a == "RUN" else a for a in args]
+    res = _rig("certificate", *args, "--store", str(tmp / "s1"), cwd=tmp)
+    assert res.returncode == 2
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], res.stderr
+
+
+@pytest.mark.parametrize(("target", "message"), [
+    ("../outside", "no such run or campaign folder (and not a run or campaign id)"),
+    ("s1", "not a run folder (no run.json) or a campaign folder (no campaign.json)"),
+])
+def test_a_target_that_is_neither_folder_nor_id_is_named(measured: dict, target: str,
+                                                         message: str, monkeypatch):
+    monkeypatch.chdir(measured["tmp"])
+    with pytest.raises(CertificateError, match=re.escape(f"{target}: {message}")):
+        resolve_subject(target, measured["tmp"] / "s1")
+
+
+def test_calibration_operator_and_an_aborted_run(measured: dict):
+    """What the record adds is shown: calibration references (list or per-sensor mapping, past
+    due flagged), the operator; an aborted run is INCOMPLETE with its reason."""
+    tmp, run = measured["tmp"], measured["run"]
+    folder = tmp / "edited"
+    shutil.copytree(run["path"], folder)
+    meta = json.loads((folder / "run.json").read_text())
+    meta["operator"] = "B. Tester"
+    meta["calibration"] = [{"sensor": "torque_transducer", "id": "TT-12",
+                            "certificate": "DAkkS D-K-1234 2026-17", "date": "2025-06-01",
+                            "due": "2026-06-01", "uncertainty": "0.05 % of full scale"}]
+    (folder / "run.json").write_text(json.dumps(meta))
+    context = write_certificate(resolve_subject(str(folder), tmp / "s1"),
+                                html=tmp / "edited.html")
+    page = (tmp / "edited.html").read_text()
+    assert context["outcome_word"] == "OK" and "B. Tester" in page
+    for text in ("TT-12", "DAkkS D-K-1234 2026-17", "2026-06-01", "0.05 % of full scale",
+                 "calibration of sensor &#39;torque_transducer&#39; was past due"):
+        assert text in page, text
+    meta["calibration"] = {"output_encoder": {"certificate": "ENC-7", "due": "2099-01-01"}}
+    meta.update(status="aborted", reason="E-stop pressed", outcome="incomplete")
+    del meta["result"]
+    (folder / "run.json").write_text(json.dumps(meta))
+    context = write_certificate(resolve_subject(str(folder), tmp / "s1"),
+                                html=tmp / "aborted.html")
+    page = (tmp / "aborted.html").read_text()
+    assert context["outcome_word"] == "INCOMPLETE"
+    assert "E-stop pressed" in page and "not measured" in page and "ENC-7" in page
+    assert "past due" not in page

@@ -4,7 +4,9 @@ One point per *unit test*: the completed runs of one campaign (a unit measured a
 positions, amplitudes ...) or one run outside any campaign, in the order the tests started.
 Its value is the unit's worst run: the largest lost motion and backlash, the smallest
 stiffness (the campaign limits are checked on every run, and the seed 000 batch band is the
-lost motion at the worst position). Metrics are those stored with the run (``result``).
+lost motion at the worst position). Metrics are the newest re-analysis of a run (``rig
+reanalyse`` after a model or software update) where one is stored, else those stored with
+the run (``result``).
 
 Per design (``unit.design``, else ``unit.model``; runs without one form the design
 "(none)"), for lost motion, backlash and stiffness: the individuals/moving-range chart and
@@ -16,7 +18,7 @@ newest campaign that has limits, and for lost motion the seed 000 batch band of 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from analysis.errors import AnalysisError
@@ -149,10 +151,29 @@ def metric_view(tests: list[UnitTest], metric: str, limits: dict[str, Any]) -> d
     return out
 
 
+def newest_metrics(store: Store, runs: list[RunInfo]) -> list[RunInfo]:
+    """The runs with their newest re-computed metrics (``rig reanalyse`` after a model or
+    software update; the latest by computation time without an error), else as measured.
+    """
+    newest: dict[str, dict[str, Any]] = {}
+    for result in store.results():  # oldest first: later ones replace earlier ones
+        if result.get("run_id") and result.get("metrics") and not result.get("error"):
+            newest[result["run_id"]] = result
+    out = []
+    for info in runs:
+        result = newest.get(info.run_id)
+        if result is not None:
+            info = replace(info, metrics={**(info.metrics or {}), **result["metrics"]})
+        out.append(info)
+    return out
+
+
 def spc_report(store: Store, *, design: str | None = None, since: str | None = None
                ) -> dict[str, Any]:
     """The ``rig spc --json`` document (module doc)."""
-    runs = store.list_runs(status="completed", design=design, since=since)
+    measured = store.list_runs(status="completed", design=design, since=since)
+    runs = newest_metrics(store, measured)
+    n_reanalysed = sum(a.metrics != b.metrics for a, b in zip(measured, runs, strict=True))
     groups: dict[str, list[RunInfo]] = {}
     for info in runs[::-1]:  # oldest first
         groups.setdefault(info.design or NO_DESIGN, []).append(info)
@@ -172,6 +193,9 @@ def spc_report(store: Store, *, design: str | None = None, since: str | None = N
         "format": SPC_FORMAT, "store": store.location, "design": design, "since": since,
         "constants": {"d2": D2, "D4": D4, "sigma_limits": 3.0},
         "rules": RULES,
+        "metrics_source": "the newest re-analysis of each run where one is stored (rig "
+                          "reanalyse), else the metrics measured with the run",
+        "n_runs_reanalysed": n_reanalysed,
         "point": "one per unit test (a campaign, or a run outside campaigns): the worst run "
                  "(max lost motion and backlash, min stiffness)",
         "designs": designs,

@@ -148,11 +148,35 @@ def conditions_of(stack: Stack) -> tuple[dict[str, tuple], list[str]]:
     temps = [r.mean_temperature_C for r in runs]
     amps = [r.amplitude_Nm for r in runs]
     levels["position"] = pos
-    levels["temperature"] = [None if t is None else round(t / 1.5) for t in temps]
+    levels["temperature"] = temperature_levels(temps)
     levels["amplitude"] = [round(a / (0.05 * stack.rated_Nm)) for a in amps]
     varied = [k for k, v in levels.items() if len(set(v)) > 1]
     cond = {r.run_id: tuple(levels[k][i] for k in varied) for i, r in enumerate(runs)}
     return cond, varied
+
+
+TEMPERATURE_SPAN_K = 2.0
+"""Housing temperatures that span less than this are one condition (the rule of
+:func:`testable` for thermal expansion: below it the campaign does not vary temperature)."""
+TEMPERATURE_GAP_K = 1.5
+"""Mean run temperatures closer than this (after sorting) are the same temperature level."""
+
+
+def temperature_levels(temps: Sequence[float | None]) -> list[int | None]:
+    """Each run's temperature level: 0 for all when the campaign does not vary temperature
+    (span below TEMPERATURE_SPAN_K: room drift of a few tenths is no factor), else levels
+    split where sorted mean temperatures leave a gap of TEMPERATURE_GAP_K. Rounding to a grid
+    split 20.12 and 20.66 deg C into two conditions, and a tooth-pair repeat was lost."""
+    known = sorted(t for t in temps if t is not None)
+    if not known or known[-1] - known[0] < TEMPERATURE_SPAN_K:
+        return [None if t is None else 0 for t in temps]
+    level_of: dict[float, int] = {}
+    level = 0
+    for a, b in zip([known[0], *known], known, strict=False):
+        if b - a >= TEMPERATURE_GAP_K:
+            level += 1
+        level_of[b] = level
+    return [None if t is None else level_of[t] for t in temps]
 
 
 def folds_by_condition(stack: Stack, cond: dict[str, tuple]) -> list[list[int]]:

@@ -445,10 +445,28 @@ OWN_TERMS = {
 }
 
 
+CROSSING_SHARE = 0.05
+"""Half-width of the play-crossing band (share of a run's torque amplitude) left out of an
+effect's size, beside the fitted friction and sensor offset that move the flank change."""
+
+
+def on_flanks(run: PreparedRun, f: LinearFit) -> np.ndarray:
+    """Blocks of ``run`` on a flank, away from the play crossing: |T| beyond 5 % of the
+    amplitude and beyond twice the fitted friction plus the sensor offset."""
+    band = max(CROSSING_SHARE * run.amplitude_Nm,
+               2.0 * abs(f.nl.get("friction_Nm", 0.0)) + abs(f.nl.get("torque_offset_Nm", 0.0)))
+    keep = np.abs(run.torque_Nm) > band
+    return keep if keep.sum() >= 4 else np.ones_like(keep, dtype=bool)
+
+
 def effect_size_arcmin(stack: Stack, f: LinearFit, effects: Sequence[str], name: str) -> float:
     """RMS (arcmin) of one effect's own term in a joint fit: the fitted twist minus the twist
     with that effect switched off (its coefficients zeroed, its friction/offset set to 0),
-    each run's mean removed (the twist zero is free)."""
+    each run's mean removed (the twist zero is free). Friction's size is read on the flanks
+    (:func:`on_flanks`): its loop signature is the branch separation 2 T_c / K there (seed 000
+    Fig. 6's hysteresis), while in the crossing band switching it off moves the whole-play
+    step of the flank change. A sensor offset keeps its band: at a commanded zero it holds
+    the unit on the other flank for the whole dwell, a real twist difference of the play."""
     coefs, nls = OWN_TERMS.get(name, ((), ()))
     beta0 = np.array([0.0 if any(n.startswith(c) for c in coefs) else b
                       for n, b in zip(f.names, f.beta, strict=True)])
@@ -459,6 +477,8 @@ def effect_size_arcmin(stack: Stack, f: LinearFit, effects: Sequence[str], name:
         full = run_columns(stack, run, ("backlash", *effects), f.nl, teeth) @ f.beta
         off = run_columns(stack, run, ("backlash", *effects), nl0, teeth) @ beta0
         d = full - off
+        if name == "friction":
+            d = d[on_flanks(run, f)]
         d = d - d.mean()
         sq += float(d @ d)
         n += d.size

@@ -69,16 +69,11 @@ def test_set_a_accuracy(graded: dict) -> None:
     assert Fraction(g["correct"], g["cases"]) >= RATIO["a"], g["confusion"]
 
 
-@pytest.mark.xfail(strict=True, reason="today's diagnosis: a two-effect case (shaft compliance "
-                   "+ friction) named in the wrong order and an out-of-vocabulary case called "
-                   "bearing_clearance; diag2 works on it (issue 10)")
 def test_set_b_accuracy(graded: dict) -> None:
     g = graded["b"]
     assert Fraction(g["correct"], g["cases"]) >= RATIO["b"], g["confusion"]
 
 
-@pytest.mark.xfail(strict=True, reason="today's diagnosis lists 3 of the 5 second effects "
-                   "under also (issue 10: also recall >= 0.75)")
 def test_set_b_also_recall(graded: dict) -> None:
     assert graded["b"]["two_effect_cases"] >= 4
     assert graded["b"]["also_recall"] >= 0.75

@@ -818,4 +818,10 @@ def _read_samples(folder: Path, allow_truncated_tail: bool) -> Samples:
     parquet = folder / SAMPLES_PARQUET
     if parquet.is_file():
         return read_samples_parquet(parquet)
-    return read_samples_csv(folder / SAMPLES_CSV, allow_truncated_tail)
+    csv_path = folder / SAMPLES_CSV
+    try:
+        return read_samples_csv(csv_path, allow_truncated_tail)
+    except RunFormatError:
+        if csv_path.exists() or not parquet.is_file():
+            raise
+    return read_samples_parquet(parquet)  # the store finalised the run meanwhile

@@ -86,7 +86,7 @@ def _read_fast(path: Path, allow_truncated_tail: bool) -> Samples | None:
         header = head[:end].decode("utf-8").rstrip("\r").split(",")
     except UnicodeDecodeError:
         return None
-    return _parse(path, header, lambda: pa.OSFile(str(path)), [])
+    return _parse(path, header, lambda: pa.OSFile(str(path)), size, [])
 
 
 def _read_fast_in_memory(path: Path, allow_truncated_tail: bool) -> Samples | None:
@@ -119,46 +119,52 @@ def _read_fast_in_memory(path: Path, allow_truncated_tail: bool) -> Samples | No
     except UnicodeDecodeError:
         return None
     body = pa.py_buffer(raw).slice(start, min(len(core) + 1, len(raw) - start))
-    return _parse(path, header, lambda: pa.BufferReader(body), notes)
+    return _parse(path, header, lambda: pa.BufferReader(body), body.size, notes)
 
 
-def _parse(path: Path, header: list[str], source: Callable[[], Any], notes: list[str]) -> (
-        Samples | None):
+def _parse(path: Path, header: list[str], source: Callable[[], Any], size: int,
+           notes: list[str]) -> Samples | None:
     names = [h.strip() for h in header]
     if names != header:
         notes.append(f"stripped spaces around column names in the header of {path}")
     if len(names) == 1 or any(not n for n in names) or len(set(names)) != len(names):
         return None  # the slow pass words the header error
     check_column_names(names, lambda msg, col: RunFormatError(path, msg, line=1, column=col))
-    table = _arrow_table(source, names)
-    if table is None:
+    # every row takes at least one byte per column (its commas and its newline)
+    columns = _arrow_columns(source, names, size // len(names) + 1)
+    if columns is None:
         return None
     data: dict[str, Column] = {}
-    columns = table.columns
-    del table
-    for j, name in enumerate(names):
-        col, columns[j] = columns[j], None
-        if pa.types.is_floating(col.type):
-            data[name] = _to_numpy(col)
+    for name, values in zip(names, columns, strict=True):
+        if isinstance(values, list):
+            numbers = _numbers_or_none(values)
+            data[name] = values if numbers is None else numbers
         else:
-            texts = col.to_pylist()
-            numbers = _numbers_or_none(texts)
-            data[name] = texts if numbers is None else numbers
+            data[name] = values
     if not _values_ok(data):
         return None
     return names, data, notes
 
 
-def _arrow_table(source: Callable[[], Any], names: list[str]) -> pa.Table | None:
-    """Parse with float64 for every column; an extra column pyarrow cannot read as numbers
-    is read again as text. None if a standard column or the rows themselves are refused."""
+def _arrow_columns(source: Callable[[], Any], names: list[str], max_rows: int) -> (
+        list[Column] | None):
+    """Parse with float64 for every column, batch by batch, each batch copied at once into
+    arrays sized for ``max_rows`` (an upper bound: only the pages written become memory), so
+    that Arrow data never piles up and peak memory stays near the data's size.
+
+    Returns the columns: float64 arrays, or lists of str for an extra column that pyarrow
+    cannot read as numbers (read again as text). None if a standard column or the rows
+    themselves are refused.
+    """
     keys = [f"f{j}" for j in range(len(names))]
     text: set[int] = set()
     while True:
         types = {k: pa.string() if j in text else pa.float64() for j, k in enumerate(keys)}
+        out: list[Column] = [[] if j in text else np.empty(max_rows) for j in range(len(names))]
+        n = 0
         try:
             with source() as stream:
-                return pacsv.read_csv(
+                reader = pacsv.open_csv(
                     stream,
                     read_options=pacsv.ReadOptions(column_names=keys, skip_rows=1),
                     parse_options=pacsv.ParseOptions(newlines_in_values=True,
@@ -166,22 +172,34 @@ def _arrow_table(source: Callable[[], Any], names: list[str]) -> pa.Table | None
                     convert_options=pacsv.ConvertOptions(
                         column_types=types, null_values=[""], strings_can_be_null=False),
                 )
+                for batch in reader:
+                    m = batch.num_rows
+                    if n + m > max_rows:
+                        return None  # cannot happen (max_rows bounds the lines); be safe
+                    for j, col in enumerate(batch.columns):
+                        target = out[j]
+                        if isinstance(target, list):
+                            target.extend(col.to_pylist())
+                        else:
+                            target[n : n + m] = _to_numpy(col)
+                    n += m
+                    del batch
+            return [c if isinstance(c, list) else c[:n] for c in out]
         except (pa.ArrowInvalid, UnicodeDecodeError) as e:
-            m = _CONVERSION.search(str(e))
-            if m is None:
+            match = _CONVERSION.search(str(e))
+            if match is None:
                 return None
-            j = int(m.group(1))
+            j = int(match.group(1))
             if j in text or j >= len(names) or names[j] in KNOWN_NUMERIC_COLUMNS:
                 return None
             text.add(j)
 
 
-def _to_numpy(col: pa.ChunkedArray) -> np.ndarray:
-    """float64 column as a writable numpy array, nulls (empty fields) as NaN."""
+def _to_numpy(col: pa.Array) -> np.ndarray:
+    """A float64 Arrow array as numpy (read-only view), nulls (empty fields) as NaN."""
     if col.null_count:
         col = pc.fill_null(col, math.nan)
-    arr = col.to_numpy()
-    return arr if arr.flags.writeable else arr.copy()
+    return col.to_numpy(zero_copy_only=False)
 
 
 def _numbers_or_none(texts: list[str]) -> np.ndarray | None:

@@ -16,7 +16,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from rig.errors import RunFormatError
-from rig.runformat_base import REQUIRED_COLUMNS, Column, Samples, check_column_names
+from rig.runformat_base import (
+    KNOWN_NUMERIC_COLUMNS,
+    REQUIRED_COLUMNS,
+    Column,
+    Samples,
+    check_column_names,
+)
 
 
 def write_samples_parquet(path: Path, columns: list[str], data: dict[str, Column]) -> None:
@@ -42,36 +48,36 @@ def read_samples_parquet(path: Path) -> Samples:
     """Read (columns, data, notes); a problem is a RunFormatError naming the file, the column
     (1-based) and the row (1-based, in the message: Parquet has no lines)."""
     try:
-        table = pq.read_table(path)
+        with pq.ParquetFile(path) as source:
+            names = list(source.schema_arrow.names)
+            check_column_names(names, lambda msg, col: RunFormatError(path, msg, column=col))
+            data: dict[str, Column] = {}
+            for j, name in enumerate(names):  # column by column: peak memory near the data
+                data[name] = _column(path, j, name, source.read(columns=[name]).column(0))
     except FileNotFoundError:
         raise RunFormatError(path, "no such file") from None
     except (OSError, pa.ArrowException) as e:
         raise RunFormatError(path, f"not a readable Parquet file: {e}") from None
-    names = list(table.column_names)
-    check_column_names(names, lambda msg, col: RunFormatError(path, msg, column=col))
-    data: dict[str, Column] = {}
-    columns = table.columns
-    del table
-    for j, name in enumerate(names):
-        col, columns[j] = columns[j], None
-        kind = col.type
-        if pa.types.is_string(kind) or pa.types.is_large_string(kind):
-            if name in REQUIRED_COLUMNS or name in ("input_angle_deg", "temperature_C"):
-                raise RunFormatError(path, f"column {name!r} holds text, not numbers",
-                                     column=j + 1)
-            data[name] = [s if s is not None else "" for s in col.to_pylist()]
-            continue
-        if not (pa.types.is_floating(kind) or pa.types.is_integer(kind)):
-            raise RunFormatError(path, f"column {name!r} has the type {kind}, expected numbers "
-                                 "or text", column=j + 1)
-        if not pa.types.is_float64(kind):
-            col = col.cast(pa.float64())
-        if col.null_count:
-            col = col.fill_null(np.nan)
-        arr = col.to_numpy()
-        data[name] = arr if arr.flags.writeable else arr.copy()
     _check_values(path, names, data)
     return names, data, []
+
+
+def _column(path: Path, j: int, name: str, col: pa.ChunkedArray) -> Column:
+    """One Parquet column as a float64 array (writable, NaN = missing) or a list of str."""
+    kind = col.type
+    if pa.types.is_string(kind) or pa.types.is_large_string(kind):
+        if name in KNOWN_NUMERIC_COLUMNS:
+            raise RunFormatError(path, f"column {name!r} holds text, not numbers", column=j + 1)
+        return [s if s is not None else "" for s in col.to_pylist()]
+    if not (pa.types.is_floating(kind) or pa.types.is_integer(kind)):
+        raise RunFormatError(path, f"column {name!r} has the type {kind}, expected numbers "
+                             "or text", column=j + 1)
+    if not pa.types.is_float64(kind):
+        col = col.cast(pa.float64())
+    if col.null_count:
+        col = col.fill_null(np.nan)
+    arr = col.to_numpy()
+    return arr if arr.flags.writeable else arr.copy()
 
 
 def _check_values(path: Path, names: list[str], data: dict[str, Column]) -> None:

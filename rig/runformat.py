@@ -2,14 +2,20 @@
 
 The format is specified in ``docs/run-format.md`` ("A run", "A campaign"): a run is a folder
 holding ``run.json`` (metadata) and ``samples.csv`` (the time series); a campaign is a folder
-of run sub-folders plus an optional ``campaign.json``.
+of run sub-folders plus an optional ``campaign.json``. A run of the store keeps its samples in
+``samples.parquet`` instead (rig/runformat_parquet.py); :func:`read_run` reads either.
+
+Samples are read and written through pyarrow (rig/runformat_csvread.py) and orjson
+(rig/runformat_csvwrite.py).
 
 Guarantees:
 
 - Lossless round-trip: unknown CSV columns (numeric or text) and unknown JSON keys at every
   level are kept, in their order. Floats are written as their shortest round-trip decimal
   (Python ``repr``), which reads back bit-exact and so carries at least the 10 significant
-  digits the spec asks for whenever a value needs them. A missing value (NaN) is an empty field.
+  digits the spec asks for whenever a value needs them; in columns the format does not
+  define, whole numbers are written as integers (``8``). A missing value (NaN) is an empty
+  field.
 - Bad input raises :class:`rig.errors.RunFormatError` naming the file, the 1-based line and
   the 1-based column. In ``samples.csv`` the column is the 1-based CSV *field index* and the
   message names the column header; in JSON files it is the 1-based *character* column.
@@ -20,10 +26,7 @@ Units follow the column names: ``t_s`` in s, ``torque_Nm`` in N·m, angles in de
 
 from __future__ import annotations
 
-import codecs
 import csv
-import difflib
-import io
 import json
 import math
 import os
@@ -35,19 +38,38 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pyarrow.parquet as pq
 
 from rig.errors import RunFormatError
+from rig.runformat_base import (
+    CAMPAIGN_FORMAT,
+    CAMPAIGN_JSON,
+    KNOWN_NUMERIC_COLUMNS,
+    OPTIONAL_NUMERIC_COLUMNS,
+    REQUIRED_COLUMNS,
+    RUN_FORMAT,
+    RUN_JSON,
+    SAMPLES_CSV,
+    SAMPLES_PARQUET,
+    Column,
+    Samples,
+    as_float_column,
+    check_column_names,
+    decode,
+    numeric_bits_equal,
+    read_bytes,
+)
+from rig.runformat_csvread import read_samples_csv
+from rig.runformat_csvwrite import csv_line, format_cell, samples_text, writes_integers
+from rig.runformat_parquet import read_samples_parquet, write_samples_parquet
 
-RUN_FORMAT = "rig-run/1"
-CAMPAIGN_FORMAT = "rig-campaign/1"
-RUN_JSON = "run.json"
-SAMPLES_CSV = "samples.csv"
-CAMPAIGN_JSON = "campaign.json"
-REQUIRED_COLUMNS = ("t_s", "torque_Nm", "output_angle_deg")
-OPTIONAL_NUMERIC_COLUMNS = ("input_angle_deg", "temperature_C")
-KNOWN_NUMERIC_COLUMNS = REQUIRED_COLUMNS + OPTIONAL_NUMERIC_COLUMNS
-
-Column = np.ndarray | list[str]
+__all__ = [
+    "CAMPAIGN_FORMAT", "CAMPAIGN_JSON", "KNOWN_NUMERIC_COLUMNS", "OPTIONAL_NUMERIC_COLUMNS",
+    "REQUIRED_COLUMNS", "RUN_FORMAT", "RUN_JSON", "SAMPLES_CSV", "SAMPLES_PARQUET", "Campaign",
+    "Column", "Run", "SamplesAppender", "is_campaign", "read_campaign", "read_run",
+    "read_run_or_campaign", "runs_equal", "sample_columns", "samples_csv_bytes",
+    "write_campaign", "write_run", "write_samples_parquet",
+]
 
 
 # --------------------------------------------------------------------------- data classes
@@ -160,14 +182,14 @@ class Run:
                 raise ValueError(f"extra_meta may not change {key!r} (got {value!r})")
             meta[key] = value
         data: dict[str, Column] = {
-            "t_s": _as_float_column("t_s", t_s),
-            "torque_Nm": _as_float_column("torque_Nm", torque_Nm),
-            "output_angle_deg": _as_float_column("output_angle_deg", output_angle_deg),
+            "t_s": as_float_column("t_s", t_s),
+            "torque_Nm": as_float_column("torque_Nm", torque_Nm),
+            "output_angle_deg": as_float_column("output_angle_deg", output_angle_deg),
         }
         if input_angle_deg is not None:
-            data["input_angle_deg"] = _as_float_column("input_angle_deg", input_angle_deg)
+            data["input_angle_deg"] = as_float_column("input_angle_deg", input_angle_deg)
         if temperature_C is not None:
-            data["temperature_C"] = _as_float_column("temperature_C", temperature_C)
+            data["temperature_C"] = as_float_column("temperature_C", temperature_C)
         for name, values in (extra_columns or {}).items():
             if name in data:
                 raise ValueError(f"extra column {name!r} duplicates a standard column")
@@ -203,10 +225,7 @@ def runs_equal(a: Run, b: Run) -> bool:
         if isinstance(x, np.ndarray) != isinstance(y, np.ndarray):
             return False
         if isinstance(x, np.ndarray):
-            if x.shape != y.shape or not np.array_equal(np.isnan(x), np.isnan(y)):
-                return False
-            keep = ~np.isnan(x)
-            if not np.array_equal(x[keep].view(np.uint64), y[keep].view(np.uint64)):
+            if not numeric_bits_equal(x, y):
                 return False
         elif list(x) != list(y):
             return False
@@ -219,9 +238,11 @@ def runs_equal(a: Run, b: Run) -> bool:
 def read_run(path: str | Path, *, allow_truncated_tail: bool = False) -> Run:
     """Read a run from its folder, its ``run.json``, or a bare CSV of samples.
 
-    A bare CSV (another lab's export, samples only) gets the minimal meta
-    ``{"format": "rig-run/1", "run_id": <file stem>}`` and a note saying so. A ``samples.csv``
-    next to a ``run.json`` is read as that run folder.
+    A run folder holding ``samples.parquet`` (a stored run) is read from it, else from
+    ``samples.csv``. A bare CSV (another lab's export, samples only) or Parquet file gets
+    the minimal meta ``{"format": "rig-run/1", "run_id": <file stem>}`` and a note saying
+    so. A ``samples.csv`` or ``samples.parquet`` next to a ``run.json`` is read as that run
+    folder.
 
     ``allow_truncated_tail``: a last line without its newline was cut off mid-write (every row
     this module writes ends in a newline); it is dropped and recorded in ``Run.notes``.
@@ -232,14 +253,18 @@ def read_run(path: str | Path, *, allow_truncated_tail: bool = False) -> Run:
         folder = p
         if not (folder / RUN_JSON).exists():
             raise RunFormatError(folder, f"not a run folder: no {RUN_JSON}")
-    elif p.name == RUN_JSON or (p.name == SAMPLES_CSV and (p.parent / RUN_JSON).is_file()):
+    elif p.name == RUN_JSON or (
+        p.name in (SAMPLES_CSV, SAMPLES_PARQUET) and (p.parent / RUN_JSON).is_file()
+    ):
         folder = p.parent
+    elif p.is_file() and p.suffix == ".parquet":
+        return _read_bare_parquet(p)
     elif p.is_file():
         return _read_bare_csv(p, allow_truncated_tail)
     else:
         raise RunFormatError(p, "no such file or folder")
     meta = _read_run_json(folder / RUN_JSON)
-    columns, data, notes = _read_samples(folder / SAMPLES_CSV, allow_truncated_tail)
+    columns, data, notes = _read_samples(folder, allow_truncated_tail)
     return Run(meta=meta, columns=columns, data=data, path=folder, notes=notes)
 
 
@@ -337,7 +362,7 @@ def write_run(run: Run, folder: str | Path) -> Path:
     _check_run(run)
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
-    _atomic_write(out / SAMPLES_CSV, _samples_text(run.columns, run.data))
+    _atomic_write(out / SAMPLES_CSV, samples_text(run.columns, run.data))
     _atomic_write(out / RUN_JSON, json.dumps(run.meta, indent=2, ensure_ascii=False) + "\n")
     return out
 
@@ -375,13 +400,36 @@ def write_campaign(campaign: Campaign, folder: str | Path) -> Path:
     return out
 
 
+def samples_csv_bytes(run: Run) -> bytes:
+    """The run's samples as the rig-run/1 ``samples.csv`` :func:`write_run` writes (UTF-8)."""
+    _check_run(run)
+    return samples_text(run.columns, run.data).encode("utf-8")
+
+
+def sample_columns(folder: str | Path) -> list[str]:
+    """The sample column names of a run folder: the Parquet schema of ``samples.parquet``
+    (a stored run), else the header of ``samples.csv``; [] if neither can be read."""
+    p = Path(folder)
+    if (p / SAMPLES_PARQUET).is_file():
+        try:
+            return list(pq.read_schema(p / SAMPLES_PARQUET).names)
+        except (OSError, ValueError):
+            return []
+    try:
+        with open(p / SAMPLES_CSV, encoding="utf-8-sig", newline="") as f:
+            return [c.strip() for c in next(csv.reader(f), [])]
+    except (OSError, ValueError):
+        return []
+
+
 class SamplesAppender:
     """Append sample rows to a ``samples.csv`` as they are measured.
 
     Writes the header to a new (or empty) file; an existing file must carry exactly
     ``columns`` as header. Rows are flushed to disk (``flush`` + ``os.fsync``) at least every
     ``flush_interval_s`` seconds by a background thread, so a SIGKILL loses at most that much.
-    Numbers are written as :func:`write_run` writes them (shortest round-trip, None/NaN empty).
+    Numbers are written as :func:`write_run` writes them (shortest round-trip, None/NaN empty,
+    whole numbers as integers in the columns the format does not define).
     ``t_s`` must be strictly ascending and the required columns finite numbers (ValueError).
 
     A file whose last line was cut off by a kill raises RunFormatError unless
@@ -403,11 +451,12 @@ class SamplesAppender:
         _check_header(self.path, self.columns)
         self._required = [self.columns.index(c) for c in REQUIRED_COLUMNS]
         self._t_index = self.columns.index("t_s")
+        self._integers = [writes_integers(c) for c in self.columns]
         self._last_t = -math.inf
         self._lock = threading.Lock()
         self._dirty = False
         self._closed = False
-        header = _csv_line(self.columns)
+        header = csv_line(self.columns)
         existing = self.path.exists() and self.path.stat().st_size > 0
         if existing:
             self._last_t = self._check_existing(header, repair_truncated_tail)
@@ -427,7 +476,7 @@ class SamplesAppender:
 
     def _check_existing(self, header: str, repair: bool) -> float:
         """Check an existing file's header and tail; return its last t_s (-inf if no rows)."""
-        raw = _read_bytes(self.path)
+        raw = read_bytes(self.path)
         if not raw.endswith(b"\n"):
             cut = raw.rfind(b"\n") + 1
             if cut == 0:
@@ -487,7 +536,7 @@ class SamplesAppender:
             raise ValueError(
                 f"{self.path}: t_s must be strictly ascending, got {t!r} after {self._last_t!r}"
             )
-        line = ",".join(_format_cell(v) for v in row) + "\n"
+        line = ",".join(map(format_cell, row, self._integers)) + "\n"
         with self._lock:
             if self._closed:
                 raise ValueError(f"{self.path}: appender is closed")
@@ -533,17 +582,10 @@ class SamplesAppender:
 # --------------------------------------------------------------------------- validation
 
 
-def _as_float_column(name: str, values: Any) -> np.ndarray:
-    arr = np.array(values, dtype=np.float64)
-    if arr.ndim != 1:
-        raise ValueError(f"column {name!r} must be 1-D, got shape {arr.shape}")
-    return arr
-
-
 def _as_column(name: str, values: Any) -> Column:
     if isinstance(values, list | tuple) and values and all(isinstance(v, str) for v in values):
         return list(values)
-    return _as_float_column(name, values)
+    return as_float_column(name, values)
 
 
 def _check_run(run: Run) -> None:
@@ -556,7 +598,7 @@ def _check_run(run: Run) -> None:
         raise ValueError(f"{who}: meta['run_id'] must be a non-empty str")
     if list(run.columns) != list(run.data):
         raise ValueError(f"{who}: columns {run.columns} differ from data keys {list(run.data)}")
-    _check_column_names(run.columns, lambda msg, col: ValueError(f"{who}: {msg}"))
+    check_column_names(run.columns, lambda msg, col: ValueError(f"{who}: {msg}"))
     n = None
     for name, values in run.data.items():
         if isinstance(values, np.ndarray):
@@ -583,34 +625,11 @@ def _check_run(run: Run) -> None:
         )
 
 
-def _check_column_names(columns: list[str], error: Any) -> None:
-    """Raise ``error(message, 1-based column)`` for an empty, duplicate or missing name."""
-    seen: set[str] = set()
-    for i, name in enumerate(columns, 1):
-        if not name:
-            raise error(f"column {i} has an empty name", i)
-        if name in seen:
-            raise error(f"column {i} {name!r} appears twice in the header", i)
-        seen.add(name)
-    for name in REQUIRED_COLUMNS:
-        if name not in seen:
-            others = [c for c in columns if c not in KNOWN_NUMERIC_COLUMNS]
-            case = [c for c in others if c.lower() == name.lower()]
-            near = case or difflib.get_close_matches(name, others, n=1, cutoff=0.6)
-            col = columns.index(near[0]) + 1 if near else None
-            hint = f"; did you mean column {col} {near[0]!r}?" if near else ""
-            raise error(
-                f"required column {name!r} is missing from the header {columns} "
-                f"(names are case-sensitive){hint}",
-                col,
-            )
-
-
 def _check_header(path: Path, columns: list[str]) -> None:
     def error(msg: str, col: int | None) -> ValueError:
         return ValueError(f"{path}: {msg}")
 
-    _check_column_names(columns, error)
+    check_column_names(columns, error)
 
 
 def _check_folder_name(name: str) -> None:
@@ -621,35 +640,8 @@ def _check_folder_name(name: str) -> None:
 # --------------------------------------------------------------------------- file helpers
 
 
-def _read_bytes(path: Path) -> bytes:
-    try:
-        return path.read_bytes()
-    except FileNotFoundError:
-        raise RunFormatError(path, "no such file") from None
-    except IsADirectoryError:
-        raise RunFormatError(path, "is a folder, expected a file") from None
-    except OSError as e:
-        raise RunFormatError(path, f"cannot read: {e.strerror or e}") from None
-
-
-def _decode(path: Path, raw: bytes, csv_fields: bool = False) -> str:
-    """Decode UTF-8 (a leading BOM is dropped). A bad byte is an error at its line and column:
-    the CSV field index if ``csv_fields``, else the character column.
-    """
-    try:
-        return raw.decode("utf-8").removeprefix("\ufeff")
-    except UnicodeDecodeError as e:
-        line_start = raw.rfind(b"\n", 0, e.start) + 1
-        line = raw.count(b"\n", 0, e.start) + 1
-        prefix = raw[line_start : e.start]
-        col = prefix.count(b",") + 1 if csv_fields else len(prefix.decode("utf-8", "replace")) + 1
-        raise RunFormatError(
-            path, f"not UTF-8: byte 0x{raw[e.start]:02x} is not valid UTF-8", line, col
-        ) from None
-
-
 def _read_text(path: Path) -> str:
-    return _decode(path, _read_bytes(path))
+    return decode(path, read_bytes(path))
 
 
 def _atomic_write(path: Path, text: str) -> None:
@@ -812,321 +804,34 @@ def _campaign_run_names(path: Path, text: str, runs: Any) -> list[str]:
     return list(runs)
 
 
-# --------------------------------------------------------------------------- CSV reading
+# --------------------------------------------------------------------------- samples files
 
 
 def _read_bare_csv(path: Path, allow_truncated_tail: bool) -> Run:
-    columns, data, notes = _read_samples(path, allow_truncated_tail)
+    columns, data, notes = read_samples_csv(path, allow_truncated_tail)
     meta = {"format": RUN_FORMAT, "run_id": path.stem}
     notes.insert(0, f"read from a bare CSV file {path} (samples only): no run.json, minimal meta")
     return Run(meta=meta, columns=columns, data=data, path=path, notes=notes)
 
 
-class _Table:
-    """The header of a samples file; words errors about its fields (line, field index)."""
-
-    def __init__(self, path: Path, header: list[str], no_newline_at_end: bool) -> None:
-        self.path = path
-        self.header = header
-        self.no_newline_at_end = no_newline_at_end
-
-    def error(self, row_line: int, col: int | None, message: str, last: bool) -> RunFormatError:
-        if col is not None and 1 <= col <= len(self.header):
-            message = f"column {self.header[col - 1]!r}: {message}"
-        if last and self.no_newline_at_end:
-            message += (
-                " (the last line has no newline: cut off mid-write? "
-                "read_run(..., allow_truncated_tail=True) drops it)"
-            )
-        return RunFormatError(self.path, message, line=row_line, column=col)
+def _read_bare_parquet(path: Path) -> Run:
+    columns, data, notes = read_samples_parquet(path)
+    meta = {"format": RUN_FORMAT, "run_id": path.stem}
+    notes.insert(0, f"read from a bare Parquet file {path} (samples only): no run.json, "
+                 "minimal meta")
+    return Run(meta=meta, columns=columns, data=data, path=path, notes=notes)
 
 
-def _read_samples(
-    path: Path, allow_truncated_tail: bool
-) -> tuple[list[str], dict[str, Column], list[str]]:
-    """Read a samples CSV into (columns, data, notes). Errors name file, line, field index."""
-    raw = _read_bytes(path)
-    notes: list[str] = []
-    if raw.startswith(codecs.BOM_UTF8):
-        raw = raw[len(codecs.BOM_UTF8) :]
-    no_newline = bool(raw) and not raw.endswith(b"\n") and b"\n" in raw
-    if no_newline and allow_truncated_tail:
-        cut = raw.rfind(b"\n") + 1
-        tail = raw[cut:].decode("utf-8", "replace")
-        line = raw.count(b"\n") + 1
-        notes.append(
-            f"dropped the incomplete last line {line} of {path} (no newline, cut off "
-            f"mid-write): {tail[:80]!r}"
-        )
-        raw = raw[:cut]
-        no_newline = False
-    text = _decode(path, raw, csv_fields=True)
-    if no_newline:
-        notes.append(f"the last line {text.count(chr(10)) + 1} of {path} has no newline at the end")
-    core = text.rstrip("\r\n")
-    blank_at_end = text[len(core) :].count("\n") - 1
-    if blank_at_end > 0:
-        notes.append(f"ignored {blank_at_end} blank line(s) at the end of {path}")
-    if not core.strip():
-        raise RunFormatError(path, "empty file: no header line", line=1)
-    if '"' in core:
-        header, body_rows, row_lines = _rows_by_csv(core)
-    else:
-        core = core.replace("\r\n", "\n") if "\r" in core else core
-        head, _, body = core.partition("\n")
-        header = head.split(",")
-        body_rows, row_lines = None, None
-    stripped = [h.strip() for h in header]
-    if stripped != header:
-        notes.append(f"stripped spaces around column names in the header of {path}")
-    table = _Table(path, stripped, no_newline)
-
-    def header_error(msg: str, col: int | None) -> RunFormatError:
-        return RunFormatError(path, msg, line=1, column=col)
-
-    if len(stripped) == 1:
-        for sep, name in ((";", "semicolon"), ("\t", "tab")):
-            if sep in stripped[0]:
-                raise header_error(f"header is {name}-separated; rig-run/1 uses commas", 1)
-    _check_column_names(stripped, header_error)
-    if body_rows is None:
-        matrix = _fast_numeric(body, len(stripped))
-        if matrix is not None:
-            data: dict[str, Column] = {name: matrix[:, j].copy() for j, name in enumerate(stripped)}
-            _check_values(table, data, lambda r: r + 2, _body_field(body))
-            return stripped, data, notes
-        columns = _columns_by_split(table, body)
-
-        def line_of(r: int) -> int:
-            return r + 2
-    else:
-        columns = _columns_by_rows(table, body_rows, row_lines)
-        line_of = row_lines.__getitem__
-    data = _columns_from_texts(table, columns, line_of)
-    _check_values(table, data, line_of, lambda r, col: columns[col - 1][r])
-    return stripped, data, notes
-
-
-def _body_field(body: str) -> Any:
-    def field_text(r: int, col: int) -> str:
-        return body.split("\n", r + 1)[r].split(",")[col - 1]
-
-    return field_text
-
-
-def _rows_by_csv(core: str) -> tuple[list[str], list[list[str]], list[int]]:
-    """Split quoted CSV with the csv module; return header, rows and each row's first line."""
-    reader = csv.reader(io.StringIO(core, newline=""))
-    header = next(reader)
-    rows: list[list[str]] = []
-    lines: list[int] = []
-    start = reader.line_num + 1
-    for row in reader:
-        rows.append(row)
-        lines.append(start)
-        start = reader.line_num + 1
-    return header, rows, lines
-
-
-def _fast_numeric(body: str, n_columns: int) -> np.ndarray | None:
-    """Parse an all-numeric, unquoted body at once with numpy; None if anything is off."""
-    if not body:
-        return np.empty((0, n_columns))
-    if "\n\n" in body or body.startswith("\n"):
-        return None
-    n_rows = body.count("\n") + 1
-    filled = _fill_empty_fields(body)
+def _read_samples(folder: Path, allow_truncated_tail: bool) -> Samples:
+    """A run folder's samples: ``samples.parquet`` (a stored run) if present, else
+    ``samples.csv``."""
+    parquet = folder / SAMPLES_PARQUET
+    if parquet.is_file():
+        return read_samples_parquet(parquet)
+    csv_path = folder / SAMPLES_CSV
     try:
-        matrix = np.loadtxt(
-            io.StringIO(filled), delimiter=",", dtype=np.float64, comments=None, ndmin=2
-        )
-    except ValueError:
-        return None
-    if matrix.shape != (n_rows, n_columns):
-        return None
-    return matrix
-
-
-def _fill_empty_fields(body: str) -> str:
-    """Write ``nan`` into empty fields so that numpy parses them as missing values."""
-    while ",," in body:
-        body = body.replace(",,", ",nan,")
-    body = body.replace(",\n", ",nan\n").replace("\n,", "\nnan,")
-    if body.startswith(","):
-        body = "nan" + body
-    if body.endswith(","):
-        body += "nan"
-    return body
-
-
-def _field_count_error(table: _Table, line: int, fields: list[str], last: bool) -> RunFormatError:
-    n_col = len(table.header)
-    if len(fields) <= 1 and not "".join(fields).strip():
-        return table.error(line, None, "blank line inside the data", last)
-    if len(fields) < n_col:
-        col = len(fields) + 1
-        msg = f"row has {len(fields)} fields, the header has {n_col}: field {col} missing"
-    else:
-        col = n_col + 1
-        msg = f"row has {len(fields)} fields, the header has {n_col}: unexpected field {col}"
-    return table.error(line, col, msg, last)
-
-
-def _columns_by_split(table: _Table, body: str) -> list[list[str]]:
-    """Split an unquoted body into columns of texts (row r is on line r + 2)."""
-    n_col = len(table.header)
-    if not body:
-        return [[] for _ in range(n_col)]
-    commas = _commas_per_line(body)
-    bad = np.flatnonzero(commas != n_col - 1)
-    if bad.size:
-        r = int(bad[0])
-        line = body.split("\n", r + 1)[r]
-        raise _field_count_error(table, r + 2, line.split(","), r == len(commas) - 1)
-    flat = body.replace("\n", ",").split(",")
-    return [flat[j::n_col] for j in range(n_col)]
-
-
-def _commas_per_line(text: str) -> np.ndarray:
-    """Number of commas on each line of ``text`` (vectorised over its UTF-8 bytes)."""
-    buf = np.frombuffer(text.encode("utf-8"), dtype=np.uint8)
-    newlines = np.flatnonzero(buf == ord("\n"))
-    commas = np.flatnonzero(buf == ord(","))
-    ends = np.append(newlines, buf.size)
-    return np.diff(np.searchsorted(commas, ends), prepend=0)
-
-
-def _columns_by_rows(
-    table: _Table, rows: list[list[str]], row_lines: list[int]
-) -> list[list[str]]:
-    """Check the field count of csv-module rows and turn them into columns of texts."""
-    for r, row in enumerate(rows):
-        if len(row) != len(table.header):
-            raise _field_count_error(table, row_lines[r], row, r == len(rows) - 1)
-    if not rows:
-        return [[] for _ in table.header]
-    return [list(c) for c in zip(*rows, strict=True)]
-
-
-def _columns_from_texts(
-    table: _Table, columns: list[list[str]], line_of: Any
-) -> dict[str, Column]:
-    """Convert each column of texts: numeric if every field is a number or empty, else text.
-
-    The required and standard optional columns must be numeric: the first field in file
-    order that is not a number is an error.
-    """
-    data: dict[str, Column] = {}
-    first_bad: tuple[int, int, str] | None = None
-    for j, (name, texts) in enumerate(zip(table.header, columns, strict=True)):
-        values, bad = _parse_floats(texts)
-        if bad is None:
-            data[name] = values
-        elif name in KNOWN_NUMERIC_COLUMNS:
-            if first_bad is None or bad < first_bad[0]:
-                first_bad = (bad, j + 1, texts[bad])
-        else:
-            data[name] = texts
-    if first_bad is not None:
-        r, col, txt = first_bad
-        last = r == len(columns[0]) - 1
-        raise table.error(line_of(r), col, f"cannot read {txt!r} as a number", last)
-    return data
-
-
-def _parse_floats(texts: list[str]) -> tuple[np.ndarray, int | None]:
-    """Convert texts to float64 (blank = NaN); return (values, index of first bad text)."""
-    try:
-        return np.array(texts, dtype=np.float64).reshape(len(texts)), None
-    except ValueError:
-        pass
-    cleaned = [t if t.strip() else "nan" for t in texts]
-    try:
-        return np.array(cleaned, dtype=np.float64).reshape(len(texts)), None
-    except ValueError:
-        for i, t in enumerate(cleaned):
-            try:
-                float(t)
-            except ValueError:
-                return np.empty(0), i
-        raise
-
-
-def _check_values(table: _Table, data: dict[str, Column], line_of: Any, field_text: Any) -> None:
-    """Required values finite, time strictly ascending; errors name line and field index.
-
-    ``line_of(row)`` gives a row's file line, ``field_text(row, column)`` the text of a field.
-    """
-    n = len(data["t_s"])
-
-    worst: tuple[int, int] | None = None
-    for name in REQUIRED_COLUMNS:
-        bad = np.flatnonzero(~np.isfinite(data[name]))
-        if bad.size:
-            cand = (int(bad[0]), table.header.index(name) + 1)
-            worst = cand if worst is None or cand < worst else worst
-    if worst is not None:
-        r, col = worst
-        value = data[table.header[col - 1]][r]
-        if np.isnan(value):
-            txt = field_text(r, col)
-            what = "empty value" if not txt.strip() else f"value {txt.strip()!r} (NaN)"
-        else:
-            what = f"non-finite value {float(value)!r}"
-        raise table.error(line_of(r), col, f"{what} in a required column", r == n - 1)
-    t = data["t_s"]
-    bad = np.flatnonzero(~(np.diff(t) > 0))
-    if bad.size:
-        r = int(bad[0]) + 1
-        raise table.error(
-            line_of(r),
-            table.header.index("t_s") + 1,
-            f"time must be strictly ascending: {float(t[r])!r} after {float(t[r - 1])!r} on line "
-            f"{line_of(r - 1)}",
-            r == n - 1,
-        )
-
-
-# --------------------------------------------------------------------------- CSV writing
-
-
-def _csv_field(text: str) -> str:
-    """Quote a text field as the csv module does (only when needed)."""
-    if any(c in text for c in ',"\r\n'):
-        return '"' + text.replace('"', '""') + '"'
-    return text
-
-
-def _csv_line(fields: Sequence[str]) -> str:
-    return ",".join(_csv_field(f) for f in fields) + "\n"
-
-
-def _format_cell(value: float | str | None) -> str:
-    """One cell: shortest round-trip float, empty for None/NaN, text quoted if needed."""
-    if value is None:
-        return ""
-    if isinstance(value, str):
-        return _csv_field(value)
-    x = float(value)
-    return "" if math.isnan(x) else repr(x)
-
-
-def _format_numeric(values: np.ndarray) -> list[str]:
-    """Shortest round-trip decimal of each float64 (Python repr), NaN as the empty string."""
-    if values.size == 0:
-        return []
-    texts = repr(values.tolist())[1:-1].split(", ")
-    for i in np.flatnonzero(np.isnan(values)):
-        texts[i] = ""
-    return texts
-
-
-def _samples_text(columns: list[str], data: dict[str, Column]) -> str:
-    cells = [
-        _format_numeric(v) if isinstance(v, np.ndarray) else [_csv_field(s) for s in v]
-        for v in (data[c] for c in columns)
-    ]
-    out = _csv_line(columns)
-    if cells and cells[0]:
-        out += "\n".join(map(",".join, zip(*cells, strict=True))) + "\n"
-    return out
+        return read_samples_csv(csv_path, allow_truncated_tail)
+    except RunFormatError:
+        if csv_path.exists() or not parquet.is_file():
+            raise
+    return read_samples_parquet(parquet)  # the store finalised the run meanwhile

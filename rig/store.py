@@ -6,12 +6,14 @@ folders go to the samples folder ``DIR`` that every rig reaches. Layout of a sto
 (the samples folder of a database store)::
 
     index.sqlite              runs and campaigns: metadata and status (WAL mode)
-    runs/<run_id>/            a run outside any campaign: run.json + samples.csv
+    runs/<run_id>/            a run outside any campaign: run.json + samples.parquet
     campaigns/<campaign_id>/  a rig-campaign/1 folder: campaign.json + one folder per run
 
 Samples go to ``samples.csv`` as they are measured (flushed at least every 0.5 s), never
-into SQLite. A process killed during a run keeps its samples; the next :class:`Store` opened
-on the root marks the run "aborted" (:meth:`Store.recover`). Live writers hold a ``flock``
+into SQLite; when the run ends they are turned into ``samples.parquet`` (the CSV removed
+once the Parquet file is in place). A process killed during a run keeps its samples in the
+CSV; the next :class:`Store` opened on the root marks the run "aborted" and finalises its
+samples to Parquet (:meth:`Store.recover`). Live writers hold a ``flock``
 on their run folder, so a reader opening the store never aborts a run still being measured.
 
 The default root is ``$RIG_STORE`` if set, else ``./rig-store`` (:func:`default_store_root`);
@@ -38,11 +40,18 @@ from rig.runformat import (
     RUN_FORMAT,
     RUN_JSON,
     SAMPLES_CSV,
+    SAMPLES_PARQUET,
     Run,
     SamplesAppender,
     read_run,
 )
-from rig.store_files import WriterLock, cut_incomplete_tail, sync_dir, write_json_atomic
+from rig.store_files import (
+    WriterLock,
+    cut_incomplete_tail,
+    finalise_samples,
+    sync_dir,
+    write_json_atomic,
+)
 from rig.store_ids import (
     InvalidIdError,
     StoreError,
@@ -340,7 +349,9 @@ class Store:
         The reason is :data:`RECOVERED_REASON`. A run whose writer still holds its lock
         (a live process, this one included) is left alone. Samples are kept; an unfinished
         last CSV line (cut by the kill) is cut off and recorded in run.json under
-        ``"recovery"``. Returns the ids of the runs marked aborted.
+        ``"recovery"``, and the CSV stream is finalised to ``samples.parquet`` (a run killed
+        after its Parquet file was in place keeps that). Returns the ids of the runs marked
+        aborted.
         """
         recovered = []
         for run_id, path in self._index.running_runs():
@@ -350,12 +361,13 @@ class Store:
                 continue
             try:
                 record: dict[str, Any] = {"found_at": utc_now_iso(), "by_pid": os.getpid()}
-                dropped = cut_incomplete_tail(folder / SAMPLES_CSV)
-                if dropped is not None:
-                    record["dropped_incomplete_line"] = dropped
+                if not (folder / SAMPLES_PARQUET).is_file():
+                    dropped = cut_incomplete_tail(folder / SAMPLES_CSV)
+                    if dropped is not None:
+                        record["dropped_incomplete_line"] = dropped
                 try:
-                    n_samples: int | None = read_run(folder, allow_truncated_tail=True).n_samples
-                except RigError as e:
+                    n_samples: int | None = finalise_samples(folder)
+                except (RigError, OSError, ValueError) as e:
                     n_samples = None
                     record["read_error"] = str(e)
                 if self._finalize_run(

@@ -1,4 +1,5 @@
-"""File-level helpers of the store: atomic JSON files, the writer lock, cut-off CSV tails.
+"""File-level helpers of the store: atomic JSON files, the writer lock, cut-off CSV tails,
+the finalisation of a run's samples (the CSV stream written during the run becomes Parquet).
 
 The writer lock is an ``fcntl.flock`` on ``<run>/.writer.lock``, held by the process that
 records the run for as long as the run is open. The kernel drops it when that process ends,
@@ -15,6 +16,12 @@ import json
 import os
 from pathlib import Path
 from typing import Any
+
+import pyarrow.parquet as pq
+
+from rig.runformat_base import SAMPLES_CSV, SAMPLES_PARQUET
+from rig.runformat_csvread import read_samples_csv
+from rig.runformat_parquet import write_samples_parquet
 
 LOCK_NAME = ".writer.lock"
 
@@ -108,3 +115,26 @@ def cut_incomplete_tail(csv_path: Path) -> str | None:
         f.flush()
         os.fsync(f.fileno())
     return raw[cut:].decode("utf-8", "replace")
+
+
+def finalise_samples(folder: Path) -> int:
+    """Turn a run's ``samples.csv`` (appended during the run) into ``samples.parquet``.
+
+    Crash-safe at every step: the Parquet file is written under a temporary name, synced and
+    renamed into place before the CSV is removed, so the folder always holds the samples
+    whole in one of the two files; a folder that already has ``samples.parquet`` (a crash
+    after the rename) only loses its leftover CSV. Returns the number of samples. A CSV that
+    cannot be read raises :class:`rig.errors.RunFormatError` and is left as it is.
+    """
+    csv_path = folder / SAMPLES_CSV
+    parquet_path = folder / SAMPLES_PARQUET
+    with contextlib.suppress(FileNotFoundError):
+        (folder / f".{SAMPLES_PARQUET}.tmp").unlink()
+    if not parquet_path.is_file():
+        columns, data, _notes = read_samples_csv(csv_path, allow_truncated_tail=False)
+        write_samples_parquet(parquet_path, columns, data)
+        sync_dir(folder)
+    if csv_path.exists():
+        csv_path.unlink()
+        sync_dir(folder)
+    return int(pq.ParquetFile(parquet_path).metadata.num_rows)

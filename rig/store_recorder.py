@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import logging
 import threading
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from rig.errors import RigError
 from rig.runformat import SamplesAppender
-from rig.store_files import WriterLock
+from rig.store_files import WriterLock, finalise_samples
 from rig.store_ids import StoreError
 from rig.store_index import to_json
 from rig.store_records import FINAL_STATUSES, RunInfo
@@ -16,9 +18,15 @@ from rig.store_records import FINAL_STATUSES, RunInfo
 if TYPE_CHECKING:
     from rig.store import Store
 
+log = logging.getLogger("rig.store")
+
 
 class RunRecorder:
     """Appends a run's samples to its ``samples.csv`` and closes the run in the store.
+
+    At the end (:meth:`finish`) the CSV stream is turned into ``samples.parquet``
+    (:func:`rig.store_files.finalise_samples`); a run whose process dies before that keeps
+    its CSV, which the next store opening finalises (:meth:`rig.store.Store.recover`).
 
     Use as a context manager: leaving the block normally finishes the run as "completed"
     (unless :meth:`finish` was called); leaving it with an exception finishes it as
@@ -79,7 +87,8 @@ class RunRecorder:
         result: dict[str, Any] | None = None,
         extra: dict[str, Any] | None = None,
     ) -> RunInfo:
-        """Close the samples file and record the end of the run; return its index row.
+        """Close the samples file, turn it into Parquet, record the end of the run; return
+        its index row.
 
         ``status``: "completed" or "aborted" (an aborted run needs a ``reason``).
         ``result``: the run's metrics (a JSON-able dict, e.g. ``{"lost_motion_arcmin": 1.2}``),
@@ -101,6 +110,11 @@ class RunRecorder:
         to_json(result)
         to_json(extra)
         self.samples.close()
+        try:
+            finalise_samples(self.path)
+        except (RigError, OSError, ValueError) as e:  # the samples stay in samples.csv
+            log.warning("run %s: samples kept in CSV, not turned into Parquet: %s",
+                        self.run_id, e)
         try:
             changed = self._store._finalize_run(
                 self.run_id, self.path, status, reason, result, self.n_samples,

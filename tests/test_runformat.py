@@ -595,3 +595,145 @@ def test_appender_repairs_a_cut_tail_only_when_asked(tmp_path: Path) -> None:
     run = read_run(path)
     assert run.n_samples == 14
     assert np.array_equal(run.t_s, np.arange(14) * 0.001)
+
+
+# ----------------------------------------------------------------------------- pyarrow data path
+
+
+def test_whole_numbers_of_extra_columns_are_written_as_integers(tmp_path: Path) -> None:
+    n = 6
+    run = small_run(n=n, extra_columns={
+        "step": [0.0, 0.0, 1.0, 1.0, 2.0, 17.0],
+        "sample_window": np.full(n, 8.0),
+        "torque_command_Nm": [0.0, -0.0, 2.5, -10.0, 2.0**53, np.nan],
+    })
+    folder = write_run(run, tmp_path / "r")
+    lines = (folder / "samples.csv").read_text().splitlines()
+    assert lines[0].endswith(",step,sample_window,torque_command_Nm")
+    tails = [line.split(",")[-3:] for line in lines[1:]]
+    assert [t[0] for t in tails] == ["0", "0", "1", "1", "2", "17"]
+    assert {t[1] for t in tails} == {"8"}
+    # -0.0 keeps its sign, 2**53 is past the exact integers, NaN is empty
+    assert [t[2] for t in tails] == ["0", "-0.0", "2.5", "-10", "9007199254740992.0", ""]
+    assert lines[1].startswith("0.0,0.0,0.0,")  # the standard columns keep their point
+    back = read_run(folder)
+    assert runs_equal(run, back)
+    assert np.signbit(back.data["torque_command_Nm"][1])
+    # the appender writes the same bytes as write_run
+    live = tmp_path / "live.csv"
+    with SamplesAppender(live, run.columns) as app:
+        for i in range(n):
+            app.append([None if np.isnan(run.data[c][i]) else run.data[c][i]
+                        for c in run.columns])
+    assert live.read_bytes() == (folder / "samples.csv").read_bytes()
+
+
+def test_floats_are_written_as_python_repr_at_every_magnitude(tmp_path: Path) -> None:
+    rng = np.random.default_rng(11)
+    bits_ = rng.integers(0, 2**64 - 1, 20000, dtype=np.uint64, endpoint=True)
+    values = bits_.view(np.float64)
+    values = values[np.isfinite(values)]
+    mags = rng.standard_normal(20000) * 10.0 ** rng.integers(-20, 20, 20000)
+    hard = np.concatenate([values, mags, SPECIAL, [1e-4, 9.999999999999999e-05, 1e16,
+                                                   9999999999999998.0, np.inf, -np.inf]])
+    n = hard.size
+    run = Run.from_arrays("mag", np.arange(n, dtype=float), np.zeros(n), np.zeros(n),
+                          temperature_C=hard)
+    folder = write_run(run, tmp_path / "r")
+    lines = (folder / "samples.csv").read_text().splitlines()[1:]
+    assert [line.split(",")[3] for line in lines] == [repr(float(x)) for x in hard]
+    assert runs_equal(read_run(folder), run)
+
+
+@pytest.mark.parametrize(("cell", "column"), [("1_000", 2), ("١٢", 3), ("0x10", 1)])
+def test_numbers_python_takes_but_the_format_does_not_are_refused(
+    tmp_path: Path, cell: str, column: int
+) -> None:
+    rows = [["0", "1", "2"], ["1", "2", "3"], ["2", "3", "4"]]
+    rows[1][column - 1] = cell
+    text = HEADER + "\n" + "\n".join(",".join(r) for r in rows) + "\n"
+    folder = write_folder(tmp_path / "run", text)
+    err = expect_error(folder / "samples.csv", 3, column)
+    assert f"cannot read {cell!r} as a number" in str(err)
+    # in a column the format does not define, such cells make a text column
+    folder = write_folder(tmp_path / "extra", f"{HEADER},count\n0,1,2,1_000\n1,2,3,7\n")
+    assert read_run(folder).data["count"] == ["1_000", "7"]
+
+
+def test_a_comment_line_is_not_skipped_but_refused(tmp_path: Path) -> None:
+    # rig-run/1 has no comment lines (docs/run-format.md): such a line is a bad row
+    folder = write_folder(tmp_path / "run", f"{HEADER}\n0,1,2\n# a comment\n1,2,3\n")
+    err = expect_error(folder / "samples.csv", 3, 2)
+    assert "field 2 missing" in str(err)
+    folder = write_folder(tmp_path / "run2", f"{HEADER}\n0,1,2\n# t,T,angle\n1,2,3\n")
+    err = expect_error(folder / "samples.csv", 3, 1)
+    assert "cannot read '# t' as a number" in str(err)
+
+
+def test_blank_fields_and_spaces_read_as_the_slow_pass_reads_them(tmp_path: Path) -> None:
+    from rig.runformat_csvread import read_located, read_samples_csv
+
+    text = (
+        "t_s,torque_Nm,output_angle_deg,temperature_C,note,gap,flag\n"
+        '0.0, 1.5 ,2,  ,"a, b",1,true\n'
+        '0.5,-inf ,2,NaN,,  ,false\n'
+        "1.0,2e-3,2.5,Infinity,x,3,true\n"
+    ).replace("-inf ", "-1.25")
+    path = tmp_path / "s.csv"
+    path.write_text(text)
+    fast = read_samples_csv(path, False)
+    slow = read_located(path, False)
+    assert fast[0] == slow[0]
+    for name in fast[0]:
+        a, b = fast[1][name], slow[1][name]
+        if isinstance(b, np.ndarray):
+            assert np.array_equal(bits(a), bits(b)), name
+        else:
+            assert a == b, name
+    assert np.isnan(fast[1]["temperature_C"][:2]).all() and fast[1]["temperature_C"][2] == np.inf
+    assert np.isnan(fast[1]["gap"][1]) and fast[1]["flag"] == ["true", "false", "true"]
+
+
+def test_parquet_run_folder_round_trips_bit_exact(tmp_path: Path) -> None:
+    from rig.runformat import SAMPLES_PARQUET, write_samples_parquet
+
+    rng = np.random.default_rng(3)
+    n = 500
+    hard = np.concatenate([SPECIAL, rng.standard_normal(n - len(SPECIAL)) * 10.0 ** rng.uniform(
+        -300, 300, n - len(SPECIAL))])
+    temperature = 20.0 + rng.standard_normal(n)
+    temperature[[0, 7, n - 1]] = np.nan
+    run = Run.from_arrays(
+        "stored", np.cumsum(rng.uniform(1e-9, 1.0, n)), hard, hard[::-1].copy(),
+        temperature_C=temperature,
+        extra_columns={"step": np.floor(np.arange(n) / 50.0),
+                       "note": [f"row {i}, ok" if i % 7 else "" for i in range(n)]},
+        extra_meta={"status": "completed", "future": {"kept": [1, 2]}},
+    )
+    folder = write_run(run, tmp_path / "r")
+    write_samples_parquet(folder / SAMPLES_PARQUET, run.columns, run.data)
+    (folder / "samples.csv").write_text(HEADER + "\n")  # a leftover CSV: Parquet wins
+    back = read_run(folder)
+    assert runs_equal(run, back) and back.notes == []
+    assert np.signbit(back.torque_Nm[3])
+    back.data["torque_Nm"][0] = 1.0  # writable like arrays read from CSV
+    assert runs_equal(read_run(folder / SAMPLES_PARQUET), run)
+    bare = read_run(tmp_path / "r" / SAMPLES_PARQUET)
+    assert bare.run_id == "stored" and bare.path == folder
+
+
+def test_parquet_problems_name_the_file_and_column(tmp_path: Path) -> None:
+    from rig.runformat import SAMPLES_PARQUET, write_samples_parquet
+
+    folder = write_run(small_run(), tmp_path / "r")
+    path = folder / SAMPLES_PARQUET
+    path.write_bytes(b"PAR1 not really")
+    with pytest.raises(RunFormatError, match="not a readable Parquet file") as info:
+        read_run(folder)
+    assert info.value.path == str(path)
+    write_samples_parquet(path, ["t_s", "torque_Nm", "output_angle_deg"],
+                          {"t_s": np.array([0.0, 1.0, 1.0]), "torque_Nm": np.zeros(3),
+                           "output_angle_deg": np.zeros(3)})
+    with pytest.raises(RunFormatError, match="row 3: time must be strictly ascending") as info:
+        read_run(folder)
+    assert info.value.column == 1

@@ -72,6 +72,9 @@ def test_completed_run_round_trips_through_folder_and_index(make_store, tmp_path
         assert np.array_equal(run.data[name], expected[:, j])  # bit-exact
     assert not (info.path / ".writer.lock").exists()
     assert st.load_run(rec.run_id).n_samples == 250
+    # the samples appended as CSV during the run are kept in Parquet once it is finished
+    assert sorted(p.name for p in info.path.iterdir()) == ["run.json", "samples.parquet"]
+    assert read_run(info.path / "samples.parquet").columns == COLUMNS
 
 
 def test_exception_in_the_block_aborts_the_run_and_keeps_its_samples(make_store, tmp_path):

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 
 from rig.runformat import read_run
@@ -51,6 +52,26 @@ for i in range(3):
 rec.samples.flush()
 with open(rec.path / "samples.csv", "a") as f:
     f.write("1.5,4.0,2.0000")
+print(rec.run_id, flush=True)
+os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+# A writer killed while it finalises: STAGE "tmp" dies with a half-written temporary Parquet
+# file, STAGE "renamed" after samples.parquet is in place but before the CSV is removed.
+MID_FINALISE = """
+import os, signal, sys
+from rig.runformat import read_run, write_samples_parquet
+from rig.store import Store
+st = Store(sys.argv[1])
+rec = st.begin_run({}, ["t_s", "torque_Nm", "output_angle_deg", "step"])
+for i in range(300):
+    rec.append([i * 0.001, 0.1 * i - 7.0, 1e-7 * i + 0.3, float(i // 100)])
+rec.samples.close()
+if sys.argv[2] == "tmp":
+    (rec.path / ".samples.parquet.tmp").write_bytes(b"PAR1 half")
+else:
+    run = read_run(rec.path)
+    write_samples_parquet(rec.path / "samples.parquet", run.columns, run.data)
 print(rec.run_id, flush=True)
 os.kill(os.getpid(), signal.SIGKILL)
 """
@@ -182,6 +203,12 @@ def test_sigkill_keeps_the_samples_and_the_next_start_marks_the_run_aborted(make
     assert meta["status"] == "aborted" and meta["reason"] == RECOVERED_REASON
     assert meta["recovery"]["by_pid"] == os.getpid()
     read_run(info.path)  # strict reader: the folder is clean rig-run/1 after recovery
+    # recovery finalised the CSV stream to Parquet, bit for bit
+    assert sorted(p.name for p in info.path.iterdir()) == ["run.json", "samples.parquet"]
+    table = pq.read_table(info.path / "samples.parquet")
+    assert table.column_names == ["t_s", "torque_Nm", "output_angle_deg", "note"]
+    assert np.array_equal(table.column("t_s").to_numpy().view(np.uint64),
+                          (i * 0.001).view(np.uint64))
     assert make_store(tmp_path).recovered == []
 
 
@@ -199,6 +226,26 @@ def test_a_row_cut_off_by_the_kill_is_dropped_and_recorded(make_store, tmp_path)
     assert run.n_samples == 3 and list(run.t_s) == [0.0, 0.5, 1.0]
     assert run.meta["recovery"]["dropped_incomplete_line"] == "1.5,4.0,2.0000"
     assert store.get_run(run_id).n_samples == 3
+
+
+@pytest.mark.parametrize("stage", ["tmp", "renamed"])
+def test_a_kill_during_the_parquet_finalisation_is_recovered(make_store, tmp_path, stage):
+    target, env = make_store.target(tmp_path), make_store.env(tmp_path)
+    proc = spawn(MID_FINALISE, target, stage, env=env)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == -signal.SIGKILL, err
+    run_id = out.strip()
+    folder = tmp_path / "runs" / run_id
+    assert (folder / "samples.csv").is_file()
+    store = make_store(tmp_path)
+    assert store.recovered == [run_id]
+    info = store.get_run(run_id)
+    assert (info.status, info.reason, info.n_samples) == ("aborted", RECOVERED_REASON, 300)
+    assert sorted(p.name for p in folder.iterdir()) == ["run.json", "samples.parquet"]
+    run = read_run(folder)
+    i = np.arange(300)
+    assert np.array_equal(run.t_s, i * 0.001) and np.array_equal(run.data["step"], i // 100)
+    assert np.array_equal(run.torque_Nm, 0.1 * i - 7.0)
 
 
 def test_a_live_writer_in_another_process_is_left_alone_and_finishes(make_store, tmp_path):

@@ -13,7 +13,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from rig.analyse import analyse_run
-from rig.runformat import read_campaign, read_run, runs_equal
+from rig.runformat import Run, read_campaign, read_run, runs_equal, samples_csv_bytes
 from rig.store import Store
 from rig.web import create_app
 from rig.web.settings import TOKEN_ENV, WebSettingsError, resolve_settings
@@ -196,7 +196,13 @@ def test_history_details_loop_and_downloads(client: TestClient, store: Store, tm
 
     csv = client.get(f"/api/runs/{run_id}/samples.csv")
     assert csv.headers["content-type"].startswith("text/csv")
-    assert csv.content == (store.run_path(run_id) / "samples.csv").read_bytes()
+    # a stored run keeps Parquet; the download is its samples in rig-run/1 CSV, bit for bit
+    assert not (store.run_path(run_id) / "samples.csv").exists()
+    assert csv.content == samples_csv_bytes(store.load_run(run_id))
+    (tmp_path / "download.csv").write_bytes(csv.content)
+    downloaded = read_run(tmp_path / "download.csv")
+    assert runs_equal(Run(store.load_run(run_id).meta, downloaded.columns, downloaded.data),
+                      store.load_run(run_id))
 
     z = client.get(f"/api/runs/{run_id}/run.zip")
     assert z.headers["content-type"] == "application/zip"

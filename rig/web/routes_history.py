@@ -19,7 +19,7 @@ from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 
 from rig.engine_record import json_safe
 from rig.errors import RigError
-from rig.runformat import RUN_JSON, SAMPLES_CSV
+from rig.runformat import RUN_JSON, SAMPLES_CSV, sample_columns, samples_csv_bytes
 from rig.store import Store, UnknownIdError
 from rig.store_records import RunInfo
 from rig.web.live import decimate
@@ -71,7 +71,7 @@ def get_run(request: Request, run_id: RunId) -> dict[str, Any]:
     info = _run_info(_store(request), run_id)
     meta = _read_json(info.path / RUN_JSON)
     return {"summary": summary_of(info), "meta": json_safe(meta),
-            "columns": _csv_header(info.path / SAMPLES_CSV)}
+            "columns": sample_columns(info.path)}
 
 
 @router.get("/runs/{run_id}/loop", response_model=LoopData,
@@ -120,10 +120,14 @@ def run_loop(request: Request, run_id: RunId,
 @router.get("/runs/{run_id}/samples.csv", response_class=FileResponse, responses={
     **NOT_FOUND, 200: {"content": {"text/csv": {}}, "description": "samples.csv"}},
     summary="Download a run's samples (CSV)")
-def run_csv(request: Request, run_id: RunId) -> FileResponse:
-    info = _run_info(_store(request), run_id)
-    return FileResponse(info.path / SAMPLES_CSV, media_type="text/csv",
-                        filename=f"{run_id}.csv")
+def run_csv(request: Request, run_id: RunId) -> Response:
+    store = _store(request)
+    info = _run_info(store, run_id)
+    if (info.path / SAMPLES_CSV).is_file():  # a run being recorded: its CSV stream
+        return FileResponse(info.path / SAMPLES_CSV, media_type="text/csv",
+                            filename=f"{run_id}.csv")
+    return Response(_samples_csv(store, run_id), media_type="text/csv", headers={
+        "Content-Disposition": f'attachment; filename="{run_id}.csv"'})
 
 
 @router.get("/runs/{run_id}/run.zip", response_class=Response, responses={
@@ -131,17 +135,28 @@ def run_csv(request: Request, run_id: RunId) -> FileResponse:
                        "description": "The run folder in rig-run/1 (run.json + samples.csv)"}},
     summary="Download a run as a rig-run/1 zip")
 def run_zip(request: Request, run_id: RunId) -> Response:
-    info = _run_info(_store(request), run_id)
+    store = _store(request)
+    info = _run_info(store, run_id)
     with tempfile.TemporaryFile() as tmp:
         with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
-            for name in (RUN_JSON, SAMPLES_CSV):
-                path = info.path / name
-                if path.is_file():
-                    zf.write(path, f"{run_id}/{name}")
+            if (info.path / RUN_JSON).is_file():
+                zf.write(info.path / RUN_JSON, f"{run_id}/{RUN_JSON}")
+            if (info.path / SAMPLES_CSV).is_file():
+                zf.write(info.path / SAMPLES_CSV, f"{run_id}/{SAMPLES_CSV}")
+            else:  # a stored run keeps Parquet; the exchange format is CSV
+                zf.writestr(f"{run_id}/{SAMPLES_CSV}", _samples_csv(store, run_id))
         tmp.seek(0)
         data = tmp.read()
     return Response(data, media_type="application/zip", headers={
         "Content-Disposition": f'attachment; filename="{run_id}.zip"'})
+
+
+def _samples_csv(store: Store, run_id: str) -> bytes:
+    """A stored run's samples as rig-run/1 CSV (409 if its files cannot be read)."""
+    try:
+        return samples_csv_bytes(store.load_run(run_id))
+    except RigError as exc:
+        raise HTTPException(409, f"run {run_id} cannot be read: {exc}") from exc
 
 
 @router.get("/runs/{run_id}/loop.png", response_class=Response, responses={
@@ -281,11 +296,3 @@ def _read_json(path: Path) -> dict[str, Any]:
     except (OSError, ValueError) as exc:
         raise HTTPException(409, f"{path.name} of this run cannot be read: {exc}") from exc
     return data if isinstance(data, dict) else {}
-
-
-def _csv_header(path: Path) -> list[str]:
-    try:
-        with path.open(encoding="utf-8") as f:
-            return f.readline().strip().split(",")
-    except OSError:
-        return []

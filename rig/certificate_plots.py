@@ -14,7 +14,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
     from rig.analyse import RunAnalysis
+
+__all__ = ["draw_positions", "loop_svg", "position_svg", "svg_uri"]
 
 
 def svg_uri(svg: bytes) -> str:
@@ -33,17 +37,25 @@ def loop_svg(analyses: Sequence[RunAnalysis], title: str | None = None) -> str:
 
 def position_svg(points: Sequence[dict[str, Any]], model_arcmin: float | None,
                  batch: dict[str, Any] | None, limit_arcmin: float | None) -> str:
-    """Lost motion (arcmin) against the input (eccentric shaft) angle (deg): each run with its
-    uncertainty, the nominal model (no runout) as a line, the batch's 95 % band shaded, and
-    the limit. ``points``: dicts with input_angle_deg, lost_motion_arcmin, uncertainty."""
+    """Lost motion against the input angle (:func:`draw_positions`) as an SVG URI."""
     import io
 
-    import matplotlib
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    fig = Figure(figsize=(5.0, 3.3))
+    draw_positions(fig.add_subplot(), points, model_arcmin, batch, limit_arcmin)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="svg")
+    return svg_uri(buf.getvalue())
 
-    fig, ax = plt.subplots(figsize=(5.0, 3.3))
+
+def draw_positions(ax: Axes, points: Sequence[dict[str, Any]], model_arcmin: float | None,
+                   batch: dict[str, Any] | None, limit_arcmin: float | None) -> Axes:
+    """Draw lost motion (arcmin) against the input (eccentric shaft) angle (deg) into ``ax``:
+    each run with its uncertainty, the nominal model (no runout) as a line, the batch's 95 %
+    band shaded, and the limit. ``points``: dicts with input_angle_deg, lost_motion_arcmin,
+    uncertainty. Returns ``ax``."""
     if batch and batch.get("band_95_arcmin"):
         low, high = batch["band_95_arcmin"]
         ax.axhspan(low, high, color="0.85", zorder=0,
@@ -66,8 +78,4 @@ def position_svg(points: Sequence[dict[str, Any]], model_arcmin: float | None,
     ax.set_xticks(range(0, 361, 60))
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.legend(fontsize=7, loc="best")
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="svg")
-    plt.close(fig)
-    return svg_uri(buf.getvalue())
+    return ax

@@ -4,13 +4,17 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import matplotlib
+import matplotlib as mpl
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+from rig.analyse import RunAnalysis, loop_centre_arcmin
 
-from rig.analyse import RunAnalysis, loop_centre_arcmin  # noqa: E402
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
+__all__ = ["draw_loops", "plot_loops"]
 
 
 def _fmt(value: float | None, unit: str) -> str:
@@ -23,14 +27,27 @@ def plot_loops(
     """Draw measured loops (twist in arcmin against torque in N·m) with the model overlaid.
 
     One axes for all runs (a campaign's loops on top of each other, each with its model loop),
-    the ±p % lost-motion band shaded, and the first run's metrics in the legend box.
-    Writes a PNG (or whatever matplotlib infers from the suffix) and returns its path.
+    the ±p % lost-motion band shaded, and the first run's metrics in the legend box
+    (:func:`draw_loops`). Writes a PNG (or whatever matplotlib infers from the suffix) and
+    returns its path. No pyplot: safe in a server thread, and the caller's backend is untouched.
     """
     if not analyses:
         raise ValueError("nothing to plot")
     path = Path(path)
-    fig, ax = plt.subplots(figsize=(7.5, 5.2), dpi=120)
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    fig = Figure(figsize=(7.5, 5.2), dpi=120)
+    draw_loops(fig.add_subplot(), analyses, title=title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path
+
+
+def draw_loops(ax: Axes, analyses: Sequence[RunAnalysis], *, title: str | None = None) -> Axes:
+    """Draw the loops of :func:`plot_loops` into ``ax`` (torque in N·m on x, twist in arcmin
+    centred on the loop on y) and return it."""
+    if not analyses:
+        raise ValueError("nothing to plot")
+    colors = mpl.rcParams["axes.prop_cycle"].by_key()["color"]
     first = analyses[0]
     band = first.lost_motion_pct / 100.0 * first.rated_torque_Nm
     ax.axvspan(-band, band, color="0.9", zorder=0, label=f"±{first.lost_motion_pct:g} % of rated")
@@ -80,8 +97,4 @@ def plot_loops(
     ax.set_title(title or f"Hysteresis loop: {first.run.run_id}")
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.legend(loc="lower right", fontsize=8)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return ax

@@ -408,6 +408,12 @@ class Store:
             limit=limit))
         return [run_info(r, self.root) for r in rows]
 
+    def runs(self, *, serial: str | None = None, since: str | None = None,
+             outcome: str | None = None, **filters: Any) -> Any:
+        """:meth:`list_runs` as a pandas DataFrame, one row per run (rig/api_store.py)."""
+        from rig.api_store import runs_frame
+        return runs_frame(self, serial=serial, since=since, outcome=outcome, **filters)
+
     def get_run(self, run_id: str) -> RunInfo:
         """The index row of one run (InvalidIdError / UnknownIdError)."""
         validate_id(run_id, "run")

@@ -60,6 +60,7 @@ class RunAnalysis:
     rated_torque_Nm: float = 0.0
     lost_motion_pct: float = 3.0
     profile: str = "nabtesco"
+    channel_lag_s: float = 0.0
 
     def model_twist_arcmin(self) -> np.ndarray | None:
         """The model loop for this run's torque history, shifted onto the measured twist.
@@ -90,6 +91,7 @@ class RunAnalysis:
         out["rated_torque_Nm"] = self.rated_torque_Nm
         out["n_samples"] = self.run.n_samples
         out["n_cycles"] = self.loop.n_cycles
+        out["channel_lag_s"] = self.channel_lag_s
         if self.model is not None:
             out["model"] = {
                 "name": "reference nominal model (rig-run/1)",
@@ -219,9 +221,17 @@ def analyse_run(
         command_Nm=_numeric_column(run, "torque_command_Nm"),
     )
 
+    lag_s = channel_lag_s(run.t_s, run.torque_Nm, twist)
+    if lag_s:
+        assumptions.append(
+            f"the torque channel is {'late' if lag_s > 0 else 'ahead'} by about {abs(lag_s):.3g} s "
+            "against the twist (channel alignment): the loop pairs each twist with the torque "
+            "of another instant")
+
     model, model_assumptions = nominal_model_for_unit(run.unit, rated)
     assumptions.extend(model_assumptions)
     return RunAnalysis(
+        channel_lag_s=lag_s,
         run=run,
         twist_arcmin=twist,
         loop=loop,
@@ -231,6 +241,24 @@ def analyse_run(
         lost_motion_pct=pct,
         profile=name,
     )
+
+
+def channel_lag_s(t_s: np.ndarray, torque_Nm: np.ndarray, twist: np.ndarray) -> float:
+    """Lag (s) of the torque channel behind the twist (negative: ahead), 0 when the channels
+    are in step: the shift that best explains the loaded flanks
+    (:func:`analysis.diagnosis_data.channel_lag_samples`, searched up to 10 samples; a lag
+    at that bound is at least that large)."""
+    from analysis.diagnosis_data import channel_lag_samples
+    from analysis.loop_branches import white_noise_std
+
+    t = np.asarray(t_s, dtype=float)
+    ok = np.isfinite(t) & np.isfinite(torque_Nm) & np.isfinite(twist)
+    if ok.sum() < 200:
+        return 0.0
+    t, torque, tw = t[ok], np.asarray(torque_Nm)[ok], np.asarray(twist)[ok]
+    sigma = max(white_noise_std(tw), 1e-9)
+    lag = channel_lag_samples(t, torque, tw, sigma)
+    return float(-lag * np.median(np.diff(t))) if lag else 0.0
 
 
 def _numeric_column(run: Run, name: str) -> np.ndarray | None:

@@ -47,6 +47,11 @@ IMPOSSIBLE_BELOW_ZERO = ("lost_motion_arcmin", "backlash_arcmin", "stiffness_Nm_
 torque and twist were not of the same instant or one channel's sign is wrong."""
 
 
+CHANNEL_LAG_LIMIT_S = 0.01
+"""Torque and twist out of step by this much or more: at the rig's ramp rates (25 N*m/s) a
+few % of the rated torque paired with the wrong twist; the loop is no measurement."""
+
+
 def impossible_metrics(run: dict[str, Any]) -> list[str]:
     """Metrics that are physically impossible (below zero beyond three of their standard
     uncertainties; a stiffness at or below zero always), one line each."""
@@ -54,6 +59,11 @@ def impossible_metrics(run: dict[str, Any]) -> list[str]:
     sigma = metrics.get("uncertainty") or {}
     label = run.get("label") or run.get("run_id") or "run"
     out = []
+    lag = metrics.get("channel_lag_s")
+    if isinstance(lag, int | float) and abs(lag) >= CHANNEL_LAG_LIMIT_S:
+        out.append(f"run {label}: the torque channel is {'late' if lag > 0 else 'ahead'} by "
+                   f"about {abs(lag):.3g} s against the twist (limit {CHANNEL_LAG_LIMIT_S:g} s):"
+                   " channels out of step, no verdict")
     for key in IMPOSSIBLE_BELOW_ZERO:
         value = metrics.get(key)
         if not isinstance(value, int | float):

@@ -154,3 +154,25 @@ def test_an_estopped_run_is_incomplete_and_a_locked_input_names_the_run(tmp_path
     stopped_json = json.loads((stopped.path / "run.json").read_text())
     assert stopped.status == "aborted" and stopped.outcome == "incomplete"
     assert stopped_json["outcome"] == "incomplete" and stopped_json["status"] == "aborted"
+
+
+def test_a_late_torque_channel_is_found_from_the_loop_alone():
+    """Fault-matrix row 7 without a cross-check sensor: the shipped example run with its
+    torque column delayed (the transducer's stream late) gives a channel lag from the loaded
+    flanks (analysis.diagnosis_data.channel_lag_samples), and the run has no verdict."""
+    import numpy as np
+
+    from rig.analyse import analyse_run
+    from rig.runformat import read_run
+
+    run = read_run(ROOT / "rig/examples/runs/pair3-pos000")
+    assert analyse_run(run).to_dict()["channel_lag_s"] == 0.0
+    limits = {"lost_motion_arcmin_max": 9.0}
+    assert run_outcome({**analyse_run(run).to_dict(), "status": "completed"}, limits)[0] == "ok"
+    torque = run.torque_Nm.copy()
+    for delay_s in (0.03, 0.8):
+        run.data["torque_Nm"] = np.interp(run.t_s - delay_s, run.t_s, torque)
+        doc = analyse_run(run).to_dict()
+        assert doc["channel_lag_s"] >= 0.02, doc["channel_lag_s"]
+        outcome, why, _ = run_outcome({**doc, "status": "completed"}, limits)
+        assert outcome == "incomplete" and "late" in why[0], why

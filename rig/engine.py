@@ -85,6 +85,7 @@ class EngineOptions:
     temperature_period_s: float = 1.0
     crosscheck_period_s: float = 0.2
     crosscheck_window_s: float = 0.05
+    crosscheck_still_s: float = 0.2
     crosscheck_limit_share: float | None = 0.1
     """The cross-check torque sensor may read at most this share of the run's rated torque
     beside the transducer's readings of the same instant (±``crosscheck_window_s``): beyond
@@ -389,10 +390,13 @@ class Engine:
             # the reading is of some instant between the request and the reply (a loaded
             # machine stretches that): compare with everything the transducer read then
             near = [r.torque_Nm for r in self._recent if t0 - w <= r.t_mono_s <= t1 + w]
+            before = [r.torque_Nm for r in self._recent
+                      if t0 - self.options.crosscheck_still_s <= r.t_mono_s <= t1 + w]
             limit = self._cross_limit_Nm
-            if not near or (limit is not None and max(near) - min(near) > 0.25 * limit):
-                # the torque moved during the read: which instant the sensor answered for is
-                # not known well enough on a loaded PC; compare when it stands still
+            if not near or (limit is not None and max(before) - min(before) > 0.25 * limit):
+                # the torque moved around the read: which instant each channel's reading is
+                # of is not known well enough on a loaded PC (a serial line time-stamped on
+                # arrival); compare only when it has stood still for crosscheck_still_s
                 continue
             diff = max(0.0, min(near) - value, value - max(near))
             self._open.note_crosscheck(diff)

@@ -109,6 +109,11 @@ class RunAnalysis:
         return out
 
 
+UNIT_IDENTITY_KEYS = frozenset({"serial", "design", "name"})
+"""Unit keys that name the unit (run-format.md) and are no design data: known keys, never an
+"unknown unit key" for the model."""
+
+
 def nominal_model_for_unit(
     unit: dict[str, Any], rated_torque_Nm: float | None = None
 ) -> tuple[LoopModel | None, list[str]]:
@@ -118,8 +123,9 @@ def nominal_model_for_unit(
     """
     if not unit:
         return None, ["run.json has no unit data: no model prediction"]
+    design = {k: v for k, v in unit.items() if k not in UNIT_IDENTITY_KEYS}
     try:
-        return model_by_kind(unit, rated_torque_Nm)
+        return model_by_kind(design, rated_torque_Nm)
     except AnalysisError as exc:
         return None, [f"no model prediction: {exc}"]
 

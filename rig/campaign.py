@@ -79,6 +79,8 @@ class CampaignFile(BaseModel):
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
     description: str = ""
     operator: str | None = None
+    calibration_override: str | None = Field(None, min_length=1, max_length=500)
+    """Why the campaign may run with a sensor calibration past due (recorded in each run)."""
     profile: Literal[PROFILE_NAMES] = "nabtesco"  # type: ignore[valid-type]
     torque_limit_Nm: float | None = Field(None, gt=0, allow_inf_nan=False, strict=True)
     unit: UnitSection

@@ -11,7 +11,9 @@ real-hardware template):
 - ``[transducer]``: :class:`drivers.transducer_serial.TransducerConfig`;
 - ``[torque_sensor]``, ``[drive]``: the Modbus drivers' configs (``drive.torque_limit_Nm``
   defaults to ``rig.torque_limit_Nm`` and may not exceed it);
-- optional ``[input_motor]``, ``[climate]``: :mod:`drivers.rig_controls` configs.
+- optional ``[input_motor]``, ``[climate]``: :mod:`drivers.rig_controls` configs;
+- optional ``[calibration]``: per sensor (``[calibration.transducer]`` ...) ``id``,
+  ``certificate``, ``date``, ``due`` and ``uncertainty`` (:mod:`rig.calibration`).
 
 The drivers' own pydantic models validate their tables. Every error names the file and the
 key (``rig.toml: drive.torque_limit_Nm: Input should be greater than 0 (got -1)``), a TOML
@@ -33,6 +35,7 @@ from drivers.loading_drive import LoadingDriveConfig
 from drivers.modbus_torque_sensor import ModbusTorqueSensorConfig
 from drivers.rig_controls import ClimateConfig, InputMotorConfig
 from drivers.transducer_serial import TransducerConfig
+from rig.calibration import Calibrations
 from rig.errors import RigError
 from rig.toml_files import describe_validation_error, read_toml
 
@@ -75,6 +78,7 @@ class RigConfig(BaseModel):
     drive: LoadingDriveConfig
     input_motor: InputMotorConfig | None = None
     climate: ClimateConfig | None = None
+    calibration: Calibrations = Field(default_factory=dict)
     source: str = "<memory>"
 
     def device_names(self) -> list[str]:

@@ -145,12 +145,21 @@ def relaxed_heartbeats(config: RigConfig) -> RigConfig:
     return config.model_copy(update=copies)
 
 
-def run_meta(unit: dict[str, Any], session: RigSession, operator: str | None = None
-             ) -> dict[str, Any]:
-    """run.json keys every run of a session carries (unit, rig id, operator, simulation)."""
-    meta: dict[str, Any] = {"unit": unit, "rig_id": session.devices.config.rig.rig_id}
+def run_meta(unit: dict[str, Any], session: RigSession, operator: str | None = None,
+             calibration_override: str | None = None, *,
+             override_how: str = "--calibration-override REASON") -> dict[str, Any]:
+    """run.json keys every run of a session carries (unit, rig id, operator, the sensors'
+    calibrations, simulation). :class:`rig.calibration.CalibrationExpired` when a
+    calibration is past due and no ``calibration_override`` reason is given (``override_how``
+    tells the operator how to give one); with a reason, ``calibration_override`` records it."""
+    from rig.calibration import calibration_meta
+
+    config = session.devices.config
+    meta: dict[str, Any] = {"unit": unit, "rig_id": config.rig.rig_id}
     if operator:
         meta["operator"] = operator
+    meta.update(calibration_meta(config.calibration, calibration_override, operator,
+                                 how=override_how))
     if session.plant_config is not None:
         meta["simulation"] = {"plant": json_safe(
             session.plant_config.model_dump(exclude={"source", "unit"}))}
@@ -183,20 +192,30 @@ def run_result(outcome_dict: dict[str, Any], limits: Limits) -> dict[str, Any]:
 
 def run_campaign(camp: CampaignFile, session: RigSession, store: Store, *,
                  progress: Progress | None = None,
-                 on_engine: Callable[[Engine], None] | None = None) -> dict[str, Any]:
-    """Run a campaign into a rig-campaign/1 folder of the store; return its results."""
+                 on_engine: Callable[[Engine], None] | None = None,
+                 override_how: str = "campaign key calibration_override = \"REASON\"",
+                 ) -> dict[str, Any]:
+    """Run a campaign into a rig-campaign/1 folder of the store; return its results.
+    campaign.json and every run.json carry the operator, the unit (serial) and the sensors'
+    calibrations (an expired one needs the campaign's ``calibration_override``)."""
     plan = camp.build_plan()
     unit = camp.unit_data()
+    meta = run_meta(unit, session, camp.operator, camp.calibration_override,
+                    override_how=override_how)  # refused before the campaign exists
     cmeta = {"description": camp.description, "unit": unit, "plan": plan.meta(),
              "limits": camp.limits.model_dump(), "campaign_file": camp.source,
-             "profile": camp.profile}
+             "profile": camp.profile, "operator": camp.operator,
+             "rig_id": meta["rig_id"]}
+    for key in ("calibration", "calibration_override"):
+        if key in meta:
+            cmeta[key] = meta[key]
     campaign_id = store.create_campaign(camp.name, meta=json_safe(cmeta))
     options = EngineOptions(torque_limit_Nm=camp.torque_limit_Nm, profile=camp.profile,
                             stale_timeout_s=session.stale_timeout_s,
                             limits=camp.limits.model_dump())
     try:
         engine, outcomes = measure_plan(
-            session, store, plan, run_meta(unit, session, camp.operator),
+            session, store, plan, meta,
             campaign_id=campaign_id, options=options, progress=progress, on_engine=on_engine)
     except BaseException as exc:  # refused before it ran, Ctrl-C, a bug: close the campaign
         with contextlib.suppress(Exception):

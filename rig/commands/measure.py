@@ -101,6 +101,13 @@ def register(app: typer.Typer) -> None:
             help="Unit data (run.json 'unit' JSON); with --simulated also the plant's unit.")
         ] = None,
         serial: Annotated[str | None, typer.Option(help="Serial number of the unit.")] = None,
+        operator: Annotated[str | None, typer.Option(
+            help="Who measures (kept in run.json and on the certificate).")] = None,
+        calibration_override: Annotated[str | None, typer.Option(
+            "--calibration-override", metavar="REASON",
+            help="Measure although a sensor calibration of the rig configuration is past due; "
+                 "the reason is recorded in run.json with the operator and the time.")
+        ] = None,
         plant: Annotated[Path | None, typer.Option(
             help="Plant TOML for --simulated (default: the default plant with --unit).")
         ] = None,
@@ -180,6 +187,10 @@ def register(app: typer.Typer) -> None:
                 raise RigError(f"{unit}: the unit data must be a JSON object")
         if serial:
             unit_data["serial"] = serial
+        if operator is not None and not operator.strip():
+            raise RigError("--operator: must not be empty")
+        if calibration_override is not None and not calibration_override.strip():
+            raise RigError("--calibration-override: give the reason (it is recorded)")
         plant_cfg = None
         if simulated:
             try:
@@ -189,6 +200,11 @@ def register(app: typer.Typer) -> None:
                 raise RigError(str(exc)) from exc
             if not unit_data:
                 unit_data = dict(plant_cfg.unit)
+        if rig is not None:  # an expired calibration is refused before the rig is opened
+            from rig.calibration import calibration_meta
+            from rig.config import load_rig_config
+
+            calibration_meta(load_rig_config(rig).calibration, calibration_override)
         st = Store(store, samples=samples)
         with open_session(rig=rig, simulated=simulated, plant=plant_cfg) as session, \
                 progress_bar(out, est.total_s) as on_event:
@@ -196,8 +212,10 @@ def register(app: typer.Typer) -> None:
 
             options = EngineOptions(profile=profile, stale_timeout_s=session.stale_timeout_s,
                                     limits=limits.model_dump())
+            meta = run_meta(unit_data, session, operator and operator.strip(),
+                            calibration_override)
             try:
-                engine, outcomes = measure_plan(session, st, plan, run_meta(unit_data, session),
+                engine, outcomes = measure_plan(session, st, plan, meta,
                                                 options=options, progress=on_event)
             except KeyboardInterrupt:
                 out.print("[red]interrupted: the rig is in its safe state; the run is kept "

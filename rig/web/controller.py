@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -23,6 +24,7 @@ from contextlib import AbstractContextManager
 from typing import Any
 
 from drivers.errors import DeviceError
+from rig.calibration import CalibrationExpired, calibration_meta, calibration_status
 from rig.campaign import campaign_from_mapping
 from rig.engine import Engine, EngineOptions
 from rig.engine_events import ProgressEvent
@@ -46,6 +48,11 @@ MONITOR_PERIOD_S = 0.5
 LIVE_METRICS_PERIOD_S = 2.0
 
 SessionFactory = Callable[[], AbstractContextManager[RigSession]]
+
+
+OVERRIDE_HOW = ("Set up: tick 'start with expired calibration' and give the reason, "
+                "or have the sensor calibrated")
+"""How the page's operator overrides an expired calibration."""
 
 
 class ControlError(RigError):
@@ -85,6 +92,12 @@ def compute_preview(req: RunRequest, facts: dict[str, Any]) -> dict[str, Any]:
     else:
         problems.append("no rig connected: the plan cannot be checked against a rig")
     model, assumptions = model_summary(req)
+    batch = None
+    if model is not None:
+        from rig.campaign import batch_band
+
+        batch = batch_band(req.unit.mapping(), req.plan.rated_torque_Nm,
+                           model["lost_motion_pct"])
     listing = [line.strip() for line in plan.listing()[:PREVIEW_LINES]]
     return json_safe({
         "name": plan.name, "n_steps": len(steps), "n_runs": est.n_runs,
@@ -92,7 +105,7 @@ def compute_preview(req: RunRequest, facts: dict[str, Any]) -> dict[str, Any]:
         "truncated": len(steps) > len(listing), "torque_limit_Nm": limit,
         "amplitude_Nm": req.plan.loop_params().amplitude_Nm,
         "fits": not problems, "problems": problems, "assumptions": assumptions,
-        "model": model,
+        "model": model, "batch": batch,
     })
 
 
@@ -110,6 +123,39 @@ def model_summary(req: RunRequest) -> tuple[dict[str, Any] | None, list[str]]:
         out[key] = value if isinstance(value, int | float) else None
     out["lost_motion_arcmin"] = model.lost_motion_arcmin(req.plan.rated_torque_Nm, pct)
     return json_safe(out), assumptions
+
+
+ARCMIN_PER_DEG = 60.0
+
+
+def wrapped_arcmin(value: float) -> float:
+    """An angle difference (arcmin) wrapped to (-10800, 10800]: half a turn either way."""
+    return -((-value + 10800.0) % 21600.0 - 10800.0)
+
+
+def settled_output_arcmin(encoder: Any, *, period_s: float = 0.1, within_arcmin: float = 0.05,
+                          timeout_s: float = 3.0) -> float:
+    """The output angle (arcmin) once it has stopped moving (two readings ``period_s`` apart
+    within ``within_arcmin``; the last reading after ``timeout_s``): the reference of the
+    twist after the input was locked (the output follows the input through the gear)."""
+    last = encoder.read().angle_deg * ARCMIN_PER_DEG
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        time.sleep(period_s)
+        now = encoder.read().angle_deg * ARCMIN_PER_DEG
+        if abs(now - last) <= within_arcmin:
+            return now
+        last = now
+    return last
+
+
+def finished_run(data: dict[str, Any]) -> dict[str, Any]:
+    """What the page lists of a run as it finishes (``run_finished`` event data): label,
+    position (deg), amplitude (%), status, outcome, lost motion and its uncertainty (arcmin)."""
+    u = (data.get("uncertainty") or {}).get("lost_motion_arcmin")
+    return json_safe({k: data.get(k) for k in (
+        "run_id", "label", "input_angle_deg", "amplitude_pct", "status", "reason", "outcome",
+        "lost_motion_arcmin")} | {"lost_motion_u_arcmin": u})
 
 
 class RigController:
@@ -145,6 +191,9 @@ class RigController:
         self._lock_confirmed = False
         self._lock_angle: float | None = None
         self._lock_by_motor = False
+        self._twist_ref_arcmin: float | None = None
+        """The output angle (arcmin) the twist is counted from: read at zero torque when the
+        input lock is confirmed (before that, the first reading after the rig opened)."""
         self._profile: str | None = None
         self._measuring = False
         self._monitor_lock = threading.Lock()
@@ -234,7 +283,7 @@ class RigController:
             tap = self._tap
             latest = tap.recorder.latest if tap is not None and tap.recorder else None
             if latest is not None:
-                live.update(torque_Nm=latest[1], twist_arcmin=latest[2])
+                live.update(torque_Nm=latest[1], output_arcmin=latest[2])
                 if len(latest) > 4:
                     live["temperature_C"] = latest[4]
             rows.append({"name": "torque transducer", "connected": True, "ok": True,
@@ -255,10 +304,23 @@ class RigController:
                 self._safe = None
                 rows.append({"name": "loading drive", "connected": False, "ok": False,
                              "detail": str(exc)})
+        self._twist_from_angle(live, busy)
         with self._lock:
             self._devices = json_safe(rows)
             self._live = json_safe(live)
         self.hub.add_event({"type": "status"})
+
+    def _twist_from_angle(self, live: dict[str, Any], busy: bool) -> None:
+        """``live``: the raw output angle (``output_arcmin``) becomes ``output_angle_deg`` and
+        the twist (arcmin) counted from the reference, wrapped to +-180 deg."""
+        raw = live.pop("output_arcmin", None)
+        if raw is None or not math.isfinite(raw):
+            return
+        live["output_angle_deg"] = raw / ARCMIN_PER_DEG
+        if self._twist_ref_arcmin is None and not busy:
+            self._twist_ref_arcmin = raw
+        if self._twist_ref_arcmin is not None:
+            live["twist_arcmin"] = wrapped_arcmin(raw - self._twist_ref_arcmin)
 
     def _idle_values(self, devices: Any, rows: list[dict[str, Any]]) -> dict[str, Any]:
         """Last values while no measurement runs (each device read once)."""
@@ -266,7 +328,7 @@ class RigController:
         readers: list[tuple[str, Callable[[], None]]] = []
         if devices.encoder is not None:
             def enc() -> None:
-                live["twist_arcmin"] = devices.encoder.read().angle_deg * 60.0
+                live["output_arcmin"] = devices.encoder.read().angle_deg * ARCMIN_PER_DEG
             readers.append(("", enc))
         if devices.input_encoder is not None:
             def inp() -> None:
@@ -414,6 +476,9 @@ class RigController:
                 "state": state, "operator": operator, "faults": faults,
                 "rig": (session.io.description if session is not None else
                         (self.description or None)),
+                "rig_id": session.devices.config.rig.rig_id if session is not None else None,
+                "calibration": ([] if session is None else
+                                calibration_status(session.devices.config.calibration)),
                 "simulated": self.simulated,
                 "torque_limit_Nm": session.io.torque_limit_Nm if session is not None else None,
                 "devices": list(self._devices), "live": dict(self._live), "safe": self._safe,
@@ -470,6 +535,11 @@ class RigController:
             if not self._lock_confirmed:
                 raise ControlError("confirm the input lock first (Devices: Confirm input "
                                    "lock): a test may start only with the input locked")
+            try:
+                calibration_meta(session.devices.config.calibration, req.calibration_override,
+                                 req.operator, how=OVERRIDE_HOW)
+            except CalibrationExpired as exc:
+                raise ControlError(str(exc)) from exc
             plan = build_plan(req)
             steps = list(plan.steps())
             limit = session.io.torque_limit_Nm
@@ -486,7 +556,8 @@ class RigController:
             self._progress = None
             self._current = {"kind": req.kind, "run_id": None, "campaign_id": None,
                              "plan": plan.name, "n_steps": len(steps),
-                             "estimated_s": estimate(steps).total_s}
+                             "estimated_s": (est := estimate(steps)).total_s,
+                             "n_runs": est.n_runs, "measuring": None, "finished": []}
             self._tap = TapStore(self.store, self.hub)
             self._profile = req.profile
             self._measuring = True
@@ -538,7 +609,8 @@ class RigController:
     def _measure_run(self, req: RunRequest, session: RigSession, tap: TapStore
                      ) -> tuple[dict[str, Any], str, str | None]:
         unit = req.unit.mapping()
-        meta = run_meta(unit, session, req.operator)
+        meta = run_meta(unit, session, req.operator, req.calibration_override,
+                        override_how=OVERRIDE_HOW)
         plan = hysteresis_plan(req.plan.loop_params(), req.position_deg)
         engine, outcomes = measure_plan(session, tap, plan, meta, options=self._options(req),
                                         progress=self._on_event, on_engine=self._set_engine)
@@ -562,11 +634,12 @@ class RigController:
             "torque_limit_Nm": req.torque_limit_Nm, "unit": req.unit.mapping(),
             "plan": req.plan.loop_params().model_dump(), "axes": req.axes.model_dump(),
             "limits": req.limits.model_dump(),
+            "calibration_override": req.calibration_override,
         }
         camp = campaign_from_mapping({k: v for k, v in data.items() if v is not None},
                                      source="<control page>")
         result = run_campaign(camp, session, tap, progress=self._on_event,
-                              on_engine=self._set_engine)
+                              on_engine=self._set_engine, override_how=OVERRIDE_HOW)
         with self._lock:
             if self._current is not None:
                 self._current["campaign_id"] = result.get("campaign_id")
@@ -597,7 +670,25 @@ class RigController:
                 camp = getattr(self._engine, "campaign_id", None)
                 if camp:
                     self._current["campaign_id"] = camp
+                self._current["measuring"] = self._measuring_now(event)
+            if event.kind == "run_finished" and self._current is not None:
+                self._current["finished"].append(finished_run(event.data))
+                self._current["measuring"] = None
         self.hub.add_event({"type": "progress", **json_safe(event.to_dict())})
+
+    def _measuring_now(self, event: ProgressEvent) -> dict[str, Any]:
+        """The run just begun: its label, number of the plan's runs, input position (deg),
+        amplitude (% of rated) and housing temperature (deg C) from its run.json ``test``."""
+        tap = self._tap
+        recorder = tap.recorder if tap is not None else None
+        test = dict(recorder.meta.get("test") or {}) if recorder is not None else {}
+        assert self._current is not None
+        return {"run_id": event.run_id, "label": event.run_label,
+                "number": len(self._current["finished"]) + 1,
+                "n_runs": self._current.get("n_runs"),
+                "input_angle_deg": test.get("input_angle_deg"),
+                "amplitude_pct": test.get("amplitude_pct"),
+                "temperature_C": test.get("temperature_C")}
 
     def _running_engine(self) -> Engine:
         engine = self._engine
@@ -687,7 +778,12 @@ class RigController:
             text = f"input locked by the motor at {angle:.3f} deg"
         else:
             text = "input lock confirmed by the operator"
+        ref = None
+        with self._device_lock, contextlib.suppress(DeviceError):
+            ref = settled_output_arcmin(session.devices.encoder)
         with self._lock:
             self._lock_confirmed = True
             self._lock_angle = angle
+            if ref is not None and math.isfinite(ref):
+                self._twist_ref_arcmin = ref  # the twist counts from here (zero torque)
         return text

@@ -141,6 +141,9 @@ class RunRequest(BaseModel):
     kind: Literal["run", "campaign"] = "run"
     name: str = Field("web", pattern=NAME_PATTERN, description="Campaign name (campaigns).")
     operator: str | None = Field(None, min_length=1, max_length=80)
+    calibration_override: str | None = Field(None, min_length=1, max_length=500)
+    """Why the measurement may run with a sensor calibration past due (recorded in run.json);
+    refused (409) without it while one is expired."""
     unit: UnitData
     plan: PlanSettings
     position_deg: float | None = Field(None, ge=-3600, le=3600, allow_inf_nan=False)
@@ -176,6 +179,8 @@ class PlanPreview(BaseModel):
     problems: list[str]
     assumptions: list[str]
     model: dict[str, Any] | None
+    batch: dict[str, Any] | None = None
+    """Where a production batch of this design lies (seed 000 tolerances, 95 % band)."""
 
 
 class Message(BaseModel):
@@ -218,6 +223,9 @@ class LiveValues(BaseModel):
     torque setpoint (N*m), drive enabled; None when unknown."""
 
     twist_arcmin: float | None = None
+    """Output twist counted from the output angle at the confirmed input lock (zero torque)."""
+    output_angle_deg: float | None = None
+    """The output encoder's angle as it reads (deg)."""
     torque_Nm: float | None = None
     crosscheck_torque_Nm: float | None = None
     temperature_C: float | None = None
@@ -287,6 +295,11 @@ class Status(BaseModel):
     operator: bool
     faults: list[LatchedFault] = Field(default_factory=list)
     rig: str | None
+    rig_id: str | None = None
+    """The rig's name (``[rig] rig_id`` of its configuration)."""
+    calibration: list[dict[str, Any]] = Field(default_factory=list)
+    """The sensors' calibrations (rig configuration ``[calibration]``), each with ``expired``
+    and ``days_left``."""
     simulated: bool
     torque_limit_Nm: float | None
     devices: list[Device]

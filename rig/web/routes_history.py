@@ -98,6 +98,9 @@ def run_loop(request: Request, run_id: RunId,
         twist = analysis.twist_arcmin
         model_twist = analysis.model_twist_arcmin()
         metrics = json_safe(analysis.to_dict())
+        recorded = run.meta.get("result") if isinstance(run.meta.get("result"), dict) else {}
+        if recorded.get("crosscheck_max_diff_Nm") is not None:
+            metrics["crosscheck_max_diff_Nm"] = recorded["crosscheck_max_diff_Nm"]
         band = analysis.lost_motion_pct / 100.0 * analysis.rated_torque_Nm
     except Exception as exc:  # an aborted or short run still has a loop to draw
         model_twist = None

@@ -26,10 +26,19 @@ async function api(method, path, body) {
   try { data = await res.json(); } catch (e) { data = null; }
   if (!res.ok) {
     let msg = res.status + " " + res.statusText;
+    let fields = null;
     if (data && typeof data.detail === "string") msg = data.detail;
-    else if (data && Array.isArray(data.detail))
-      msg = data.detail.map((d) => d.loc.slice(1).join(".") + ": " + d.msg).join("; ");
-    throw new Error(msg);
+    else if (data && Array.isArray(data.detail)) {
+      fields = data.detail.map(fieldProblem);
+      msg = fields.map((f) => f.text).join("; ");
+    }
+    if (res.status === 403) msg = "wrong operator token: this page can only watch. Log out and " +
+      "log in with the token printed by rig serve";
+    else if (res.status === 401) msg = "this needs the operator token: log in first";
+    const err = new Error(msg);
+    err.fields = fields;
+    err.status = res.status;
+    throw err;
   }
   return data;
 }
@@ -62,21 +71,29 @@ function bandHook(u) {
   ctx.restore();
 }
 
+const cssVar = (name) => getComputedStyle(document.documentElement).getPropertyValue(name).trim();
+function axis(label) {
+  const ink = cssVar("--ink") || "#1d2330", line = cssVar("--line") || "#d5d8de";
+  return { label, stroke: ink, grid: { stroke: line, width: 1 }, ticks: { stroke: line, width: 1 } };
+}
+const plotWidth = (el) => Math.max(200, el.clientWidth || 800);
+const PLOT_HEIGHT = 400;
+
 function makePlot() {
   const el = $("loop-plot");
-  const width = Math.max(400, el.clientWidth || 800);
+  const width = plotWidth(el);
   const opts = {
-    mode: 2, width, height: 420,
+    mode: 2, width, height: PLOT_HEIGHT,
     title: "",
     scales: { x: { time: false }, y: {} },
-    axes: [{ label: "output torque T (N·m)" }, { label: "output twist (arcmin, centred)" }],
+    axes: [axis("output torque T (N·m)"), axis("output twist (arcmin, centred)")],
     legend: { show: true, live: false },
     cursor: { drag: { x: true, y: true } },
     series: [
       {},
       { label: "measured", stroke: "#1f5fbf", width: 1.2, paths: uPlot.paths.linear(),
         points: { show: false }, facets: [{ scale: "x", auto: true }, { scale: "y", auto: true }] },
-      { label: "model", stroke: "#222", width: 1.2, dash: [6, 4], paths: uPlot.paths.linear(),
+      { label: "nominal model (no runout)", stroke: cssVar("--ink") || "#222", width: 1.2, dash: [6, 4], paths: uPlot.paths.linear(),
         points: { show: false }, facets: [{ scale: "x", auto: true }, { scale: "y", auto: true }] },
     ],
     hooks: { drawClear: [bandHook] },
@@ -144,12 +161,56 @@ function addRows(msg) {
   } else scheduleDraw();
 }
 
+function withU(m, key, digits = 3) {   // ["4.304", " ± 0.001"] (the uncertainty when known)
+  const v = m ? m[key] : null;
+  if (v === null || v === undefined || !isFinite(v)) return ["–", ""];
+  const u = m.uncertainty ? m.uncertainty[key] : null;
+  return [fmt(v, digits), u !== null && u !== undefined && isFinite(u) ? " ± " + fmt(u, digits) : ""];
+}
+function showU(id, parts) { $(id).textContent = parts[0]; $(id + "-u").textContent = parts[1]; }
+
+function setupNumber(name, fallback) {
+  const v = Number($("setup").elements[name].value);
+  return isFinite(v) && v > 0 ? v : fallback;
+}
+
 function showMetrics(m, model) {
-  $("m-lost").textContent = fmt(m && m.lost_motion_arcmin);
-  $("m-backlash").textContent = fmt(m && m.backlash_arcmin);
-  $("m-stiffness").textContent = fmt(m && m.stiffness_Nm_per_arcmin, 2);
+  showU("m-lost", withU(m, "lost_motion_arcmin"));
+  showU("m-backlash", withU(m, "backlash_arcmin"));
+  showU("m-stiffness", withU(m, "stiffness_Nm_per_arcmin", 2));
+  const mJ = m && m.loop_area_J !== undefined && m.loop_area_J !== null ? {
+    loop_area_J: 1000 * m.loop_area_J,
+    uncertainty: { loop_area_J: m.uncertainty && m.uncertainty.loop_area_J !== undefined
+      && m.uncertainty.loop_area_J !== null ? 1000 * m.uncertainty.loop_area_J : null } } : null;
+  showU("m-hysteresis", withU(mJ, "loop_area_J", 3));
   const mm = (m && m.model) || model;
   $("m-model").textContent = fmt(mm && mm.lost_motion_arcmin);
+  const band = live.batch && live.batch.band_95_arcmin;
+  $("m-batch").textContent = band ? `${fmt(band[0])} .. ${fmt(band[1])}` : "–";
+  const flags = [];
+  // stiffness asymmetry: the stiffer side over the other
+  const kp = m && m.stiffness_pos_Nm_per_arcmin, kn = m && m.stiffness_neg_Nm_per_arcmin;
+  const maxRatio = setupNumber("asymmetry_flag_ratio", 1.3);
+  if (kp > 0 && kn > 0) {
+    const ratio = Math.max(kp, kn) / Math.min(kp, kn);
+    $("m-asym").textContent = `${fmt(kp, 2)} / ${fmt(kn, 2)} (ratio ${fmt(ratio, 2)})`;
+    if (ratio > maxRatio) flags.push(`stiffness asymmetry: ${fmt(ratio, 2)} between the sides ` +
+      `(+ ${fmt(kp, 2)}, − ${fmt(kn, 2)} N·m/arcmin) exceeds ${fmt(maxRatio, 2)}`);
+  } else $("m-asym").textContent = "–";
+  // the torque cross-check: its largest disagreement against a share of rated torque
+  const diff = m ? m.crosscheck_max_diff_Nm : null;
+  const rated = (m && m.rated_torque_Nm) || num($("setup").elements.rated_torque_Nm.value);
+  const pct = setupNumber("crosscheck_flag_pct", 10);
+  if (diff !== null && diff !== undefined && isFinite(diff)) {
+    const share = rated > 0 ? 100 * diff / rated : null;
+    $("m-cross").textContent = fmt(diff, 3) + " N·m" + (share !== null ? ` (${fmt(share, 1)} % of rated)` : "");
+    if (share !== null && share > pct) flags.push(`torque cross-check: the transducer and the ` +
+      `cross-check sensor differed by up to ${fmt(diff, 3)} N·m, ${fmt(share, 1)} % of rated ` +
+      `(flag above ${fmt(pct, 1)} %): check both sensors' zero and calibration`);
+  } else $("m-cross").textContent = "–";
+  $("m-cross").classList.toggle("flag", flags.some((f) => f.startsWith("torque")));
+  $("m-asym").classList.toggle("flag", flags.some((f) => f.startsWith("stiffness")));
+  $("flags").innerHTML = flags.map((f) => `<div class="flag">⚠ ${esc(f)}</div>`).join("");
 }
 
 // ---------------------------------------------------------------- campaign: lost motion vs position
@@ -180,9 +241,9 @@ function showCampaign(title, summary) {
   const data = [xs, meas, fit, low, high];
   if (!campaignPlot) {
     campaignPlot = new uPlot({
-      width: Math.max(400, $("loop-plot").clientWidth || 800), height: 240,
+      width: plotWidth($("loop-plot")), height: 240,
       scales: { x: { time: false } },
-      axes: [{ label: "input angle (deg)" }, { label: "lost motion (arcmin)" }],
+      axes: [axis("input angle (deg)"), axis("lost motion (arcmin)")],
       series: [{}, { label: "measured", stroke: "#1f5fbf", paths: () => null,
                      points: { show: true, size: 9, fill: "#1f5fbf" } },
                { label: "runout signature", stroke: "#c62828", dash: [6, 4], points: { show: false } },
@@ -199,7 +260,9 @@ function renderStatus(s) {
   const st = $("state");
   st.textContent = s.state.replace("_", " ");
   st.className = "badge " + s.state;
-  $("rig-name").textContent = s.rig || "";
+  $("rig-name").textContent = s.rig_id || (s.simulated ? "simulated rig" : "");
+  $("rig-name").title = s.rig ? "rig: " + s.rig : "";
+  document.title = (s.rig_id ? s.rig_id + " · " : "") + "backlash-rig control page";
   const role = $("role");
   role.textContent = s.operator ? "operator" : "viewer";
   role.className = "badge " + (s.operator ? "operator" : "viewer");
@@ -218,6 +281,7 @@ function renderStatus(s) {
   }
   const v = s.live || {};
   $("v-twist").textContent = fmt(v.twist_arcmin, 2);
+  $("v-angle").textContent = fmt(v.output_angle_deg, 3);
   $("v-torque").textContent = fmt(v.torque_Nm, 3);
   $("v-temp").textContent = fmt(v.temperature_C, 1);
   $("v-setpoint").textContent = fmt(v.setpoint_Nm, 3);
@@ -257,12 +321,16 @@ function renderStatus(s) {
     $("fault-detail").textContent = [f.detail, listed].filter(Boolean).join("\n");
   }
   $("reset-faults").hidden = !latched.length;
+  renderCalibration(s.calibration || []);
+  renderCampaignNow(s.current, busy);
   // buttons
   const op = s.operator;
   const connected = s.state !== "no_rig" && s.state !== "starting";
   const faulted = latched.length > 0;
-  $("start").disabled = !op || busy || !connected || !lock.confirmed || faulted;
-  $("start").title = faulted ? "a fault is latched: Reset faults first" : "";
+  const why = startBlockers(s, { op, busy, connected, faulted, lock });
+  $("start").disabled = why.length > 0;
+  $("start").title = why.join("; ");
+  $("start-why").textContent = why.length && !busy ? "Start is off: " + why.join("; ") + "." : "";
   $("preview").disabled = busy || faulted;
   $("reset-faults").disabled = !op || busy;
   $("pause").disabled = !op || s.state !== "running";
@@ -272,6 +340,89 @@ function renderStatus(s) {
   $("lock").disabled = !op || busy || !connected;
   // a stored run drawn from the history keeps its own numbers beside it
   if (s.last_result && !busy && !live.stored) renderResult(s.last_result);
+}
+
+// Why Start is greyed out, in words (empty: it may start)
+function startBlockers(s, st) {
+  const why = [];
+  if (!st.op) why.push("log in with the operator token");
+  if (!st.connected) why.push("no rig is connected");
+  if (st.busy) why.push("a measurement is " + s.state);
+  if (st.faulted) why.push("a fault is latched: Reset faults first");
+  if (st.connected && !st.lock.confirmed)
+    why.push("input lock not confirmed (Devices: Confirm input lock)");
+  const expired = (s.calibration || []).filter((c) => c.expired);
+  if (expired.length && !overrideGiven())
+    why.push("calibration expired (" + expired.map((c) => c.sensor).join(", ") +
+      "): tick 'start with expired calibration' and give the reason");
+  if (formProblems > 0) why.push("fix the set-up fields marked in red");
+  return why;
+}
+
+function overrideGiven() {
+  const f = $("setup").elements;
+  return f.override.checked && f.override_reason.value.trim().length > 0;
+}
+
+function renderCalibration(cal) {
+  const tb = $("calibration").querySelector("tbody");
+  tb.innerHTML = "";
+  for (const c of cal) {
+    const tr = document.createElement("tr");
+    tr.innerHTML = "<td></td><td></td><td></td><td></td><td></td>";
+    tr.children[0].textContent = c.sensor;
+    tr.children[1].textContent = c.id;
+    tr.children[2].textContent = c.certificate;
+    tr.children[3].textContent = c.due + (c.expired ? " (expired)" : "");
+    tr.children[3].className = c.expired ? "expired" : "";
+    tr.children[4].textContent = c.uncertainty;
+    tb.appendChild(tr);
+  }
+  const expired = cal.filter((c) => c.expired);
+  $("calibration-state").textContent = !cal.length ? "none in the rig configuration"
+    : expired.length ? "EXPIRED: " + expired.map((c) => c.sensor).join(", ") : "all valid";
+  $("calibration-state").className = expired.length ? "expired" : "muted";
+  $("override-box").hidden = expired.length === 0;
+}
+
+// What a campaign measures now, and each finished run's lost motion as it completes
+function renderCampaignNow(cur, busy) {
+  const box = $("campaign-now");
+  if (!cur || !busy) { box.hidden = true; return; }
+  const m = cur.measuring;
+  let html = "";
+  if (m) {
+    const parts = [];
+    if (m.input_angle_deg !== null && m.input_angle_deg !== undefined)
+      parts.push(`input position ${fmt(m.input_angle_deg, 1)}°`);
+    if (m.amplitude_pct !== null && m.amplitude_pct !== undefined)
+      parts.push(`amplitude ${fmt(m.amplitude_pct, 0)} % of rated`);
+    parts.push(m.temperature_C !== null && m.temperature_C !== undefined
+      ? `housing ${fmt(m.temperature_C, 1)} °C` : "temperature not controlled");
+    html += `<b>Now measuring run ${m.number}${m.n_runs ? " of " + m.n_runs : ""}: ` +
+      `${esc(m.label || "")}</b> · ${parts.map(esc).join(" · ")}`;
+  } else html += "<b>between runs</b>";
+  const done = cur.finished || [];
+  if (done.length) {
+    html += "<ol class=\"finished\">" + done.map((r) => `<li>${esc(r.label || r.run_id)}: ` +
+      (r.lost_motion_arcmin !== null && r.lost_motion_arcmin !== undefined
+        ? `lost motion ${fmt(r.lost_motion_arcmin)}${r.lost_motion_u_arcmin ? " ± " + fmt(r.lost_motion_u_arcmin) : ""} arcmin`
+        : esc((r.status || "") + (r.reason ? " (" + r.reason + ")" : ""))) +
+      ` ${outcomeHtml(r.outcome)}</li>`).join("") + "</ol>";
+  }
+  box.innerHTML = html;
+  box.hidden = false;
+  if (cur.kind === "campaign" && done.length) {   // the positions so far, on the plot
+    const byPos = {};
+    for (const r of done) {
+      if (r.lost_motion_arcmin === null || r.input_angle_deg === null) continue;
+      (byPos[r.input_angle_deg] = byPos[r.input_angle_deg] || []).push(r.lost_motion_arcmin);
+    }
+    const pts = Object.keys(byPos).map(Number).sort((a, b) => a - b).map((a) => ({
+      input_angle_deg: a, lost_motion_arcmin: byPos[a].reduce((x, y) => x + y, 0) / byPos[a].length }));
+    showCampaign("so far: " + pts.length + " position(s)", {
+      lost_motion_by_position: pts, runout_signature: null, batch: live.batch });
+  }
 }
 
 const OUTCOME_WORDS = { ok: "OK", not_ok: "NOT OK", incomplete: "INCOMPLETE" };
@@ -291,6 +442,7 @@ function renderResult(r) {
     html += "<br>lost motion against position: " + r.lost_motion_by_position
       .map((x) => `${fmt(x.input_angle_deg, 0)}°: ${fmt(x.lost_motion_arcmin)}`).join(", ");
   }
+  if (r.batch) live.batch = r.batch;
   const band = r.batch && r.batch.band_95_arcmin;
   if (band) {
     html += `<br>production batch of this design (seed 000 tolerances, 95 %): ` +
@@ -380,8 +532,10 @@ function request() {
       zero_band_Nm: num(f.zero_band_Nm.value) || 0, zero_rate_Nm_per_s: num(f.zero_rate_Nm_per_s.value) },
     limits: { lost_motion_arcmin_max: num(f.lost_motion_arcmin_max.value) },
     torque_limit_Nm: num(f.torque_limit_Nm.value),
-    operator: f.operator.value || null,
+    operator: f.operator.value.trim() || null,
   };
+  if (f.override.checked && f.override_reason.value.trim())
+    body.calibration_override = f.override_reason.value.trim();
   if (kind === "campaign") {
     body.name = f.name.value || "web";
     body.axes = { positions_deg: list(f.positions_deg.value) || [0], repeats: num(f.repeats.value) || 1 };
@@ -390,9 +544,11 @@ function request() {
 }
 
 async function previewPlan() {
+  if (!validateForm()) throw new Error("fix the set-up fields marked in red");
   const body = request();
   const p = await api("POST", "/api/plan/preview", body);
   live.model = p.model;
+  live.batch = p.batch || null;
   live.amplitudeNm = p.amplitude_Nm;
   live.bandNm = p.model ? p.model.lost_motion_pct / 100 * body.plan.rated_torque_Nm : null;
   const mins = (p.estimated_s / 60).toFixed(1);
@@ -401,8 +557,10 @@ async function previewPlan() {
     (p.torque_limit_Nm !== null ? `, rig limit ±${fmt(p.torque_limit_Nm, 2)} N·m` : "") +
     (p.fits ? ' <span class="pass">fits the rig</span>' : ' <span class="fail">does not fit</span>');
   if (p.problems.length) html += "<br>" + p.problems.map(esc).join("<br>");
-  if (p.model) html += `<br>model: lost motion ${fmt(p.model.lost_motion_arcmin)} arcmin, ` +
-    `backlash ${fmt(p.model.backlash_arcmin)} arcmin, stiffness ${fmt(p.model.stiffness_Nm_per_arcmin, 2)} N·m/arcmin`;
+  if (p.model) html += `<br>nominal model (no runout): lost motion ${fmt(p.model.lost_motion_arcmin)} arcmin, ` +
+    `backlash ${fmt(p.model.backlash_arcmin)} arcmin, torsional stiffness ${fmt(p.model.stiffness_Nm_per_arcmin, 2)} N·m/arcmin`;
+  if (p.batch && p.batch.band_95_arcmin) html += `; production batch of this design (95 %): ` +
+    `${fmt(p.batch.band_95_arcmin[0])} .. ${fmt(p.batch.band_95_arcmin[1])} arcmin`;
   html += `<details><summary>steps</summary><pre>${esc(p.steps.join("\n"))}` +
     `${p.truncated ? "\n…" : ""}</pre></details>`;
   $("preview-out").innerHTML = html;
@@ -418,8 +576,187 @@ function operatorName() {
 
 async function run(action, fn) {
   try { const r = await fn(); if (r && r.message) notice(r.message, false); }
-  catch (e) { notice(action + ": " + e.message, true); }
+  catch (e) {
+    if (e.fields) showServerFieldErrors(e.fields);
+    notice(action + ": " + e.message, true);
+  }
   refreshStatus();
+}
+
+// ---------------------------------------------------------------- set-up checks, at the field
+const FIELD_NAMES = {
+  serial: "serial", operator: "operator", z_internal: "teeth of the ring gear (z internal)",
+  z_external: "teeth of the pinion (z external)", module_mm: "module", pressure_angle_deg: "pressure angle",
+  addendum_coeff: "addendum coefficient", face_width_mm: "face width", center_distance_mm: "centre distance",
+  m_value_internal_mm: "M value of the ring gear", m_value_external_mm: "M value of the pinion",
+  runout_internal_mm: "runout of the ring gear", runout_external_mm: "runout of the pinion",
+  rated_torque_Nm: "rated torque", amplitude_pct: "amplitude", rate_Nm_per_s: "loading rate",
+  cycles: "cycles", pre_cycles: "pre-cycles", steps_per_quarter: "steps per quarter",
+  dwell_s: "dwell", extra_levels_pct: "extra levels", zero_band_Nm: "slow band",
+  zero_rate_Nm_per_s: "slow rate", lost_motion_arcmin_max: "lost motion limit",
+  torque_limit_Nm: "torque limit", name: "campaign name", positions_deg: "positions",
+  repeats: "repeats", crosscheck_flag_pct: "cross-check flag share",
+  asymmetry_flag_ratio: "stiffness asymmetry ratio", override_reason: "override reason",
+};
+const isNum = (v) => v.trim() !== "" && isFinite(Number(v));
+const numbersIn = (v) => v.split(/[,\s]+/).filter((x) => x);
+function rule(kind, lo, hi) {      // a checker of one field's text: a problem in words or null
+  return (v, optional) => {
+    if (v.trim() === "") return optional ? null : "is needed";
+    if (!isNum(v)) return "must be a number";
+    const x = Number(v);
+    if (kind === "int" && !Number.isInteger(x)) return "must be a whole number";
+    if (kind === "gt" && !(x > lo)) return `must be above ${lo}`;
+    if (kind !== "gt" && lo !== undefined && x < lo) return `must be at least ${lo}`;
+    if (hi !== undefined && x > hi) return `must be at most ${hi}`;
+    return null;
+  };
+}
+function listRule(lo, hi, optional) {
+  return (v) => {
+    if (v.trim() === "") return optional ? null : "is needed";
+    for (const t of numbersIn(v)) {
+      if (!isFinite(Number(t))) return `must be numbers separated by commas ("${t}" is not one)`;
+      const x = Number(t);
+      if (lo !== undefined && !(x > lo)) return `must all be above ${lo}`;
+      if (hi !== undefined && !(x < hi)) return `must all be below ${hi}`;
+    }
+    return null;
+  };
+}
+const RULES = {
+  serial: (v) => v.trim() === "" || /^[A-Za-z0-9][A-Za-z0-9._-]{0,79}$/.test(v.trim()) ? null
+    : "may hold letters, digits, dot, dash and underscore (up to 80), starting with a letter or digit",
+  operator: (v) => v.length <= 80 ? null : "must be at most 80 characters",
+  z_internal: rule("int", 3, 2000), z_external: rule("int", 3, 2000), module_mm: rule("gt", 0),
+  pressure_angle_deg: (v) => v.trim() === "" ? null : (rule("gt", 0)(v) || (Number(v) < 45 ? null : "must be below 45°")),
+  addendum_coeff: (v) => rule("ge", 0, 2)(v, true), face_width_mm: (v) => rule("gt", 0)(v, true),
+  center_distance_mm: (v) => rule("ge", 0)(v, true),
+  m_value_internal_mm: listRule(0, undefined, true), m_value_external_mm: listRule(0, undefined, true),
+  runout_internal_mm: (v) => rule("ge", 0, 10)(v, true), runout_external_mm: (v) => rule("ge", 0, 10)(v, true),
+  rated_torque_Nm: rule("gt", 0), amplitude_pct: (v) => rule("gt", 0)(v) || rule("ge", 0, 100)(v),
+  rate_Nm_per_s: rule("gt", 0), cycles: rule("int", 1, 20), pre_cycles: rule("int", 0, 10),
+  steps_per_quarter: rule("int", 1, 200), dwell_s: rule("ge", 0, 600),
+  extra_levels_pct: listRule(0, 100, true), zero_band_Nm: (v) => rule("ge", 0)(v, true),
+  zero_rate_Nm_per_s: (v) => rule("gt", 0)(v, true),
+  lost_motion_arcmin_max: (v) => rule("gt", 0)(v, true), torque_limit_Nm: (v) => rule("gt", 0)(v, true),
+  name: (v) => /^[A-Za-z0-9][A-Za-z0-9._-]{0,79}$/.test(v.trim()) ? null : "may hold letters, digits, dot, dash and underscore",
+  positions_deg: listRule(undefined, undefined, false), repeats: rule("int", 1, 50),
+  crosscheck_flag_pct: rule("gt", 0), asymmetry_flag_ratio: (v) => rule("ge", 1)(v),
+};
+let formProblems = 0;
+
+function fieldErrorEl(input) {
+  let el = input.parentElement.querySelector(".field-error");
+  if (!el) {
+    el = document.createElement("span");
+    el.className = "field-error";
+    el.setAttribute("role", "alert");
+    el.dataset.for = input.name;
+    input.parentElement.appendChild(el);
+  }
+  return el;
+}
+function setFieldError(input, text) {
+  fieldErrorEl(input).textContent = text || "";
+  input.setAttribute("aria-invalid", text ? "true" : "false");
+}
+
+function validateForm() {
+  const f = $("setup").elements;
+  const campaign = f.kind.value === "campaign";
+  let problems = 0;
+  for (const [name, check] of Object.entries(RULES)) {
+    const input = f[name];
+    if (!input) continue;
+    if (input.closest(".campaign-only") && !campaign) { setFieldError(input, ""); continue; }
+    const why = check(input.value);
+    setFieldError(input, why ? `${FIELD_NAMES[name] || name} ${why}` : "");
+    if (why) problems++;
+  }
+  // between fields: the ring has more teeth than the pinion (an internal pair)
+  if (!RULES.z_internal(f.z_internal.value) && !RULES.z_external(f.z_external.value) &&
+      Number(f.z_internal.value) <= Number(f.z_external.value)) {
+    setFieldError(f.z_internal, `teeth of the ring gear must exceed the pinion's (${f.z_external.value})`);
+    problems++;
+  }
+  const reason = f.override.checked && !f.override_reason.value.trim();
+  setFieldError(f.override_reason, reason ? "give the reason for starting with an expired calibration" : "");
+  if (reason) problems++;
+  formProblems = problems;
+  return problems === 0;
+}
+
+// a 422 of the API, in words at its field ("rated torque must be above 0"), never a path
+function fieldProblem(d) {
+  const loc = (d.loc || []).filter((x) => typeof x === "string" && x !== "body");
+  const f = $("setup").elements;
+  let name = [...loc].reverse().find((x) => f[x]);
+  if (!name && loc.includes("unit")) name = "z_internal";
+  const msg = String(d.msg || "").replace(/^Value error, /, "")
+    .replace(/^Input should be greater than or equal to (.*)$/, "must be at least $1")
+    .replace(/^Input should be greater than (.*)$/, "must be above $1")
+    .replace(/^Input should be less than or equal to (.*)$/, "must be at most $1")
+    .replace(/^Input should be less than (.*)$/, "must be below $1")
+    .replace(/^Input should be a valid (number|integer).*$/, "must be a $1")
+    .replace(/^Field required$/, "is needed")
+    .replace(/^String should match pattern .*$/, "has characters that are not allowed");
+  const label = name ? (FIELD_NAMES[name] || name.replace(/_/g, " ")) : "set-up";
+  return { name, text: msg.startsWith(name || "\u0000") ? msg : `${label} ${msg}` };
+}
+function showServerFieldErrors(fields) {
+  const f = $("setup").elements;
+  for (const p of fields) if (p.name && f[p.name]) setFieldError(f[p.name], p.text);
+}
+
+// ---------------------------------------------------------------- the set-up kept across a reload
+const SETUP_KEY = "rigSetup";
+function saveSetup() {
+  const data = { unitExample: $("unit-example").value, lockAngle: $("lock-angle").value };
+  for (const el of $("setup").elements) {
+    if (!el.name) continue;
+    data[el.name] = el.type === "checkbox" ? el.checked : el.value;
+  }
+  try { localStorage.setItem(SETUP_KEY, JSON.stringify(data)); } catch (e) { /* private mode */ }
+}
+function restoreSetup() {
+  let data = null;
+  try { data = JSON.parse(localStorage.getItem(SETUP_KEY) || "null"); } catch (e) { data = null; }
+  if (!data || typeof data !== "object") return false;
+  if (data.unitExample && units.some((u) => u.name === data.unitExample)) {
+    $("unit-example").value = data.unitExample;
+    fillUnit(units.find((u) => u.name === data.unitExample).unit);
+  }
+  if (typeof data.lockAngle === "string") $("lock-angle").value = data.lockAngle;
+  for (const el of $("setup").elements) {
+    if (!el.name || !(el.name in data)) continue;
+    if (el.type === "checkbox") el.checked = !!data[el.name];
+    else el.value = String(data[el.name]);
+  }
+  $("setup").className = $("setup").elements.kind.value === "campaign" ? "campaign" : "";
+  return true;
+}
+
+// ---------------------------------------------------------------- keyboard
+function typingIn(el) {
+  if (!el) return false;
+  const tag = el.tagName;
+  if (tag === "TEXTAREA" || tag === "SELECT" || el.isContentEditable) return true;
+  return tag === "INPUT" && !["checkbox", "radio", "button", "submit"].includes(el.type);
+}
+function onKey(e) {
+  if (e.ctrlKey || e.metaKey || e.altKey) return;
+  if (e.key === "Escape" || (e.key === " " && !typingIn(e.target))) {
+    e.preventDefault();        // Space never clicks a focused button instead
+    $("estop").click();
+    return;
+  }
+  if (typingIn(e.target) || e.repeat) return;
+  const key = e.key.toLowerCase();
+  const press = (id) => { e.preventDefault(); if (!$(id).disabled) $(id).click(); };
+  if (key === "s") press("start");
+  else if (key === "p") press(lastStatus && lastStatus.state === "paused" ? "resume" : "pause");
+  else if (key === "a") press("abort");
 }
 
 // ---------------------------------------------------------------- history
@@ -473,11 +810,8 @@ async function showStoredRun(runId) {
 // ---------------------------------------------------------------- wiring
 function wire() {
   $("estop").addEventListener("click", () => run("E-stop", () => api("POST", "/api/control/estop")));
-  $("token-set").addEventListener("click", () => {
-    sessionStorage.setItem("rigToken", $("token").value.trim());
-    $("token").value = "";
-    refreshStatus();
-  });
+  $("token-set").addEventListener("click", logIn);
+  $("token").addEventListener("keydown", (e) => { if (e.key === "Enter") logIn(); });
   $("token-clear").addEventListener("click", () => { sessionStorage.removeItem("rigToken"); refreshStatus(); });
   $("tare").addEventListener("click", () => run("tare", () => api("POST", "/api/devices/tare")));
   $("reset-faults").addEventListener("click", () => run("reset faults", () =>
@@ -502,7 +836,17 @@ function wire() {
   $("unit-example").addEventListener("change", (e) => {
     const u = units.find((x) => x.name === e.target.value);
     if (u) fillUnit(u.unit);
+    validateForm(); saveSetup();
   });
+  const onSetup = () => {
+    validateForm();
+    saveSetup();
+    if (lastStatus) renderStatus(lastStatus);
+  };
+  $("setup").addEventListener("input", onSetup);
+  $("setup").addEventListener("change", onSetup);
+  $("lock-angle").addEventListener("input", saveSetup);
+  document.addEventListener("keydown", onKey);
   $("campaigns").addEventListener("click", async (e) => {
     const a = e.target.closest("a[data-campaign]");
     if (!a) return;
@@ -516,7 +860,24 @@ function wire() {
     const a = e.target.closest("a[data-run]");
     if (a) { e.preventDefault(); showStoredRun(a.dataset.run).catch((err) => notice(err.message, true)); }
   });
-  window.addEventListener("resize", () => plot.setSize({ width: $("loop-plot").clientWidth, height: 420 }));
+  window.addEventListener("resize", () => {
+    plot.setSize({ width: plotWidth($("loop-plot")), height: PLOT_HEIGHT });
+    if (campaignPlot) campaignPlot.setSize({ width: plotWidth($("loop-plot")), height: 240 });
+  });
+}
+
+// a wrong token says so (the page would otherwise just stay a viewer)
+async function logIn() {
+  const given = $("token").value.trim();
+  if (!given) { notice("log in: type the operator token first", true); return; }
+  sessionStorage.setItem("rigToken", given);
+  $("token").value = "";
+  await refreshStatus();
+  if (lastStatus && !lastStatus.operator) {
+    sessionStorage.removeItem("rigToken");
+    notice("wrong operator token: this page can only watch. Use the token printed by rig serve", true);
+    refreshStatus();
+  } else if (lastStatus) notice("logged in as operator", false);
 }
 
 async function init() {
@@ -533,8 +894,12 @@ async function init() {
     }
     if (units.length) fillUnit(units[0].unit);
   } catch (e) { notice("units: " + e.message, true); }
+  restoreSetup();
+  validateForm();
   connectLive();
   await refreshStatus();
+  if (token() && lastStatus && !lastStatus.operator)
+    notice("wrong operator token: this page can only watch. Log out and use the token printed by rig serve", true);
   refreshHistory();
   setInterval(refreshStatus, STATUS_POLL_MS);
   previewPlan().catch(() => {});

@@ -11,6 +11,8 @@ A run:
   ``columns`` / ``variables`` cells pair them), ``run_id`` and ``meta_json``, the run.json
   text (``jsondecode(meta_json)`` in MATLAB).
 - ``xlsx``: sheet ``samples`` and sheet ``meta`` (dotted key, value; lists as JSON text).
+  Numbers carry 16 significant digits (openpyxl writes ``%.16g``, Excel's own precision):
+  within 1e-15 relative, not bit for bit; use csv, parquet or mat for that.
 
 A campaign: its tidy results table (:mod:`rig.io_results`, one row per run) as CSV,
 Parquet, MATLAB (one variable per column) or XLSX (sheets ``results`` and ``campaign``).

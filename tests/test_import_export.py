@@ -253,3 +253,32 @@ def test_bad_value_names_file_line_and_column(tmp_path: Path, row: str, named: s
     line = _one_line_error(_rig("import", "data.csv", "--map", str(CATMAN_MAP), "--unit",
                                 "unit.json", "--out", "x", cwd=tmp_path))
     assert named in line, line
+
+
+def test_tdms_time_from_waveform_timing(tmp_path: Path) -> None:
+    """No t_s channel: the time is the torque channel's waveform timing; a missing channel
+    is one line listing the group's channels."""
+    n, dt = 200, 0.002
+    torque = 10.0 * np.sin(np.linspace(0.0, 2.0 * np.pi, n))
+    wf = {"wf_increment": dt, "wf_start_offset": 0.5}
+    with TdmsWriter(tmp_path / "wave.tdms") as writer:
+        writer.write_segment([
+            ChannelObject("G", "Torque", torque, properties=wf),
+            ChannelObject("G", "Angle", np.full(n, 30.0), properties=wf),
+        ])
+    (tmp_path / "unit.json").write_text((ROOT / "rig/examples/units/seed000-pair1.json")
+                                        .read_text())
+    mapping = tmp_path / "wave.toml"
+    mapping.write_text('[columns]\ntorque_Nm = "Torque"\n'
+                       'output_angle_deg = { column = "Angle", unit = "arcmin" }\n'
+                       '[test]\nrated_torque_Nm = 10.0\n')
+    res = _rig("import", "wave.tdms", "--map", "wave.toml", "--unit", "unit.json",
+               "--out", "run", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    run = read_run(tmp_path / "run")
+    np.testing.assert_allclose(run.t_s, 0.5 + dt * np.arange(n), rtol=1e-12)
+    np.testing.assert_array_equal(run.output_angle_deg, np.full(n, 0.5))
+    mapping.write_text(mapping.read_text().replace('"Angle"', '"Angel"'))
+    line = _one_line_error(_rig("import", "wave.tdms", "--map", "wave.toml", "--unit",
+                                "unit.json", "--out", "run2", cwd=tmp_path))
+    assert "wave.tdms" in line and "'Angel'" in line and "['Torque', 'Angle']" in line, line

@@ -51,8 +51,7 @@ def native(tmp_path_factory: pytest.TempPathFactory) -> dict:
     lost motion by ``rig analyse``."""
     work = tmp_path_factory.mktemp("native")
     res = _rig("measure", "--simulated", "--store", "S", "--rated-torque", "10",
-               "--steps", "2", "--dwell", "0", "--pre-cycles", "0", "--json", "out.json",
-               cwd=work)
+               "--json", "out.json", cwd=work)
     assert res.returncode == 0, res.stderr[-2000:]
     run_id = json.loads((work / "out.json").read_text())["run_id"]
     folder = Store(work / "S", create=False).get_run(run_id).path

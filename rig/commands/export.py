@@ -1,0 +1,43 @@
+"""``rig export RUN_OR_CAMPAIGN --format csv|parquet|mat|xlsx [--out PATH]``: a run's samples
+and run.json, or a campaign's tidy results table, for other tools (rig/io_export.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from rig.store_options import DEFAULT_STORE, SamplesOption, StoreOption
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def export(
+        target: Annotated[str, typer.Argument(
+            metavar="RUN_OR_CAMPAIGN",
+            help="A run or campaign folder, or a run or campaign id of the --store.")],
+        fmt: Annotated[str, typer.Option(
+            "--format", help="csv (a rig-run/1 run folder; a campaign's table), parquet, "
+            "mat (MATLAB) or xlsx (Excel).")],
+        out: Annotated[Path | None, typer.Option(
+            "--out", help="Where to write (default: RUN_ID[.EXT] or "
+            "CAMPAIGN-results.EXT in the current folder).")] = None,
+        store: StoreOption = DEFAULT_STORE,
+        samples: SamplesOption = None,
+    ) -> None:
+        """Export a run (samples and run.json) or a campaign (one row per run: conditions,
+        metrics with uncertainties, model, limits, outcome). --store is read only when
+        RUN_OR_CAMPAIGN is not a folder."""
+        from rig.io_export import export_campaign, export_run, resolve_target
+        from rig.runformat import read_campaign, read_run
+
+        path, is_campaign = resolve_target(target, store, samples)
+        if is_campaign:
+            campaign = read_campaign(path)
+            written = export_campaign(campaign, fmt, out)
+            typer.echo(f"campaign {campaign.name}: {len(campaign.runs)} runs -> {written}")
+        else:
+            run = read_run(path)
+            written = export_run(run, fmt, out)
+            typer.echo(f"run {run.run_id}: {run.n_samples} samples -> {written}")

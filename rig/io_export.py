@@ -14,8 +14,9 @@ A run:
   Numbers carry 16 significant digits (openpyxl writes ``%.16g``, Excel's own precision):
   within 1e-15 relative, not bit for bit; use csv, parquet or mat for that.
 
-A campaign: its tidy results table (:mod:`rig.io_results`, one row per run) as CSV,
-Parquet, MATLAB (one variable per column) or XLSX (sheets ``results`` and ``campaign``).
+A campaign: its tidy results table (:mod:`rig.api_results`, one row per run, the table of
+``rig.open(...).results()``) as CSV, Parquet, MATLAB (one variable per column) or XLSX
+(sheets ``results`` and ``campaign``).
 Units follow the column names (s, N·m, deg, °C, arcmin, J).
 """
 
@@ -144,12 +145,12 @@ def export_run(run: Run, fmt: str, out: Path | None = None) -> Path:
 
 def export_campaign(campaign: Campaign, fmt: str, out: Path | None = None) -> Path:
     """Write the campaign's results table as ``fmt`` (csv, parquet, mat, xlsx); the path."""
-    from rig.io_results import TEXT_COLUMNS, results_table
+    from rig.api_results import TEXT_COLUMNS, results_frame
 
     fmt = _check_format(fmt)
     name = campaign.meta.get("campaign_id") or campaign.name or "campaign"
     out = _prepare(out or default_out(str(name), fmt, True))
-    table = results_table(campaign)
+    table = results_frame(campaign)
     if fmt == "csv":
         table.to_csv(out, index=False)
     elif fmt == "parquet":

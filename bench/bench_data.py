@@ -1,6 +1,6 @@
 """The columnar data path: open and write a 1,000,000-sample run (docs/run-format.md).
 
-The run is a 1 kHz encoder run as the recorder writes it (rig/engine_record.py): ``t_s``
+The run is a 1 kHz encoder run as the recorder writes it (rig/engine/record.py): ``t_s``
 (monotonic clock, jittered), ``torque_Nm`` (a slow ±10 N·m sweep with noise),
 ``output_angle_deg`` and ``input_angle_deg`` (2^23-count encoders, unwrapped),
 ``temperature_C`` (0.01 °C steps), ``torque_command_Nm``, ``step`` and ``sample_window``
@@ -99,7 +99,7 @@ def run() -> Iterator[dict[str, Any]]:
     import pyarrow.csv as pacsv
 
     from rig.runformat import RUN_JSON, read_run, runs_equal, write_run, write_samples_parquet
-    from rig.store_files import finalise_samples, sync_dir, write_json_atomic
+    from rig.store.files import finalise_samples, sync_dir, write_json_atomic
 
     n = int(os.environ.get("BENCH_DATA_ROWS", "1000000"))
     repeat = int(os.environ.get("BENCH_REPEAT", "3"))

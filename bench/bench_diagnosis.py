@@ -24,7 +24,7 @@ import numpy as np
 
 from rig.diagnose import diagnose_campaign, diagnose_path
 from rig.validate import make_case, run_validation, simulate_campaign, summarise
-from simulators.plant_config import load_plant_config
+from simulators.plant.config import load_plant_config
 
 
 def devset_cases() -> list[Path]:

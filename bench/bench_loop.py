@@ -15,7 +15,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from analysis.loop import analyse_loop
-from analysis.loop_synthetic import dead_zone_twist, triangle_profile
+from analysis.loop.synthetic import dead_zone_twist, triangle_profile
 
 N_SAMPLES = 1_000_000
 CYCLES = 5

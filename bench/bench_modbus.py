@@ -1,6 +1,6 @@
 """Modbus TCP torque polling: sustained rate, samples lost, timestamp jitter, safe-state time.
 
-The simulator runs in its own process (``python -m simulators.modbus_server``), as on the
+The simulator runs in its own process (``python -m simulators.modbus.server``), as on the
 rig. The torque sensor is polled on a fixed 250 Hz schedule (absolute deadlines) for
 ``BENCH_SECONDS`` (default 60 s). A tick is lost when its read fails or when the loop falls a
 whole period behind. Jitter: deviation of each sample's timestamp from its scheduled tick,
@@ -21,7 +21,7 @@ import numpy as np
 
 from drivers.errors import DeviceError
 from drivers.loading_drive import LoadingDrive, LoadingDriveConfig
-from drivers.modbus_torque_sensor import ModbusTorqueSensor, ModbusTorqueSensorConfig
+from drivers.modbus.torque_sensor import ModbusTorqueSensor, ModbusTorqueSensorConfig
 
 POLL_HZ = 250.0
 
@@ -71,7 +71,7 @@ def _free_run(sensor: ModbusTorqueSensor, seconds: float) -> tuple[float, float]
 
 def run() -> Iterator[dict]:
     seconds = float(os.environ.get("BENCH_SECONDS", "60"))
-    proc = subprocess.Popen([sys.executable, "-m", "simulators.modbus_server", "--port", "0"],
+    proc = subprocess.Popen([sys.executable, "-m", "simulators.modbus.server", "--port", "0"],
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         host, port = json.loads(proc.stdout.readline())["modbus_tcp"].rsplit(":", 1)

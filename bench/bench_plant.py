@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterator
 from simulators.clock import ManualClock
 from simulators.offline import simulate_run
 from simulators.plant import GearPlant
-from simulators.plant_config import EFFECT_NAMES, PlantConfig, load_plant_config
+from simulators.plant.config import EFFECT_NAMES, PlantConfig, load_plant_config
 
 
 def _triangle(period_s: float, amplitude_Nm: float = 10.0) -> Callable[[float], float]:

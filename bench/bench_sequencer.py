@@ -17,12 +17,12 @@ from typing import Any
 
 from rig.campaign import SimulationSection
 from rig.measure import measure_plan, open_session, plant_config_for, run_meta
-from rig.plan_estimate import estimate
-from rig.plan_steps import Settle
 from rig.plans import LoopParams, Plan, hysteresis_plan
+from rig.plans.estimate import estimate
+from rig.plans.steps import Settle
 from rig.runformat import read_run
 from rig.store import Store
-from simulators.plant_config import load_plant_config
+from simulators.plant.config import load_plant_config
 
 DRAG = {"effects": {"friction": {"enabled": True, "model": "lugre",
                                  "viscous_Nms_per_arcmin": 0.002}}}

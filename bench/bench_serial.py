@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.transducer_serial import SerialTorqueTransducer, TransducerConfig
+from drivers.transducer.serial import SerialTorqueTransducer, TransducerConfig
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -1,4 +1,4 @@
-"""Driver of the Modbus loading drive (register map: ``drivers/modbus_map.py``).
+"""Driver of the Modbus loading drive (register map: ``drivers/modbus/map.py``).
 
 Safety, in two layers: this driver refuses any setpoint beyond its torque limit with
 :class:`DeviceOutOfRange` before anything is sent, and the drive refuses it too (exception 3,
@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from pydantic import ConfigDict, Field
 
 from drivers.errors import DeviceError, DeviceFault, DeviceOutOfRange, DeviceProtocolError
-from drivers.modbus_link import ModbusHealth, ModbusLink, ModbusLinkConfig
-from drivers.modbus_map import (
+from drivers.modbus.link import ModbusHealth, ModbusLink, ModbusLinkConfig
+from drivers.modbus.map import (
     DRIVE_DEVICE_ID,
     LOADING_DRIVE_MAP,
     DriveControl,

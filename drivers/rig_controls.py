@@ -3,7 +3,7 @@
 On the rig the eccentric shaft (input) of the unit under test is turned to a measuring
 position and locked there by the input motor; the housing temperature is set by a heater or
 climate chamber. Both are small Modbus devices (register maps below, declared as data with
-:class:`drivers.modbus_map.Register`; conventions as in ``docs/modbus.md``: 0-based
+:class:`drivers.modbus.map.Register`; conventions as in ``docs/modbus.md``: 0-based
 addresses, float32 high word first). ``docs/rig-config.md`` documents them for a technician.
 
 Input motor (default unit 3):
@@ -29,8 +29,8 @@ from dataclasses import dataclass
 from pydantic import Field
 
 from drivers.errors import DeviceError, DeviceFault, DeviceOutOfRange, DeviceTimeout
-from drivers.modbus_link import ModbusHealth, ModbusLink, ModbusLinkConfig
-from drivers.modbus_map import (
+from drivers.modbus.link import ModbusHealth, ModbusLink, ModbusLinkConfig
+from drivers.modbus.map import (
     Register,
     decode_flags,
     encode_float32,

@@ -24,7 +24,7 @@ from rig.run_meta_check import unit_problems
 from rig.toml_files import describe_validation_error, read_toml
 
 PROFILE_NAMES = tuple(PROFILES)
-"""The lost-motion definitions a campaign may name (analysis/loop.py PROFILES)."""
+"""The lost-motion definitions a campaign may name (analysis/loop/__init__.py PROFILES)."""
 
 
 class CampaignError(RigError):

@@ -8,7 +8,7 @@ real-hardware template):
   ``sample_rate_Hz`` (acquisition), ``keepalive_period_s`` and ``master_timeout_s`` (s);
 - ``[can]``: the CAN bus of the encoders (:class:`drivers.encoder_canopen.CanBusConfig`);
 - ``[encoder]`` and optional ``[input_encoder]``: :class:`EncoderConfig` without ``bus``;
-- ``[transducer]``: :class:`drivers.transducer_serial.TransducerConfig`;
+- ``[transducer]``: :class:`drivers.transducer.serial.TransducerConfig`;
 - ``[torque_sensor]``, ``[drive]``: the Modbus drivers' configs (``drive.torque_limit_Nm``
   defaults to ``rig.torque_limit_Nm`` and may not exceed it);
 - optional ``[input_motor]``, ``[climate]``: :mod:`drivers.rig_controls` configs;
@@ -32,9 +32,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from drivers.encoder_canopen import CanBusConfig, EncoderConfig
 from drivers.loading_drive import LoadingDriveConfig
-from drivers.modbus_torque_sensor import ModbusTorqueSensorConfig
+from drivers.modbus.torque_sensor import ModbusTorqueSensorConfig
 from drivers.rig_controls import ClimateConfig, InputMotorConfig
-from drivers.transducer_serial import TransducerConfig
+from drivers.transducer.serial import TransducerConfig
 from rig.calibration import Calibrations
 from rig.errors import RigError
 from rig.toml_files import describe_validation_error, read_toml

@@ -6,7 +6,7 @@ it holds (None where the configuration has no such device, or it failed to open 
 
 - ``encoder``, ``input_encoder``: :class:`drivers.encoder_canopen.CanopenEncoder` on one
   shared :class:`EncoderNetwork` (the SYNC producer);
-- ``transducer``: :class:`drivers.transducer_serial.SerialTorqueTransducer` (opened);
+- ``transducer``: :class:`drivers.transducer.serial.SerialTorqueTransducer` (opened);
 - ``torque_sensor``, ``drive``: the Modbus drivers; ``input_motor``, ``climate``: the
   :mod:`drivers.rig_controls` ones. Modbus devices at the same address share one
   :class:`ModbusLink` (one RS-485 line or TCP connection, requests serialised).
@@ -32,10 +32,10 @@ from typing import Any
 from drivers.encoder_canopen import CanopenEncoder, EncoderNetwork
 from drivers.errors import DeviceError
 from drivers.loading_drive import LoadingDrive
-from drivers.modbus_link import ModbusLink, ModbusLinkConfig
-from drivers.modbus_torque_sensor import ModbusTorqueSensor
+from drivers.modbus.link import ModbusLink, ModbusLinkConfig
+from drivers.modbus.torque_sensor import ModbusTorqueSensor
 from drivers.rig_controls import ClimateChamber, InputMotor
-from drivers.transducer_serial import SerialTorqueTransducer
+from drivers.transducer.serial import SerialTorqueTransducer
 from rig.config import RigConfig, link_key
 
 log = logging.getLogger(__name__)

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from analysis.diagnosis import Diagnosis, diagnose
-from analysis.diagnosis_data import RunInput
+from analysis.diagnosis.data import RunInput
 from analysis.errors import AnalysisError
 from analysis.loop import twist_arcmin
 from rig.errors import RigError

@@ -20,15 +20,15 @@ from rig.campaign import CampaignFile, Limits, SimulationSection, batch_band, su
 from rig.config import RigConfig, dump_rig_toml, load_rig_config
 from rig.devices import RigDevices, open_rig
 from rig.engine import Engine, EngineOptions
-from rig.engine_devices import DevicesIO
-from rig.engine_events import ProgressEvent
-from rig.engine_record import json_safe
+from rig.engine.devices import DevicesIO
+from rig.engine.events import ProgressEvent
+from rig.engine.record import json_safe
 from rig.errors import RigError
 from rig.outcome import campaign_outcome, run_outcome
 from rig.plans import Plan
 from rig.realtime import apply_realtime_priority
 from rig.store import Store
-from simulators.plant_config import (
+from simulators.plant.config import (
     DEFAULT_PLANT_TOML,
     PlantConfig,
     PlantConfigError,

@@ -1,7 +1,7 @@
 """Real-time scheduling of a measuring process (optional, Linux).
 
 A rig PC also runs a browser, reports and the diagnosis. The engine has its own process
-(rig/engine_host.py), which the kernel's normal scheduler shares fairly with everything else;
+(rig/engine/host.py), which the kernel's normal scheduler shares fairly with everything else;
 under a load average of 5-8 on 2 cores that still leaves it waiting tens of milliseconds for
 the CPU. ``[rig] realtime_priority`` (1-99) puts every thread of the measuring process under
 ``SCHED_FIFO``: runnable, it preempts every normal process. Measured by

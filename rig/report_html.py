@@ -20,7 +20,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from analysis.diagnosis import Diagnosis  # noqa: E402
-from analysis.diagnosis_fit import predict_run  # noqa: E402
+from analysis.diagnosis.fit import predict_run  # noqa: E402
 
 
 def _png(fig: Any) -> str:
@@ -101,11 +101,12 @@ def _plain_words(report: dict[str, Any]) -> str:
                 f"{before:.2f} arcsec RMS against a noise of {report['noise_arcsec']:.2f} arcsec.")
     if v == "ambiguous":
         return (f"The gap ({before:.2f} arcsec RMS) is explained equally well by "
-                f"{', '.join(report.get('candidates', []))}. "
-                f"Next: {report.get('next_experiment')}.")
+                f"{html.escape(', '.join(report.get('candidates', [])))}. "
+                f"Next: {html.escape(str(report.get('next_experiment')))}.")
     if v == "unexplained":
         return (f"A systematic gap of {before:.2f} arcsec RMS remains that no effect of the "
-                f"vocabulary closes (closest: {', '.join(report.get('candidates', []))}).")
+                f"vocabulary closes (closest: "
+                f"{html.escape(', '.join(report.get('candidates', [])))}).")
     after = report.get("gap_after", {}).get("rms_arcsec", math.nan)
     text = (f"The gap is caused by <b>{html.escape(v)}</b>: adding it shrinks the held-out gap "
             f"from {before:.2f} to {after:.2f} arcsec RMS (shrink {report.get('shrink', 0):.0%}).")
@@ -116,51 +117,32 @@ def _plain_words(report: dict[str, Any]) -> str:
 
 def render_html(report: dict[str, Any], diagnosis: Diagnosis,
                 header: dict[str, str] | None = None) -> str:
-    """The whole page as a string; ``header``: the certificate's header of the campaign
-    (:func:`rig.certificate_header.header_for_campaign`: unit, serial, operator, date, rig,
-    software), drawn first by the same partial."""
-    from rig.certificate_header import render_header
+    """The whole page (rig/templates/diagnosis.html); ``header``: the certificate's header
+    of the campaign (:func:`rig.certificate.header.header_for_campaign`: unit, serial,
+    operator, date, rig, software), drawn first by the same partial."""
+    from markupsafe import Markup
+
+    from rig.certificate.header import template_env
 
     verdict = report["verdict"]
     effects = (verdict,) if verdict in diagnosis.models else None
-    parts = [
-        "<!doctype html><html><head><meta charset='utf-8'>",
-        f"<title>Gap diagnosis: {html.escape(str(report.get('campaign', '')))}</title>",
-        "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}"
-        "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 6px;"
-        "font-size:13px}</style></head><body>",
-        render_header(header) if header is not None else "",
-        f"<h1>Sim-to-real gap: {html.escape(verdict)}</h1>",
-        f"<p>{_plain_words(report)}</p>",
-        f"<p>Where: <b>{html.escape(report['localization']['where'])}</b> — "
-        f"{html.escape(report['localization']['detail'])}.</p>",
-        f"<p>Predictive gap (model as designed): {report['predictive_gap']['rms_arcsec']:.2f}"
-        f" arcsec RMS; structural gap (play and stiffness calibrated): "
-        f"{report['structural_gap']['rms_arcsec']:.2f} arcsec RMS.</p>",
-        "<h2>Loops, model before and after</h2>",
-        f"<img src='{_loops_figure(diagnosis, effects)}'>",
-        "<h2>Gap map (standardised residuals of the calibrated model)</h2>",
-        f"<img src='{_gap_map_figure(report)}'>",
-    ]
-    play = _play_figure(report)
-    if play:
-        parts += ["<h2>Free play against position</h2>", f"<img src='{play}'>"]
-    parts.append("<h2>Ranking</h2><table><tr><th>effect</th><th>shrink</th>"
-                 "<th>held-out RMS after (arcsec)</th><th>ΔBIC</th><th>cross-validation</th>"
-                 "<th>parameters</th></tr>")
+    ranking = []
     for r in report["ranking"]:
         after = (r.get("gap_after") or {}).get("rms_arcsec")
-        params = ", ".join(f"{k}={v:.4g}" for k, v in (r.get("params") or {}).items()
-                           if isinstance(v, int | float))
         ev = r.get("evidence", {})
-        parts.append(
-            f"<tr><td>{html.escape(r['effect'])}</td>"
-            f"<td>{'' if r.get('shrink') is None else format(r['shrink'], '.2f')}</td>"
-            f"<td>{'' if after is None else format(after, '.3f')}</td>"
-            f"<td>{ev.get('delta_bic', '')}</td><td>{html.escape(str(ev.get('cv', '')))}</td>"
-            f"<td>{html.escape(params)}</td></tr>")
-    parts.append("</table></body></html>")
-    return "\n".join(parts)
+        ranking.append({
+            "effect": r["effect"],
+            "shrink": "" if r.get("shrink") is None else format(r["shrink"], ".2f"),
+            "after": "" if after is None else format(after, ".3f"),
+            "delta_bic": ev.get("delta_bic", ""), "cv": str(ev.get("cv", "")),
+            "params": ", ".join(f"{k}={v:.4g}" for k, v in (r.get("params") or {}).items()
+                                if isinstance(v, int | float)),
+        })
+    return template_env().get_template("diagnosis.html").render(
+        report=report, header=header, campaign=str(report.get("campaign", "")),
+        plain_words=Markup(_plain_words(report)),  # its own parts are escaped
+        loops_png=_loops_figure(diagnosis, effects), gap_map_png=_gap_map_figure(report),
+        play_png=_play_figure(report), ranking=ranking)
 
 
 def write_html(report: dict[str, Any], diagnosis: Diagnosis, path: str | Path,

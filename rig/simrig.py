@@ -39,7 +39,7 @@ from rig.config import dump_rig_toml, rig_config_from_mapping
 from rig.errors import RigError
 from simulators.encoder_node import EncoderNode
 from simulators.plant import GearPlant
-from simulators.plant_config import PlantConfig, load_plant_config
+from simulators.plant.config import PlantConfig, load_plant_config
 from simulators.rig_controls import RigModbusServer
 from simulators.slcan_adapter import SlcanAdapter
 from simulators.transducer import TransducerSimulator

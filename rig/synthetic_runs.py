@@ -1,6 +1,6 @@
 """Synthetic campaigns written into a store: a stand-in rig for tests, benchmarks and demos.
 
-Each run is the run format's reference loop (:func:`analysis.loop_synthetic.dead_zone_twist`:
+Each run is the run format's reference loop (:func:`analysis.loop.synthetic.dead_zone_twist`:
 free play plus a linear spring) over a triangle torque profile, so its metrics are known in
 closed form: backlash = ``play_arcmin``, stiffness = ``stiffness_Nm_per_arcmin``, lost motion
 = play + 2 p T_r / K at the ±p % band (p = 3 %, the "nabtesco" profile). These are made-up
@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from analysis.loop_synthetic import dead_zone_twist, triangle_profile
+from analysis.loop.synthetic import dead_zone_twist, triangle_profile
 from rig.store import Store
 
 COLUMNS = ["t_s", "torque_Nm", "output_angle_deg"]

@@ -34,7 +34,7 @@ import can
 import canopen
 
 from simulators.clock import Clock, MonotonicClock
-from simulators.plant_api import Plant, PlantSnapshot
+from simulators.plant.api import Plant, PlantSnapshot
 
 DEFAULT_EDS = Path(__file__).resolve().parent.parent / "drivers" / "cia406_encoder.eds"
 POSITION_INDEX = 0x6004

@@ -1,6 +1,6 @@
 """Offline simulation: a whole run from a torque profile, without a wall clock.
 
-The same engine as GearPlant (simulators/plant_model.py), stepped directly on simulated
+The same engine as GearPlant (simulators/plant/model.py), stepped directly on simulated
 time, with the sensors' noise drawn at once and the encoder quantisation applied: the
 columns of a run's samples.csv (docs/run-format.md). Used to generate campaigns.
 """
@@ -12,8 +12,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from simulators.plant_config import PlantConfig
-from simulators.plant_model import PlantModel
+from simulators.plant.config import PlantConfig
+from simulators.plant.model import PlantModel
 
 
 def _commands(profile: Callable[[float], float] | np.ndarray, t_s: np.ndarray) -> np.ndarray:

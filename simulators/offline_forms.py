@@ -1,7 +1,7 @@
 """Other functional forms and sensor artifacts for generated campaigns (outside the plant).
 
-The plant (simulators/plant_model.py) has one law per effect. A validation that only ever saw
-those laws would test self-recognition, so the generator (rig/validate.py) adds, on the
+The plant (simulators/plant/model.py) has one law per effect. A validation that only ever saw
+those laws would test self-recognition, so the generator (rig/validate/__init__.py) adds, on the
 plant's output columns, other forms a lab's data may hold: a Hertzian power-law stiffening, a
 smooth clearance take-up, loading profiles other than steps, a delayed torque channel, the
 ringing of an impact at the play crossing, a coarse encoder. Each function names the equation

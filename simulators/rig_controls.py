@@ -5,14 +5,13 @@ it; a heater or climate chamber sets the housing temperature. Here both are devi
 fed by the plant (``GearPlant.lock_input_at`` and ``set_ambient_temperature``), laid out by
 the register maps of ``drivers/rig_controls.py``, and served as two more units (3 and 4 by
 default) of the same pymodbus server as the torque sensor and the loading drive
-(:class:`RigModbusServer`), so the backdoor of ``simulators/modbus_backdoor.py`` covers them
+(:class:`RigModbusServer`), so the backdoor of ``simulators/modbus/backdoor.py`` covers them
 too. Writes the device refuses return a Modbus exception code.
 """
 
 from __future__ import annotations
 
 import math
-import struct
 from collections.abc import Sequence
 from functools import partial
 from typing import Protocol
@@ -20,7 +19,7 @@ from typing import Protocol
 from pymodbus.constants import ExcCodes
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from drivers.modbus_map import Register
+from drivers.modbus.map import Register, float_from_words
 from drivers.rig_controls import (
     CLIMATE_DEVICE_ID,
     CLIMATE_MAP,
@@ -30,9 +29,9 @@ from drivers.rig_controls import (
     InputMotorCommand,
     InputMotorStatus,
 )
-from simulators.modbus_devices import register_image
-from simulators.modbus_server import ModbusRigServer
-from simulators.plant_api import Plant
+from simulators.modbus.devices import register_image
+from simulators.modbus.server import ModbusRigServer
+from simulators.plant.api import Plant
 
 ARRIVED_DEG = 1e-6
 """The input counts as at its target (and LOCKED) within this many deg."""
@@ -45,11 +44,6 @@ class ClimatePlant(Plant, Protocol):
     """A plant whose ambient/heater setpoint can be set (``GearPlant`` is one)."""
 
     def set_ambient_temperature(self, celsius: float) -> None: ...
-
-
-def _float(words: Sequence[int]) -> float:
-    (value,) = struct.unpack(">f", struct.pack(">HH", int(words[0]), int(words[1])))
-    return float(value)
 
 
 def _split_write(register_map: dict[str, Register], address: int, words: Sequence[int]
@@ -94,7 +88,7 @@ class InputMotorModel:
         if isinstance(parts, ExcCodes):
             return parts
         if "target" in parts:
-            value = _float(parts["target"])
+            value = float_from_words(parts["target"])
             if not math.isfinite(value):
                 return ExcCodes.ILLEGAL_VALUE
             self.target_deg = value
@@ -129,7 +123,7 @@ class ClimateModel:
         parts = _split_write(CLIMATE_MAP, address, words)
         if isinstance(parts, ExcCodes):
             return parts
-        value = _float(parts["setpoint"])
+        value = float_from_words(parts["setpoint"])
         lo, hi = CLIMATE_RANGE_C
         if not (math.isfinite(value) and lo <= value <= hi):
             return ExcCodes.ILLEGAL_VALUE
@@ -149,7 +143,7 @@ class RigModbusServer(ModbusRigServer):
     """The rig's Modbus server: torque sensor (1), loading drive (2), input motor (3) and
     climate chamber (4) as units of one pymodbus server (one RS-485 line or TCP port).
 
-    Arguments as :class:`simulators.modbus_server.ModbusRigServer`, plus the two unit ids
+    Arguments as :class:`simulators.modbus.server.ModbusRigServer`, plus the two unit ids
     and ``ambient_C`` (deg C), the chamber's initial setpoint.
     """
 

@@ -3,7 +3,7 @@
 Three parts kept apart, as in lewis:
 
 - :class:`TransducerDevice`, the device model: answers command lines and takes samples
-  from a :class:`~simulators.plant_api.Plant`; no I/O;
+  from a :class:`~simulators.plant.api.Plant`; no I/O;
 - :class:`TransducerSimulator`, the protocol face: serves the device's ASCII line protocol
   (``docs/transducer-protocol.md``) on a pseudo-terminal (the driver opens the slave path,
   e.g. ``/dev/pts/7``) or on a TCP port on 127.0.0.1 (pyserial URL ``socket://...``);
@@ -32,7 +32,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Literal
 
-from drivers.transducer_protocol import (
+from drivers.transducer.protocol import (
     ERROR_TEXT,
     MAX_COMMAND_CHARS,
     SEQ_MODULO,
@@ -42,8 +42,8 @@ from drivers.transducer_protocol import (
     frame_line,
     max_stream_rate_Hz,
 )
-from simulators.modbus_test_plant import SineTestPlant
-from simulators.plant_api import Plant
+from simulators.modbus.test_plant import SineTestPlant
+from simulators.plant.api import Plant
 
 Transport = Literal["pty", "tcp"]
 
@@ -57,7 +57,7 @@ DEFAULT_RATE_HZ = 100.0
 @dataclass
 class SineTorqueSource(SineTestPlant):
     """A transducer on a calibration bench: the closed-form plant of
-    :class:`~simulators.modbus_test_plant.SineTestPlant` with a 5 N*m, 0.5 Hz sine at 22 deg C.
+    :class:`~simulators.modbus.test_plant.SineTestPlant` with a 5 N*m, 0.5 Hz sine at 22 deg C.
 
     Drive disabled: ``torque = offset_Nm + amplitude_Nm * sin(2 pi frequency_Hz t)`` (N*m);
     drive enabled: the commanded torque plus ``offset_Nm`` (an ideal drive).
@@ -172,7 +172,7 @@ class TransducerDevice:
     """The transducer's behaviour: command lines in, reply bodies (no checksum) out.
 
     ``full_scale_Nm`` is the range (N*m); ``baudrate`` bounds the stream rate as on a real
-    UART (see :func:`drivers.transducer_protocol.max_stream_rate_Hz`). Not thread-safe:
+    UART (see :func:`drivers.transducer.protocol.max_stream_rate_Hz`). Not thread-safe:
     the face calls it from its one serving thread.
     """
 

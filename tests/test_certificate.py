@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from rig.certificate import CertificateError, resolve_subject, write_certificate
-from rig.certificate_header import software_version
+from rig.certificate.header import software_version
 from tests.test_measure_cli import TINY
 
 ROOT = Path(__file__).resolve().parents[1]

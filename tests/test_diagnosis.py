@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from analysis.diagnosis import diagnose, heldout_separation, play_tiebreak, separated
-from analysis.diagnosis_data import RunInput, prepare_run, transit_mask
-from analysis.diagnosis_fit import build_stack, fit, fit_profile
+from analysis.diagnosis.data import RunInput, prepare_run, transit_mask
+from analysis.diagnosis.fit import build_stack, fit, fit_profile
 from analysis.effects import (
     LoopParams,
     bearing_play_arcmin,
@@ -20,7 +20,7 @@ from analysis.effects import (
 from analysis.errors import AnalysisError
 from analysis.models.nominal import reference_nominal_model
 from rig.validate import cycle_profile, make_case, simulate_campaign
-from simulators.plant_config import load_plant_config
+from simulators.plant.config import load_plant_config
 
 UNIT = load_plant_config().unit
 NOM = reference_nominal_model(UNIT)

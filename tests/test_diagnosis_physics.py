@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from analysis.diagnosis import Candidate, curvature_effect, series_compliance
-from analysis.diagnosis_fit import LinearFit, censor_floating
+from analysis.diagnosis.fit import LinearFit, censor_floating
 from analysis.effects import tooth_pair_phase, tooth_repeat_period_deg
 
 
@@ -39,7 +39,7 @@ def test_float_across_the_play_is_censored() -> None:
 
 def _take_up_fit(compliance: float) -> Candidate:
     """A saturating take-up fit (play, loaded compliance, extra twist) with a tight
-    covariance, as analysis.diagnosis_fit returns it."""
+    covariance, as analysis.diagnosis.fit returns it."""
     f = LinearFit(("play", "compliance", "soft_twist"), np.array([3.0, compliance, 0.2]),
                   {"stiffening_torque_Nm": 1.0}, 100.0, 200.0, 200,
                   cov=np.diag([1e-8, (0.002 * compliance) ** 2, 1e-8]))
@@ -72,7 +72,7 @@ def test_lag_between_channels_is_found() -> None:
     """Sinusoidal loading of the nominal loop (play + linear flanks, injected): a torque
     channel 3 samples late is found (the rate-proportional branch split), and no lag is found
     without it."""
-    from analysis.diagnosis_data import channel_lag_samples
+    from analysis.diagnosis.data import channel_lag_samples
     from analysis.effects import LoopParams, predict_twist_arcmin
 
     n = 3000

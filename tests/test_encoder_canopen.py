@@ -27,7 +27,7 @@ from drivers.encoder_canopen import (
 )
 from drivers.errors import DeviceDisconnected, DeviceFault, DeviceProtocolError, DeviceTimeout
 from simulators.encoder_node import EncoderNode, SweepPlant
-from simulators.plant_api import PlantSnapshot
+from simulators.plant.api import PlantSnapshot
 from simulators.slcan_adapter import SlcanAdapter
 
 CPR = 8_388_608  # 0x6001 of the shipped EDS: 23 bit per revolution

@@ -6,15 +6,15 @@ import math
 
 import pytest
 
-from rig.engine_merge import ChannelMerger
-from rig.engine_safety import (
+from rig.engine.merge import ChannelMerger
+from rig.engine.safety import (
     PlanRejected,
     TorqueLimitExceeded,
     check_command,
     check_measured,
     preflight,
 )
-from rig.plan_steps import LockInput, Ramp, SetAmbient, StepTwist
+from rig.plans.steps import LockInput, Ramp, SetAmbient, StepTwist
 
 
 def test_torque_is_interpolated_linearly_at_each_encoder_time() -> None:

@@ -25,7 +25,7 @@ from rig.plans import LoopParams, hysteresis_plan
 from rig.runformat import read_run
 from rig.simrig import SimulatedRig
 from rig.store import Store
-from simulators.plant_config import load_plant_config
+from simulators.plant.config import load_plant_config
 
 UNIT = dict(load_plant_config().unit, serial="fault-matrix")
 PLANT = plant_config_for(UNIT, SimulationSection(seed=3, plant={"effects": {"friction": {
@@ -67,7 +67,7 @@ def _outside_disable(sim: SimulatedRig) -> None:
     drive's control register mid-run: fault-matrix row 2."""
     from pymodbus.client import ModbusTcpClient
 
-    from drivers.modbus_map import DRIVE_DEVICE_ID, LOADING_DRIVE_MAP
+    from drivers.modbus.map import DRIVE_DEVICE_ID, LOADING_DRIVE_MAP
 
     host, port = sim.modbus_server.address.rsplit(":", 1)
     client = ModbusTcpClient(host, port=int(port), timeout=1.0, retries=0)

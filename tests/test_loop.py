@@ -14,9 +14,9 @@ from analysis.loop import (
     split_branches,
     twist_arcmin,
 )
-from analysis.loop_area import RAD_PER_ARCMIN
-from analysis.loop_fit import BranchPass, Resolution, branch_value
-from analysis.loop_synthetic import (
+from analysis.loop.area import RAD_PER_ARCMIN
+from analysis.loop.fit import BranchPass, Resolution, branch_value
+from analysis.loop.synthetic import (
     dead_zone_twist,
     friction_twist,
     step_dwell_profile,

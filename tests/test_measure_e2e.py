@@ -12,14 +12,14 @@ from typer.testing import CliRunner
 from rig.campaign import SimulationSection
 from rig.cli import app
 from rig.engine import EngineOptions
-from rig.engine_safety import PlanRejected
+from rig.engine.safety import PlanRejected
 from rig.measure import RigSession, measure_plan, open_session, plant_config_for, run_meta
 from rig.plans import LoopParams, hysteresis_plan
 from rig.runformat import read_run
 from rig.store import Store
 from simulators.clock import ManualClock
 from simulators.plant import GearPlant
-from simulators.plant_config import load_plant_config
+from simulators.plant.config import load_plant_config
 
 # a little drag (seals, oil) so the output crosses the free play without a flank impact
 DRAG = {"effects": {"friction": {"enabled": True, "model": "lugre", "coulomb_torque_Nm": 0.02,

@@ -18,7 +18,7 @@ from rig.plans import LoopParams, hysteresis_plan
 from rig.runformat import read_run
 from rig.simrig import SimulatedRig
 from rig.store import RECOVERED_REASON, Store
-from simulators.plant_config import load_plant_config
+from simulators.plant.config import load_plant_config
 
 DRAG = {"effects": {"friction": {"enabled": True, "model": "lugre",
                                  "viscous_Nms_per_arcmin": 0.002}}}

@@ -11,7 +11,7 @@ from rig.plans import CampaignAxes, LoopParams, campaign_plan, hysteresis_plan
 from rig.store import Store
 from simulators.clock import ManualClock
 from simulators.plant import GearPlant
-from simulators.plant_config import load_plant_config
+from simulators.plant.config import load_plant_config
 
 DRAG = {"effects": {"friction": {"enabled": True, "model": "lugre", "coulomb_torque_Nm": 0.02,
                                  "static_torque_Nm": 0.03, "viscous_Nms_per_arcmin": 0.002}}}

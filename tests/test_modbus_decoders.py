@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from drivers.errors import DeviceError, DeviceProtocolError
 from drivers.loading_drive import decode_drive_block
-from drivers.modbus_map import (
+from drivers.modbus.map import (
     LOADING_DRIVE_MAP,
     TORQUE_SENSOR_MAP,
     DriveFaultCode,
@@ -29,8 +29,8 @@ from drivers.modbus_map import (
     encode_uint32,
     table_span,
 )
-from drivers.modbus_torque_sensor import decode_torque_block
-from simulators.modbus_devices import register_image
+from drivers.modbus.torque_sensor import decode_torque_block
+from simulators.modbus.devices import register_image
 
 DEV = "test device"
 words16 = st.integers(min_value=0, max_value=0xFFFF)

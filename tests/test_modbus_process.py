@@ -1,6 +1,6 @@
 """The drivers against the Modbus simulator running in a separate process.
 
-``python -m simulators.modbus_server`` prints its address as JSON on its first stdout line
+``python -m simulators.modbus.server`` prints its address as JSON on its first stdout line
 and serves until killed; this is how ``rig sim`` and a technician start it.
 """
 
@@ -15,14 +15,14 @@ import pytest
 
 from drivers.errors import DeviceDisconnected, DeviceError
 from drivers.loading_drive import LoadingDrive, LoadingDriveConfig
-from drivers.modbus_torque_sensor import ModbusTorqueSensor, ModbusTorqueSensorConfig
+from drivers.modbus.torque_sensor import ModbusTorqueSensor, ModbusTorqueSensorConfig
 
 TIMEOUT_S = 2.0
 
 
 def start_simulator(*args: str) -> tuple[subprocess.Popen, dict]:
     proc = subprocess.Popen(
-        [sys.executable, "-m", "simulators.modbus_server", *args],
+        [sys.executable, "-m", "simulators.modbus.server", *args],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     line = proc.stdout.readline()  # blocks until the server listens (or the process dies)
     if not line:

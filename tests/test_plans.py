@@ -5,8 +5,16 @@ from __future__ import annotations
 import pytest
 from pydantic import ValidationError
 
-from rig.plan_estimate import estimate
-from rig.plan_steps import (
+from rig.plans import (
+    CampaignAxes,
+    LoopParams,
+    campaign_plan,
+    hysteresis_plan,
+    ramp_segments,
+    run_label,
+)
+from rig.plans.estimate import estimate
+from rig.plans.steps import (
     BeginRun,
     Checkpoint,
     EndRun,
@@ -19,14 +27,6 @@ from rig.plan_steps import (
     StepTwist,
     WaitTemperature,
     describe,
-)
-from rig.plans import (
-    CampaignAxes,
-    LoopParams,
-    campaign_plan,
-    hysteresis_plan,
-    ramp_segments,
-    run_label,
 )
 
 

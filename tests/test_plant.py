@@ -20,7 +20,7 @@ from analysis.models.nominal import reference_nominal_model
 from simulators.clock import ManualClock, MonotonicClock
 from simulators.offline import simulate_run
 from simulators.plant import GearPlant
-from simulators.plant_config import EFFECT_NAMES, load_plant_config
+from simulators.plant.config import EFFECT_NAMES, load_plant_config
 
 RATED_NM = 10.0
 

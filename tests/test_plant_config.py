@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from simulators.plant_config import (
+from simulators.plant.config import (
     DEFAULT_PLANT_TOML,
     EFFECT_NAMES,
     PlantConfigError,

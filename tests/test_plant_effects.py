@@ -16,8 +16,8 @@ from analysis.models.seed000_geometry import runout_center_distance_mm
 from simulators.clock import ManualClock
 from simulators.offline import simulate_run
 from simulators.plant import GearPlant
-from simulators.plant_config import load_plant_config
-from simulators.plant_geometry import MeshGeometry
+from simulators.plant.config import load_plant_config
+from simulators.plant.geometry import MeshGeometry
 
 TAN_A = math.tan(math.radians(20.0))
 K_MESH = 27.85975  # N*m/arcmin, seed 004 eq. (8) for the seed pair (test_plant checks it)

@@ -164,8 +164,8 @@ def test_namespace_exports_and_submodules_stay_reachable() -> None:
 
     assert rig.analyse.analyse_run is analyse_run
     assert rig.diagnose.diagnose_path is importlib.import_module("rig.diagnose").diagnose_path
-    for name in ("rig", "rig.api", "rig.api_data", "rig.api_reports", "rig.api_results",
-                 "rig.api_store", "rig.api_connect", "rig.api_plots"):
+    for name in ("rig", "rig.api", "rig.api.data", "rig.api.reports", "rig.api.results",
+                 "rig.api.store", "rig.api.connect", "rig.api.plots"):
         module = importlib.import_module(name)
         exported = set(module.__all__)
         assert not exported & {"np", "pd", "pa", "dataclass", "Path", "Any"}, name

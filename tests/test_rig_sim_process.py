@@ -22,7 +22,7 @@ from rig.config import load_rig_config
 from rig.devices import open_rig
 from rig.simrig import SimulatedRig
 from simulators.plant import GearPlant
-from simulators.plant_config import load_plant_config
+from simulators.plant.config import load_plant_config
 
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 TORQUE_NM = 10.0

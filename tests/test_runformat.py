@@ -671,7 +671,7 @@ def test_a_comment_line_is_not_skipped_but_refused(tmp_path: Path) -> None:
 
 
 def test_blank_fields_and_spaces_read_as_the_slow_pass_reads_them(tmp_path: Path) -> None:
-    from rig.runformat_csvread import read_located, read_samples_csv
+    from rig.runformat.csvread import read_located, read_samples_csv
 
     text = (
         "t_s,torque_Nm,output_angle_deg,temperature_C,note,gap,flag\n"

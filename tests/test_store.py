@@ -20,7 +20,7 @@ from rig.store import (
     StoreError,
     UnknownIdError,
 )
-from rig.store_ids import ID_PATTERN
+from rig.store.ids import ID_PATTERN
 
 COLUMNS = ["t_s", "torque_Nm", "output_angle_deg", "temperature_C"]
 

@@ -17,7 +17,7 @@ import psycopg
 import pytest
 
 from rig.store import Store, StoreError
-from rig.store_index import SCHEMA_VERSION
+from rig.store.index import SCHEMA_VERSION
 
 REPO = Path(__file__).resolve().parent.parent
 V1_STORE = REPO / "tests" / "data" / "store-v1"  # made by the code of edd5ecb (schema 1)
@@ -67,7 +67,7 @@ def test_a_store_made_by_version_1_opens_and_is_migrated(tmp_path):
 
 
 def test_a_version_1_postgresql_schema_is_migrated(pg_server, tmp_path):
-    from rig.store_index_pg import _PG_MIGRATIONS
+    from rig.store.index_pg import _PG_MIGRATIONS
 
     url = pg_server.create_schema()
     with psycopg.connect(url, autocommit=True) as conn:

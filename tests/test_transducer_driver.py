@@ -12,7 +12,7 @@ import serial
 from pydantic import ValidationError
 
 from drivers.errors import DeviceDisconnected, DeviceFault, DeviceOutOfRange
-from drivers.transducer_serial import (
+from drivers.transducer.serial import (
     SerialTorqueTransducer,
     TransducerConfig,
     TransducerIdentity,

@@ -16,7 +16,7 @@ from drivers.errors import (
     DeviceProtocolError,
     DeviceTimeout,
 )
-from drivers.transducer_serial import SerialTorqueTransducer, TorqueReading, TransducerConfig
+from drivers.transducer.serial import SerialTorqueTransducer, TorqueReading, TransducerConfig
 from simulators.transducer import SineTorqueSource, TransducerSimulator
 
 TIMEOUT_S = 0.4

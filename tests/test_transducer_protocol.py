@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drivers.errors import DeviceProtocolError
-from drivers.transducer_protocol import (
+from drivers.transducer.protocol import (
     ErrorReply,
     Measurement,
     Reply,

@@ -14,7 +14,7 @@ import pytest
 import serial
 import serial.rfc2217
 
-from drivers.transducer_serial import SerialTorqueTransducer, TransducerConfig
+from drivers.transducer.serial import SerialTorqueTransducer, TransducerConfig
 from simulators.transducer import SineTorqueSource, TransducerSimulator
 
 # pyserial 3.5's own rfc2217 client thread uses setDaemon()/setName()

@@ -29,7 +29,7 @@ from simulators.offline_forms import (
     sine_profile,
     smooth_takeup_twist_arcmin,
 )
-from simulators.plant_config import load_plant_config
+from simulators.plant.config import load_plant_config
 
 
 def test_cycle_profile_closes_the_loop_and_visits_3_percent() -> None:

@@ -1,4 +1,4 @@
-"""Grading rules of labelled campaigns (rig.validate_labels, rig.validate_cases): the
+"""Grading rules of labelled campaigns (rig.validate.labels, rig.validate.cases): the
 development sets' graders' semantics on hand-written reports, and malformed labels."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from rig.errors import RigError
-from rig.validate_cases import generator_name, record, summarise_graded, summary_line
-from rig.validate_labels import grade, label_from_dict, read_labels
+from rig.validate.cases import generator_name, record, summarise_graded, summary_line
+from rig.validate.labels import grade, label_from_dict, read_labels
 
 
 def _report(verdict: str, also: tuple[str, ...] = (), candidates: tuple[str, ...] = (),

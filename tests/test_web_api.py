@@ -250,7 +250,7 @@ def test_campaign_results_and_diagnosis(client: TestClient, store: Store):
 
 def test_faults_in_plain_words_keep_the_device_message():
     from drivers.errors import DeviceDisconnected, DeviceFault, DeviceTimeout
-    from rig.engine_safety import TorqueLimitExceeded, check_command, check_measured
+    from rig.engine.safety import TorqueLimitExceeded, check_command, check_measured
     from rig.web.faults import explain
 
     watchdog = DeviceFault("loading drive (Modbus unit 2 on tcp 127.0.0.1:5020)",

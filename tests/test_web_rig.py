@@ -148,7 +148,7 @@ def test_a_drive_enabled_behind_the_idle_page_is_made_safe(tmp_path):
     never take it off: the page brings the drive to the safe state and says so."""
     from pymodbus.client import ModbusTcpClient
 
-    from drivers.modbus_map import (
+    from drivers.modbus.map import (
         DRIVE_DEVICE_ID,
         LOADING_DRIVE_MAP,
         DriveControl,

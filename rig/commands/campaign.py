@@ -15,7 +15,7 @@ import typer
 from rich.table import Table
 
 from rig.commands.measure import console, progress_bar, write_json
-from rig.store_options import DEFAULT_STORE, SamplesOption, StoreOption
+from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
 
 
 def _summary_table(result: dict[str, Any]) -> Table:
@@ -66,7 +66,7 @@ def register(app: typer.Typer) -> None:
         from rig.campaign import load_campaign
         from rig.errors import RigError
         from rig.measure import open_session, plant_config_for, run_campaign
-        from rig.plan_estimate import estimate
+        from rig.plans.estimate import estimate
         from rig.store import Store
 
         out = console()

@@ -52,7 +52,7 @@ def register(app: typer.Typer) -> None:
             write_json(report, json_file)
             console.print(f"report written to {json_file}")
         if html_file is not None:
-            from rig.certificate_header import header_for_campaign
+            from rig.certificate.header import header_for_campaign
             from rig.report_html import write_html
 
             write_html(report, result, html_file, header=header_for_campaign(camp))

@@ -1,5 +1,5 @@
 """``rig export RUN_OR_CAMPAIGN --format csv|parquet|mat|xlsx [--out PATH]``: a run's samples
-and run.json, or a campaign's tidy results table, for other tools (rig/io_export.py)."""
+and run.json, or a campaign's tidy results table, for other tools (rig/io/exporter.py)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from rig.store_options import DEFAULT_STORE, SamplesOption, StoreOption
+from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
 
 
 def register(app: typer.Typer) -> None:
@@ -29,7 +29,7 @@ def register(app: typer.Typer) -> None:
         """Export a run (samples and run.json) or a campaign (one row per run: conditions,
         metrics with uncertainties, model, limits, outcome). --store is read only when
         RUN_OR_CAMPAIGN is not a folder."""
-        from rig.io_export import export_campaign, export_run, resolve_target
+        from rig.io.exporter import export_campaign, export_run, resolve_target
         from rig.runformat import read_campaign, read_run
 
         path, is_campaign = resolve_target(target, store, samples)

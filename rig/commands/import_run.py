@@ -10,7 +10,7 @@ from typing import Annotated
 
 import typer
 
-from rig.store_options import SAMPLES_HELP
+from rig.store.options import SAMPLES_HELP
 
 
 def register(app: typer.Typer) -> None:
@@ -37,8 +37,8 @@ def register(app: typer.Typer) -> None:
         """Import another lab's measurement through a map: units converted to the run's
         (s, N·m, deg, °C), run.json with the unit, the map's test keys and source
         {file, map}. Exactly one of --out and --into."""
-        from rig.io_import import import_run, store_imported, write_imported
-        from rig.io_map import RunImportError
+        from rig.io.importer import import_run, store_imported, write_imported
+        from rig.io.map import RunImportError
 
         if (out is None) == (into is None):
             raise RunImportError("give exactly one of --out RUN_FOLDER and --into STORE")

@@ -17,7 +17,7 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from rig.store_options import (
+from rig.store.options import (
     DEFAULT_STORE,
     STORE_HELP,  # noqa: F401 (imported from here by other commands)
     SamplesOption,
@@ -25,7 +25,7 @@ from rig.store_options import (
 )
 
 if TYPE_CHECKING:
-    from rig.engine_events import ProgressEvent
+    from rig.engine.events import ProgressEvent
 
 
 def console() -> Console:
@@ -151,10 +151,10 @@ def register(app: typer.Typer) -> None:
         from rig.campaign import Limits
         from rig.errors import RigError
         from rig.measure import measure_plan, open_session, plant_config_for, run_meta, run_result
-        from rig.plan_estimate import estimate
         from rig.plans import LoopParams, hysteresis_plan
+        from rig.plans.estimate import estimate
         from rig.store import Store
-        from simulators.plant_config import PlantConfigError, load_plant_config
+        from simulators.plant.config import PlantConfigError, load_plant_config
 
         out = console()
         try:

@@ -11,7 +11,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from rig.store_options import DEFAULT_STORE, SamplesOption, StoreOption
+from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
 
 STATUS_STYLE = {"running": "yellow", "completed": "green", "aborted": "red"}
 

@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from rig.store_options import SamplesOption
+from rig.store.options import SamplesOption
 
 
 def register(app: typer.Typer) -> None:
@@ -38,7 +38,7 @@ def register(app: typer.Typer) -> None:
         Prints the page's address and the operator token; stops on Ctrl-C (the rig is left
         in its safe state).
         """
-        from rig.engine_host import EngineHost, EngineSpec
+        from rig.engine.host import EngineHost, EngineSpec
         from rig.errors import RigError
         from rig.store import Store, default_store_root
         from rig.web.app import create_app
@@ -60,7 +60,7 @@ def register(app: typer.Typer) -> None:
             description = f"simulated rig (plant: example unit {unit})"
         else:
             description = f"rig {rig}"
-        # The rig runs in the engine's own process (rig/engine_host.py): no page request,
+        # The rig runs in the engine's own process (rig/engine/host.py): no page request,
         # SSE client or analysis of this server can hold up its keepalive or acquisition.
         controller = EngineHost(EngineSpec(
             store=str(root), samples=None if samples is None else str(samples),

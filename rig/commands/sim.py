@@ -53,7 +53,7 @@ def register(app: typer.Typer) -> None:
         "rig_config", the rig configuration file that connects to them.
         """
         from rig.simrig import SimulatedRig, serve_until_signalled
-        from simulators.plant_config import PlantConfigError
+        from simulators.plant.config import PlantConfigError
 
         try:
             sim_rig = SimulatedRig(config, in_process=True, transducer=transducer.value,

@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from rig.store_options import DEFAULT_STORE, SamplesOption, StoreOption
+from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
 
 
 def register(app: typer.Typer) -> None:
@@ -36,7 +36,7 @@ def register(app: typer.Typer) -> None:
 
         from rig.errors import RigError
         from rig.spc import spc_report
-        from rig.spc_html import render_html
+        from rig.spc.html import render_html
         from rig.store import Store
 
         st = Store(store, create=False, samples=samples)

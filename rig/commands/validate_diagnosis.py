@@ -23,7 +23,7 @@ console = Console()
 
 def _print_graded(summary: dict[str, Any], verbose: bool) -> None:
     """Per-effect confusion, per-category accuracy, false alarms, also, shrink, summary line."""
-    from rig.validate_cases import summary_line
+    from rig.validate.cases import summary_line
 
     name = summary["generator"]
     table = Table(title=f"{name}: confusion (true effect[+also] -> verdict[+also])")
@@ -117,8 +117,8 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Diagnose labelled campaigns blind and grade them: per-effect confusion, false alarms,
         also recall/precision, median shrink, one summary line per generator. Without
-        --cases-dir: campaigns from our own generator (rig/validate.py)."""
-        from rig.validate_cases import generator_name, grade_folder, summarise_graded
+        --cases-dir: campaigns from our own generator (rig/validate/)."""
+        from rig.validate.cases import generator_name, grade_folder, summarise_graded
 
         dirs, labs = list(cases_dir or []), list(labels or [])
         if len(dirs) != len(labs):
@@ -138,7 +138,7 @@ def register(app: typer.Typer) -> None:
             _print_graded(summary, verbose)
             summaries.append(summary)
         if len(summaries) > 1:
-            from rig.validate_cases import summary_line
+            from rig.validate.cases import summary_line
 
             console.print("each generator apart:")
             for s in summaries:

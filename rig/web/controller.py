@@ -27,14 +27,14 @@ from drivers.errors import DeviceError
 from rig.calibration import CalibrationExpired, calibration_meta, calibration_status
 from rig.campaign import campaign_from_mapping
 from rig.engine import Engine, EngineOptions
-from rig.engine_events import ProgressEvent
-from rig.engine_record import json_safe
-from rig.engine_safety import PlanRejected, preflight
+from rig.engine.events import ProgressEvent
+from rig.engine.record import json_safe
+from rig.engine.safety import PlanRejected, preflight
 from rig.errors import RigError
 from rig.measure import RigSession, measure_plan, run_campaign, run_meta, run_result
 from rig.outcome import campaign_outcome
-from rig.plan_estimate import estimate
 from rig.plans import Plan, campaign_plan, hysteresis_plan
+from rig.plans.estimate import estimate
 from rig.store import Store
 from rig.web.faults import explain
 from rig.web.live import LiveHub

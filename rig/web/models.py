@@ -71,7 +71,7 @@ class UnitData(BaseModel):
 
 
 class PlanSettings(BaseModel):
-    """One hysteresis run's loading (rig/plans.py, :class:`rig.plans.LoopParams`): N*m, %,
+    """One hysteresis run's loading (rig/plans/__init__.py, :class:`rig.plans.LoopParams`): N*m, %,
     s, arcmin. The defaults are the GB/T loop of examples/campaigns/seed000-pair1.toml:
     4 equal torque steps per quarter, settled points at +-3 % of rated too, the free play
     crossed slowly (|T| < 0.3 N*m at 0.3 N*m/s)."""

@@ -19,9 +19,9 @@ def diagnose_campaign_folder(campaign_path: Path) -> tuple[dict[str, Any], str]:
     """Diagnose the campaign folder: its rig-diagnosis/1 report (JSON-safe) and the HTML page
     of :func:`rig.report_html.render_html` (figures inline); the plain tables of
     :func:`plain_report_html` if that page cannot be drawn for this report."""
-    from rig.certificate_header import header_for_campaign
+    from rig.certificate.header import header_for_campaign
     from rig.diagnose import diagnose_path, report_dict
-    from rig.engine_record import json_safe
+    from rig.engine.record import json_safe
     from rig.report_html import render_html
 
     campaign, diagnosis = diagnose_path(campaign_path)

@@ -4,7 +4,7 @@ The server's event loop answers the E-stop and the status; its thread pool serve
 requests. Neither may be held by an analysis: :func:`run_in_worker` runs a picklable function
 in a separate process (one worker, spawned on first use, kept for the next request) and waits
 for it on the calling request's thread. The engine has its own process anyway
-(rig/engine_host.py); this keeps the page itself responsive.
+(rig/engine/host.py); this keeps the page itself responsive.
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ import pytest
 from playwright.sync_api import expect, sync_playwright
 from pymodbus.client import ModbusTcpClient
 
-from drivers.modbus_map import LOADING_DRIVE_MAP, encode_float32
+from drivers.modbus.map import LOADING_DRIVE_MAP, encode_float32
 from rig.config import load_rig_config
 from rig.store import Store
 from tests.e2e.test_control_page import ARTIFACTS, TOKEN, get_json, launch_browser, rig_serve

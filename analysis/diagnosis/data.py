@@ -1,0 +1,352 @@
+"""Input of the diagnosis: one run as arrays, reduced to a few hundred quasi-static points.
+
+Pure numerics. Per run: the twist noise (robust second differences, analysis.loop.branches),
+the samples crossing the free play (a twist jump no torque change explains: not quasi-static,
+left out), block means of the remaining samples (blocks never span a jump), the honest noise of
+a block mean (the scatter of consecutive block means in dwells, where the loop stands still),
+the branch (loading/unloading) and the time since the last torque reversal of each point.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from analysis.errors import AnalysisError
+from analysis.loop import analyse_loop
+from analysis.loop.branches import white_noise_std
+from analysis.models.by_kind import LoopModel, nominal_model_for_unit
+
+#: Decimated points per run kept for fitting.
+TARGET_POINTS = 240
+#: Blocks whose mean torque is within this many block-mean torque sigmas (+ 2e-4 of the
+#: amplitude) of zero are left out: with no torque on it the unit floats in the free play
+#: (a slow drift before the crossing becomes a jump), so its flank is undetermined there.
+FLOAT_BAND_SIGMAS = 6.0
+
+
+@dataclass(frozen=True)
+class RunInput:
+    """One run as the diagnosis sees it: only what the campaign folder says (no labels).
+
+    ``twist_arcmin``: output twist (arcmin, any zero); ``torque_Nm``: measured torque;
+    ``input_angle_deg``: where the eccentric shaft was locked (None: unknown);
+    ``temperature_C``: housing temperature per sample (None: unknown); ``unit``: run.json
+    ``unit`` mapping."""
+
+    run_id: str
+    t_s: np.ndarray
+    torque_Nm: np.ndarray
+    twist_arcmin: np.ndarray
+    rated_torque_Nm: float
+    unit: Mapping[str, Any]
+    input_angle_deg: float | None = None
+    temperature_C: np.ndarray | None = None
+    start_flank: int = -1
+    torque_full_scale_Nm: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class PreparedRun:
+    """A run reduced to block means (arrays of equal length) and its summary numbers."""
+
+    run_id: str
+    torque_Nm: np.ndarray
+    twist_arcmin: np.ndarray
+    temperature_C: np.ndarray | None
+    t_s: np.ndarray
+    branch: np.ndarray  # +1 loading (torque rising), -1 unloading
+    since_reversal_s: np.ndarray
+    sigma_arcmin: float  # noise of one block mean
+    sigma_torque_Nm: float  # noise of one block mean's torque
+    raw_sigma_arcmin: float
+    block: int
+    n_raw: int
+    n_transit: int
+    rated_torque_Nm: float
+    amplitude_Nm: float
+    input_angle_deg: float | None
+    mean_temperature_C: float | None
+    start_flank: int
+    nominal: LoopModel | None
+    lost_motion_arcmin: float  # measured, analysis.loop (NaN: unavailable)
+    raw: RunInput = field(repr=False)
+
+
+#: Largest lag between the channels searched (samples).
+MAX_LAG_SAMPLES = 10
+#: In-sample evidence (chi2 units, like a BIC difference) a lag needs to be corrected.
+LAG_EVIDENCE = 10.0
+
+
+def _flank_rss(torque: np.ndarray, twist: np.ndarray, t: np.ndarray, amplitude: float,
+               sigma: float) -> float:
+    """Residual sum of squares (in noise units) of the loaded flanks (|T| > 20 % of the
+    amplitude, where the unit is on a flank whatever friction and play do) under a smooth
+    flank law per flank (1, T, T^2) with a constant loading/unloading separation (Coulomb
+    friction's 2F/K): what a lag between the channels adds is a separation proportional to
+    the torque rate, which this law cannot hold."""
+    on = np.abs(torque) > 0.2 * amplitude
+    if on.sum() < 30:
+        return math.nan
+    direction, _ = direction_and_reversal(t, torque, 0.02 * amplitude)
+    s = np.sign(torque)
+    cols = []
+    for sign in (1.0, -1.0):
+        m = (s == sign).astype(float)
+        cols += [m, m * torque, m * torque**2, m * direction]
+    X = np.column_stack(cols)[on]
+    y = twist[on]
+    beta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ beta
+    return float(r @ r) / max(sigma, 1e-12) ** 2
+
+
+def channel_lag_samples(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
+                        sigma: float) -> int:
+    """Lag (samples) of the twist behind the torque channel (negative: ahead): the integer
+    shift that best explains the loaded flanks (:func:`_flank_rss`), kept only when it
+    improves them by LAG_EVIDENCE noise-units over no shift (a filter or transport delay of
+    one channel; with constant-rate ramps only it looks like friction and is not found)."""
+    n = torque.size
+    amplitude = float(np.percentile(np.abs(torque), 99.5))
+    if n < 200 or amplitude <= 0:
+        return 0
+    lmax = min(MAX_LAG_SAMPLES, n // 100)
+    core = slice(lmax, n - lmax)
+    best, best_rss = 0, _flank_rss(torque[core], twist[core], t[core], amplitude, sigma)
+    if not math.isfinite(best_rss):
+        return 0
+    base = best_rss
+    for lag in range(-lmax, lmax + 1):
+        if lag == 0:
+            continue
+        shifted = np.roll(torque, lag)[core]  # torque of sample k - lag beside twist k
+        rss = _flank_rss(shifted, twist[core], t[core], amplitude, sigma)
+        if rss < best_rss:
+            best, best_rss = lag, rss
+    return best if base - best_rss > LAG_EVIDENCE else 0
+
+
+def resolution_of(values: np.ndarray) -> float:
+    """The quantum (count) of a quantised channel: the smallest step between the distinct
+    readings when readings repeat (fewer distinct values than half the samples) and the
+    steps are multiples of it; 0 for a channel that is not visibly quantised."""
+    v = np.asarray(values, dtype=float)
+    u = np.unique(v)
+    if u.size < 3 or u.size > v.size // 2:
+        return 0.0
+    steps = np.diff(u)
+    steps = steps[steps > 1e-12 * max(1.0, float(np.max(np.abs(u))))]
+    if steps.size == 0:
+        return 0.0
+    q = float(np.min(steps))
+    ratio = steps / q
+    if np.median(np.abs(ratio - np.round(ratio))) > 0.05:
+        return 0.0
+    return q
+
+
+def direction_and_reversal(t_s: np.ndarray, torque_Nm: np.ndarray, threshold_Nm: float
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """Torque direction (+1 rising, -1 falling) with hysteresis ``threshold_Nm`` and the time
+    (s) since the last reversal (the running extreme) for every sample."""
+    values = torque_Nm.tolist()
+    times = t_s.tolist()
+    n = len(values)
+    direction = [0.0] * n
+    since = [0.0] * n
+    d = 1.0
+    extreme = values[0] if n else 0.0
+    t_ext = times[0] if n else 0.0
+    for k in range(n):
+        v = values[k]
+        if d > 0:
+            if v >= extreme:
+                extreme, t_ext = v, times[k]
+            elif v < extreme - threshold_Nm:
+                d, extreme, t_ext = -1.0, v, times[k]
+        else:
+            if v <= extreme:
+                extreme, t_ext = v, times[k]
+            elif v > extreme + threshold_Nm:
+                d, extreme, t_ext = 1.0, v, times[k]
+        direction[k] = d
+        since[k] = times[k] - t_ext
+    return np.asarray(direction), np.asarray(since)
+
+
+def transit_mask(twist_arcmin: np.ndarray, torque_Nm: np.ndarray, sigma_arcmin: float,
+                 soft_compliance_arcmin_per_Nm: float) -> tuple[np.ndarray, np.ndarray]:
+    """(keep, jump): ``jump[k]`` marks a step k -> k+1 whose twist change exceeds what the
+    softest plausible flank and the noise allow (crossing the free play, impacts);
+    ``keep`` is False for samples next to a jump (in flight across the play, or at its start
+    or end, where a sample is partly in flight and its torque already past the switch while
+    its twist is not: with inertia the crossing starts late)."""
+    d_twist = np.abs(np.diff(twist_arcmin))
+    d_torque = np.abs(np.diff(torque_Nm))
+    jump = d_twist > d_torque * soft_compliance_arcmin_per_Nm + 6.0 * math.sqrt(2.0) * max(
+        sigma_arcmin, 1e-6)
+    keep = np.ones(twist_arcmin.size, dtype=bool)
+    keep[:-1] &= ~jump
+    keep[1:] &= ~jump
+    return keep, jump
+
+
+def _segments(keep: np.ndarray, jump: np.ndarray) -> list[tuple[int, int]]:
+    """Maximal index ranges [a, b) of kept samples with no jump inside."""
+    n = keep.size
+    brk = np.zeros(n, dtype=bool)
+    brk[0] = True
+    brk[1:] = jump | ~keep[1:] | ~keep[:-1]
+    starts = np.flatnonzero(brk)
+    out = []
+    for i, a in enumerate(starts):
+        b = starts[i + 1] if i + 1 < starts.size else n
+        if keep[a]:
+            out.append((int(a), int(b)))
+    return out
+
+
+def _block_means(values: np.ndarray, segments: list[tuple[int, int]], block: int) -> np.ndarray:
+    out = []
+    for a, b in segments:
+        m = (b - a) // block
+        if m == 0:
+            if b - a >= max(1, block // 2):
+                out.append(values[a:b].mean(keepdims=True))
+            continue
+        out.append(values[a:a + m * block].reshape(m, block).mean(axis=1))
+        if b - (a + m * block) >= max(1, block // 2):
+            out.append(values[a + m * block:b].mean(keepdims=True))
+    return np.concatenate(out) if out else np.empty(0)
+
+
+def _segment_ids(segments: list[tuple[int, int]], block: int) -> np.ndarray:
+    ids = []
+    for i, (a, b) in enumerate(segments):
+        m = (b - a) // block
+        extra = 1 if (b - a - m * block) >= max(1, block // 2) else 0
+        ids.extend([i] * (m + extra))
+    return np.asarray(ids, dtype=int)
+
+
+def dwell_lost_motion_arcmin(torque_Nm: np.ndarray, twist_arcmin: np.ndarray,
+                             direction: np.ndarray, rated_torque_Nm: float, window_Nm: float,
+                             pct: float = 3.0) -> float:
+    """Lost motion (arcmin) from the samples standing at +-pct % of rated torque (a plan with
+    dwells there): midline ``(median loading + median unloading) / 2`` at +p minus at -p.
+    Used when analysis.loop cannot read the run's branches; NaN when a point is missing."""
+    p = pct / 100.0 * rated_torque_Nm
+    mids = []
+    for sign in (1.0, -1.0):
+        near = np.abs(torque_Nm - sign * p) < window_Nm
+        up = twist_arcmin[near & (direction > 0)]
+        down = twist_arcmin[near & (direction < 0)]
+        if up.size < 3 or down.size < 3:
+            return math.nan
+        mids.append(0.5 * (float(np.median(up)) + float(np.median(down))))
+    return mids[0] - mids[1]
+
+
+def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRun:
+    """Reduce one run (see the module docstring). Raises AnalysisError on unusable input."""
+    t = np.asarray(run.t_s, dtype=float)
+    torque = np.asarray(run.torque_Nm, dtype=float)
+    twist = np.asarray(run.twist_arcmin, dtype=float)
+    if not (t.shape == torque.shape == twist.shape) or t.ndim != 1:
+        raise AnalysisError(f"run {run.run_id!r}: t, torque and twist must be 1-D, same length")
+    if t.size < 20:
+        raise AnalysisError(f"run {run.run_id!r}: {t.size} samples, at least 20 needed")
+    if not (np.all(np.isfinite(torque)) and np.all(np.isfinite(twist))):
+        raise AnalysisError(f"run {run.run_id!r}: torque or twist has missing values")
+    if not run.rated_torque_Nm > 0:
+        raise AnalysisError(f"run {run.run_id!r}: rated torque must be > 0 N*m")
+    temp = None if run.temperature_C is None else np.asarray(run.temperature_C, dtype=float)
+    if temp is not None and not np.all(np.isfinite(temp)):
+        finite = np.isfinite(temp)
+        temp = None if not finite.any() else np.where(finite, temp, np.nanmean(temp))
+    nominal: LoopModel | None
+    try:
+        # the nominal model of the unit's kind (seed 000 reference model, seed 002 cycloid,
+        # seed 001 beveloid): the diagnosis uses its free play and stiffness
+        nominal = nominal_model_for_unit(run.unit, run.rated_torque_Nm)[0] if run.unit else None
+    except AnalysisError:
+        nominal = None
+    # a channel's resolution belongs in its noise floor: a reading that sits on one count
+    # for long stretches makes the second-difference estimate collapse, while the error of
+    # a reading is still uniform over one count (q^2 / 12)
+    q_twist = resolution_of(twist)
+    q_torque = resolution_of(torque)
+    sigma = math.hypot(white_noise_std(twist), q_twist / math.sqrt(12.0))
+    sigma_t = math.hypot(white_noise_std(torque), q_torque / math.sqrt(12.0))
+    # a lag between the channels (a filter in one of them) is a sensor artifact, not a gap:
+    # found on the loaded flanks and taken out by shifting the torque channel
+    lag = channel_lag_samples(t, torque, twist, sigma)
+    if lag:
+        keep_n = t.size - abs(lag)
+        if lag > 0:
+            torque, twist, t = torque[:keep_n], twist[lag:], t[lag:]
+        else:
+            torque, twist, t = torque[-lag:], twist[:keep_n], t[:keep_n]
+        if temp is not None:
+            temp = temp[lag:] if lag > 0 else temp[:keep_n]
+    amplitude = float(np.percentile(np.abs(torque), 99.5))
+    if nominal is not None and math.isfinite(nominal.stiffness_Nm_per_arcmin):
+        soft = 10.0 / nominal.stiffness_Nm_per_arcmin
+    else:
+        span_t = float(np.ptp(torque)) or 1.0
+        soft = 10.0 * float(np.ptp(twist)) / span_t
+    keep, jump = transit_mask(twist, torque, sigma, soft)
+    segments = _segments(keep, jump)
+    n_keep = int(sum(b - a for a, b in segments))
+    block = max(1, int(round(n_keep / target_points)))
+    thr = max(8.0 * sigma_t, 0.02 * amplitude)
+    direction, since = direction_and_reversal(t, torque, thr)
+    tb = _block_means(torque, segments, block)
+    yb = _block_means(twist, segments, block)
+    seg = _segment_ids(segments, block)
+    sigma_tb = sigma_t / math.sqrt(block)
+    # honest block-mean noise: consecutive blocks of a segment standing still (a dwell)
+    still = (np.diff(seg) == 0) & (np.abs(np.diff(tb)) < 3.0 * sigma_tb + 1e-4 * amplitude)
+    pairs = np.diff(yb)[still]
+    if pairs.size >= 20:
+        sigma_b = 1.4826 * float(np.median(np.abs(pairs - np.median(pairs)))) / math.sqrt(2.0)
+        sigma_b = max(sigma_b, 0.5 * sigma / math.sqrt(block))
+    else:
+        sigma_b = sigma / math.sqrt(block)
+    # without dither (noise below a count) averaging does not shrink the quantisation error
+    # of a block mean: it stays up to half a count, uniform -> q / sqrt(12)
+    if white_noise_std(twist) < q_twist:
+        sigma_b = max(sigma_b, q_twist / math.sqrt(12.0))
+    # blocks at zero torque are kept: with no torque on it the unit floats in the free play,
+    # which analysis.diagnosis.fit models (censored between the flank last loaded and the
+    # centre of the play); there a torque-sensor offset shows (the unit on the other flank)
+    held = np.ones(tb.size, dtype=bool)
+    lost_motion = math.nan
+    try:
+        res = analyse_loop(t, torque, twist, rated_torque_Nm=run.rated_torque_Nm)
+        if "lost_motion_arcmin" in res.metrics:
+            lost_motion = res.metrics["lost_motion_arcmin"].value
+    except AnalysisError:
+        pass
+    if not math.isfinite(lost_motion):
+        lost_motion = dwell_lost_motion_arcmin(torque, twist, direction, run.rated_torque_Nm,
+                                               max(3.0 * sigma_t, 0.01 * run.rated_torque_Nm))
+    return PreparedRun(
+        run_id=run.run_id, torque_Nm=tb, twist_arcmin=yb,
+        temperature_C=None if temp is None else _block_means(temp, segments, block)[held],
+        t_s=_block_means(t, segments, block)[held],
+        branch=np.sign(_block_means(direction, segments, block))[held],
+        since_reversal_s=_block_means(since, segments, block)[held],
+        sigma_arcmin=max(sigma_b, 1e-7), sigma_torque_Nm=sigma_tb, raw_sigma_arcmin=sigma,
+        block=block, n_raw=int(t.size), n_transit=int((~keep).sum()),
+        rated_torque_Nm=float(run.rated_torque_Nm), amplitude_Nm=amplitude,
+        input_angle_deg=run.input_angle_deg,
+        mean_temperature_C=None if temp is None else float(np.mean(temp)),
+        start_flank=run.start_flank, nominal=nominal, lost_motion_arcmin=lost_motion, raw=run,
+    )

@@ -1,0 +1,528 @@
+"""Fitting the composed loop (analysis.effects) to prepared runs: profile, robust, held out.
+
+Given at most one nonlinear parameter per effect (friction torque, torque offset, stiffening
+torque scale, bearing stage torque), the twist is *linear* in everything else: play, compliance,
+the runout coefficients, the thermal coefficient, the per-tooth play changes, the stiffening
+twist, the bearing compliance and the per-run twist offsets. So each candidate is fitted by
+(1) a profile over a grid of its nonlinear parameter, each point a bounded linear least squares
+(scipy.optimize.lsq_linear) with Huber re-weighting (robust to the odd impact sample) and the
+run offsets projected out, then (2) a bounded scalar refinement (scipy.optimize
+.minimize_scalar). Coefficients with a prior (runout, tooth spacing) get Gaussian pseudo-
+observations of their plausible size (the tolerance budget), which keeps the nearly collinear
+runout terms of one crank turn finite.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import lsq_linear, minimize_scalar
+
+from analysis.diagnosis.data import PreparedRun
+from analysis.effects import (
+    LoopParams,
+    chain_torque_Nm,
+    flank_sign,
+    model_lost_motion_arcmin,
+    runout_basis,
+    tooth_pair_phase,
+    um_to_arcmin,
+)
+from analysis.errors import AnalysisError
+
+HUBER_C = 2.5
+#: Half the 95 % quantile of chi2 with one degree of freedom: a profile-likelihood interval.
+PROFILE_95 = 1.92
+#: Nonlinear parameter of each effect: (name, lower, upper as fractions of rated torque, log?).
+NONLINEAR = {
+    "friction": ("friction_Nm", 0.0, 0.2, False),
+    "torque_sensor_offset": ("torque_offset_Nm", -0.1, 0.1, False),
+    "stiffness_nonlinearity": ("stiffening_torque_Nm", 0.005, 0.6, True),
+    "bearing_clearance": ("bearing_stage_torque_Nm", 0.005, 0.6, True),
+}
+
+
+@dataclass(frozen=True, eq=False)
+class Stack:
+    """All prepared runs of a campaign, concatenated, with the unit's geometry."""
+
+    runs: tuple[PreparedRun, ...]
+    z_internal: int
+    z_external: int
+    module_mm: float
+    pressure_angle_deg: float
+    runout_budget_arcmin: float  # amplitude prior of each runout coefficient
+    spacing_budget_arcmin: float  # prior sd of one tooth's play change
+    reference_C: float
+    rated_Nm: float
+    cache: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def n_runs(self) -> int:
+        return len(self.runs)
+
+
+def _num(unit: dict, key: str, default: float) -> float:
+    value = unit.get(key)
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        return default
+    return float(value)
+
+
+def build_stack(runs: Sequence[PreparedRun]) -> Stack:
+    """Stack prepared runs; the unit geometry comes from the first run's unit data."""
+    if not runs:
+        raise AnalysisError("no runs to diagnose")
+    unit = dict(runs[0].raw.unit or {})
+    z1 = int(_num(unit, "z_internal", 45))
+    z2 = int(_num(unit, "z_external", 40))
+    m = _num(unit, "module_mm", 1.0)
+    alpha = _num(unit, "pressure_angle_deg", 20.0)
+    fr = _num(unit, "runout_internal_mm", 0.02) + _num(unit, "runout_external_mm", 0.02)
+    # prior of a runout coefficient: the eq. (4)/(3) play change of the inspected runout
+    runout_um = 2.0 * math.tan(math.radians(alpha)) * 1000.0 * max(fr, 0.01) / 2.0
+    temps = [r.mean_temperature_C for r in runs if r.mean_temperature_C is not None]
+    return Stack(
+        runs=tuple(runs), z_internal=z1, z_external=z2, module_mm=m, pressure_angle_deg=alpha,
+        runout_budget_arcmin=float(um_to_arcmin(runout_um, m, z1)),
+        spacing_budget_arcmin=float(um_to_arcmin(4.0, m, z1)),
+        reference_C=float(np.mean(temps)) if temps else 20.0,
+        rated_Nm=float(np.median([r.rated_torque_Nm for r in runs])),
+    )
+
+
+def positions_known(stack: Stack) -> bool:
+    return all(r.input_angle_deg is not None for r in stack.runs)
+
+
+def temperatures_known(stack: Stack) -> bool:
+    return all(r.temperature_C is not None for r in stack.runs)
+
+
+@dataclass(frozen=True)
+class Columns:
+    """Design matrix of one run for a set of effects (rows: the run's points)."""
+
+    X: np.ndarray
+    names: tuple[str, ...]
+
+
+def column_names(stack: Stack, effects: Sequence[str], teeth: Sequence[int]) -> list[str]:
+    names = ["play", "compliance"]
+    if "stiffness_nonlinearity" in effects:
+        names.append("soft_twist")
+    if "bearing_clearance" in effects:
+        names.append("bearing_compliance")
+    if "runout" in effects:
+        names += ["runout_c1", "runout_s1", "runout_c2", "runout_s2"]
+    if "thermal_expansion" in effects:
+        names.append("thermal")
+    if "tooth_spacing_error" in effects:
+        names += [f"tooth_{t}" for t in teeth]
+    return names
+
+
+def run_columns(stack: Stack, run: PreparedRun, effects: Sequence[str], nl: dict[str, float],
+                teeth: Sequence[int]) -> np.ndarray:
+    """Columns (see :func:`column_names`) of one run: the composed loop of analysis.effects
+    written as ``twist = X beta + offset``."""
+    torque = run.torque_Nm - nl.get("torque_offset_Nm", 0.0)
+    g = chain_torque_Nm(torque, nl.get("friction_Nm", 0.0), run.start_flank)
+    s = flank_sign(g, flank_band_Nm(run), run.start_flank)
+    tau = np.abs(g)
+    cols = [s / 2.0, s * tau]
+    if "stiffness_nonlinearity" in effects:
+        cols.append(s * -np.expm1(-tau / nl["stiffening_torque_Nm"]))
+    if "bearing_clearance" in effects:
+        cols.append(s * np.minimum(tau, nl["bearing_stage_torque_Nm"]))
+    if "runout" in effects:
+        basis = runout_basis(run.input_angle_deg or 0.0, stack.z_internal, stack.z_external)
+        cols += [s / 2.0 * b for b in basis]
+    if "thermal_expansion" in effects:
+        temp = run.temperature_C if run.temperature_C is not None else np.full(s.size, math.nan)
+        cols.append(s / 2.0 * (temp - stack.reference_C))
+    if "tooth_spacing_error" in effects:
+        tooth = int(tooth_pair_phase(run.input_angle_deg or 0.0, stack.z_internal,
+                                     stack.z_external))
+        cols += [s / 2.0 * (1.0 if t == tooth else 0.0) for t in teeth]
+    return np.column_stack(cols)
+
+
+def flank_band_Nm(run: PreparedRun) -> float:
+    """Noise band of the chain torque (N*m) within which the flank is undetermined: three
+    block-mean torque sigmas (+1e-4 of rated for a noiseless channel)."""
+    return 3.0 * run.sigma_torque_Nm + 1e-4 * run.rated_torque_Nm
+
+
+def run_floating(run: PreparedRun, nl: dict[str, float]) -> np.ndarray:
+    """Points whose chain torque is within the flank band: nothing holds the unit on a flank,
+    it floats in the free play (True)."""
+    torque = run.torque_Nm - nl.get("torque_offset_Nm", 0.0)
+    g = chain_torque_Nm(torque, nl.get("friction_Nm", 0.0), run.start_flank)
+    return np.abs(g) < flank_band_Nm(run)
+
+
+def censor_floating(r: np.ndarray, X: np.ndarray, beta: np.ndarray, floating: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals (arcmin) with the float across the play modelled: a floating point may lie
+    anywhere between the flank it last touched (the model's value) and the centre of the play
+    (half the play towards the other flank), at no cost; beyond the centre only the excess
+    counts, outwards the full residual. Returns (effective residual, inside mask). Column 0 of
+    X is ``s / 2`` (the play column), ``beta[0]`` the play."""
+    if not floating.any():
+        return r, np.zeros(r.size, dtype=bool)
+    s = 2.0 * X[:, 0]
+    half = max(float(beta[0]), 0.0) / 2.0
+    d = s * r  # > 0: beyond the kept flank outwards; < 0: drifted towards the centre
+    inside = floating & (d <= 0) & (d >= -half)
+    past = floating & (d < -half)
+    out = r.copy()
+    out[inside] = 0.0
+    out[past] = r[past] + s[past] * half
+    return out, inside
+
+
+def teeth_of(stack: Stack) -> list[int]:
+    return sorted({int(tooth_pair_phase(r.input_angle_deg or 0.0, stack.z_internal,
+                                        stack.z_external))
+                   for r in stack.runs})
+
+
+def bounds_and_prior(stack: Stack, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray,
+                                                                   np.ndarray]:
+    """Lower, upper bounds and prior standard deviations (inf: none) of the coefficients."""
+    lo, hi, prior = [], [], []
+    for name in names:
+        if name in ("play",):
+            lo.append(-np.inf), hi.append(np.inf), prior.append(np.inf)
+        elif name in ("compliance", "soft_twist", "bearing_compliance"):
+            lo.append(0.0), hi.append(np.inf), prior.append(np.inf)
+        elif name.startswith("runout"):
+            lo.append(-np.inf), hi.append(np.inf), prior.append(stack.runout_budget_arcmin)
+        elif name.startswith("tooth"):
+            lo.append(-np.inf), hi.append(np.inf), prior.append(stack.spacing_budget_arcmin)
+        else:
+            lo.append(-np.inf), hi.append(np.inf), prior.append(np.inf)
+    return np.array(lo), np.array(hi), np.array(prior)
+
+
+@dataclass
+class LinearFit:
+    """A fit: coefficients, per-run offsets, residuals (arcmin) and robust objective."""
+
+    names: tuple[str, ...]
+    beta: np.ndarray
+    nl: dict[str, float]
+    objective: float
+    chi2: float
+    n: int
+    residual: dict[str, np.ndarray] = field(default_factory=dict)
+    cov: np.ndarray | None = None
+
+    def coef(self, name: str, default: float = 0.0) -> float:
+        return float(self.beta[self.names.index(name)]) if name in self.names else default
+
+
+def _centre(values: np.ndarray, weights: np.ndarray, run: np.ndarray, n_runs: int
+            ) -> np.ndarray:
+    """Subtract each run's weighted mean (columns of a 2-D array, or a 1-D array)."""
+    wsum = np.bincount(run, weights, minlength=n_runs)
+    wsum[wsum == 0] = 1.0
+    if values.ndim == 1:
+        means = np.bincount(run, weights * values, minlength=n_runs) / wsum
+        return values - means[run]
+    means = np.stack([np.bincount(run, weights * values[:, j], minlength=n_runs)
+                      for j in range(values.shape[1])], axis=1) / wsum[:, None]
+    return values - means[run]
+
+
+def _solve(X: np.ndarray, y: np.ndarray, sig: np.ndarray, run: np.ndarray, n_runs: int,
+           lo: np.ndarray, hi: np.ndarray, prior: np.ndarray, fixed: np.ndarray | None,
+           iterations: int = 3, want_cov: bool = False, floating: np.ndarray | None = None,
+           ) -> tuple[np.ndarray, float, float, np.ndarray, np.ndarray | None]:
+    """Robust bounded LS with per-run offsets projected out (``run``: run index per point).
+    ``fixed``: coefficients held (predictive gap) instead of fitted. Huber re-weighting.
+    ``floating``: points floating in the play (:func:`censor_floating`); those inside their
+    interval get no weight, those past the centre are fitted to the centre."""
+    p = X.shape[1]
+    w = np.ones(y.size)
+    beta = fixed if fixed is not None else np.zeros(p)
+    has_prior = np.isfinite(prior)
+    pr = np.zeros((int(has_prior.sum()), p))
+    pr[np.arange(pr.shape[0]), np.flatnonzero(has_prior)] = 1.0 / prior[has_prior]
+    inv_var = 1.0 / sig**2
+    A = None
+    X0 = X
+    flt = floating if floating is not None and floating.any() else None
+    for _ in range(iterations if fixed is None else 2):
+        ww = w * inv_var
+        if fixed is None:
+            sw = np.sqrt(ww)
+            A = np.vstack([_centre(X, ww, run, n_runs) * sw[:, None], pr])
+            b = np.concatenate([_centre(y, ww, run, n_runs) * sw, np.zeros(pr.shape[0])])
+            scale = np.sqrt((A**2).sum(axis=0))
+            scale[scale == 0] = 1.0
+            x, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
+            beta = x / scale
+            if np.any(beta < lo - 1e-12) or np.any(beta > hi + 1e-12):
+                res = lsq_linear(A / scale, b, bounds=(lo * scale, hi * scale), method="bvls")
+                beta = res.x / scale
+        r = _centre(y - X0 @ beta, ww, run, n_runs)
+        u = np.abs(r) / sig
+        w = np.minimum(1.0, HUBER_C / np.maximum(u, 1e-12))
+        if flt is not None:
+            r_eff, inside = censor_floating(r, X0, beta, flt)
+            w = np.minimum(1.0, HUBER_C / np.maximum(np.abs(r_eff) / sig, 1e-12))
+            w[inside] = 0.0
+            past = flt & ~inside & (2.0 * X0[:, 0] * r < 0)
+            X = X0.copy()
+            X[past] = 0.0  # fitted to the centre of the play (the run offset)
+    ww = w * inv_var
+    r = _centre(y - X0 @ beta, ww, run, n_runs)
+    float_cost = 0.0
+    if flt is not None:
+        r, inside = censor_floating(r, X0, beta, flt)
+        # a floating point inside its interval costs what a fitted point costs on average
+        # (E[u^2 / 2] = 1/2): letting points float is no free lunch for a candidate
+        float_cost = 0.5 * float(inside.sum())
+    u = np.abs(r) / sig
+    objective = float(np.sum(np.where(u <= HUBER_C, 0.5 * u**2, HUBER_C * (u - 0.5 * HUBER_C))))
+    objective += float_cost
+    cov = None
+    if want_cov and A is not None:
+        cov = np.linalg.pinv(A.T @ A)
+    return beta, objective, float(np.sum(u**2)), r, cov
+
+
+def fit(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None = None,
+        nl: dict[str, float] | None = None, fixed: dict[str, float] | None = None,
+        want_cov: bool = False) -> LinearFit:
+    """Fit the effects' linear coefficients for given nonlinear ones (``nl``) on ``runs``
+    (indices; None: all). ``fixed`` holds play and compliance (predictive gap)."""
+    idx = list(range(stack.n_runs)) if runs is None else list(runs)
+    nl = dict(nl or {})
+    teeth = teeth_of(stack)
+    names = column_names(stack, effects, teeth)
+    X = np.vstack([cached_columns(stack, i, effects, nl, teeth) for i in idx])
+    y = np.concatenate([stack.runs[i].twist_arcmin for i in idx])
+    sig = np.concatenate([np.full(stack.runs[i].twist_arcmin.size, stack.runs[i].sigma_arcmin)
+                          for i in idx])
+    run = np.concatenate([np.full(stack.runs[i].twist_arcmin.size, k)
+                          for k, i in enumerate(idx)])
+    lo, hi, prior = bounds_and_prior(stack, names)
+    fixed_beta = None
+    if fixed is not None:
+        fixed_beta = np.array([fixed.get(nm, 0.0) for nm in names])
+    floating = np.concatenate([run_floating(stack.runs[i], nl) for i in idx])
+    beta, obj, chi2, r, cov = _solve(X, y, sig, run, len(idx), lo, hi, prior, fixed_beta,
+                                     want_cov=want_cov, floating=floating)
+    fitres = LinearFit(tuple(names), beta, nl, obj, chi2, int(y.size), cov=cov)
+    fitres.residual = {stack.runs[i].run_id: r[run == k] for k, i in enumerate(idx)}
+    return fitres
+
+
+def cached_columns(stack: Stack, i: int, effects: Sequence[str], nl: dict[str, float],
+                   teeth: Sequence[int]) -> np.ndarray:
+    """:func:`run_columns`, memoised per stack, run, effects and nonlinear values."""
+    key = (id(stack), i, tuple(effects), tuple(sorted(nl.items())))
+    hit = stack.cache.get(key)
+    if hit is None:
+        hit = run_columns(stack, stack.runs[i], effects, nl, teeth)
+        stack.cache[key] = hit
+    return hit
+
+
+def nonlinear_of(effects: Sequence[str]) -> list[str]:
+    return [e for e in effects if e in NONLINEAR]
+
+
+def _grid(stack: Stack, effect: str, n: int = 13) -> np.ndarray:
+    _, lo, hi, log = NONLINEAR[effect]
+    r = stack.rated_Nm
+    if effect == "torque_sensor_offset":
+        return offset_grid(stack, lo * r, hi * r)
+    if log:
+        return np.geomspace(lo * r, hi * r, n)
+    if lo == 0.0:
+        return np.concatenate([[0.0], np.geomspace(2e-4 * r, hi * r, n - 1)])
+    return np.linspace(lo * r, hi * r, 2 * n + 1)
+
+
+def offset_grid(stack: Stack, lo: float, hi: float, most: int = 160) -> np.ndarray:
+    """Candidate torque offsets (N*m): the objective is piecewise constant in the offset, with
+    steps where a point's chain torque crosses the flank band, so the candidates are the
+    midpoints between those crossing offsets (at most ``most``, by quantile)."""
+    vals = []
+    for run in stack.runs:
+        delta = 3.0 * run.sigma_torque_Nm + 1e-4 * run.rated_torque_Nm
+        t = run.torque_Nm[(run.torque_Nm > lo - delta) & (run.torque_Nm < hi + delta)]
+        vals += [t - delta, t + delta]
+    v = np.unique(np.clip(np.concatenate(vals + [np.array([0.0])]), lo, hi))
+    mids = np.concatenate([[0.0], 0.5 * (v[1:] + v[:-1])]) if v.size > 1 else np.array([0.0])
+    mids = np.unique(mids)
+    if mids.size > most:
+        mids = np.unique(np.append(np.quantile(mids, np.linspace(0, 1, most)), 0.0))
+    return mids
+
+
+def fit_profile(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None = None,
+                start: dict[str, float] | None = None, local: bool = False) -> LinearFit:
+    """Fit with the nonlinear parameters profiled: a grid (coordinate-wise, each effect's
+    parameter in turn) then a bounded scalar refinement. ``start``/``local``: search only near
+    a previous optimum (cross-validation folds)."""
+    nls = nonlinear_of(effects)
+    current = {NONLINEAR[e][0]: (start or {}).get(NONLINEAR[e][0], _grid(stack, e)[
+        len(_grid(stack, e)) // 2] if NONLINEAR[e][3] else 0.0) for e in nls}
+    best = fit(stack, effects, runs, current)
+    for _ in range(2 if len(nls) > 1 else 1):
+        for e in nls:
+            key = NONLINEAR[e][0]
+            grid = _grid(stack, e)
+            if local and start is not None and key in start:
+                j = int(np.argmin(np.abs(grid - start[key])))
+                grid = np.unique(np.append(grid[max(0, j - 1): j + 2], start[key]))
+            results = []
+            for v in grid:
+                trial = fit(stack, effects, runs, {**current, key: float(v)})
+                results.append(trial)
+            k = int(np.argmin([r.objective for r in results]))
+            a = grid[max(0, k - 1)]
+            b = grid[min(grid.size - 1, k + 1)]
+            cand = results[k]
+            if local:
+                pass
+            elif b > a and e != "torque_sensor_offset":
+                def obj(v: float, key: str = key, held: dict = current) -> float:
+                    return fit(stack, effects, runs, {**held, key: v}).objective
+
+                opt = minimize_scalar(obj, bounds=(a, b), method="bounded",
+                                      options={"xatol": 1e-4 * stack.rated_Nm, "maxiter": 10})
+                if opt.fun < cand.objective:
+                    cand = fit(stack, effects, runs, {**current, key: float(opt.x)})
+            elif b > a:  # the offset moves flank switches: a finer grid, no gradients
+                fine = np.linspace(a, b, 9)
+                trials = [fit(stack, effects, runs, {**current, key: float(v)}) for v in fine]
+                j = int(np.argmin([t.objective for t in trials]))
+                if trials[j].objective < cand.objective:
+                    cand = trials[j]
+                # the objective is flat between flank switches: the data bound the offset to
+                # that interval only. Its 95 % profile-likelihood interval (objective within
+                # chi2_1(0.95) / 2 = 1.92 of the best); take its middle and keep its bounds
+                # (plausibility is judged at the bound nearest zero)
+                objs = np.array([r.objective for r in results])
+                flat = objs <= cand.objective + PROFILE_95
+                lo_j = hi_j = k
+                while lo_j > 0 and flat[lo_j - 1]:
+                    lo_j -= 1
+                while hi_j < grid.size - 1 and flat[hi_j + 1]:
+                    hi_j += 1
+                if hi_j > lo_j:
+                    mid = 0.5 * (float(grid[lo_j]) + float(grid[hi_j]))
+                    trial = fit(stack, effects, runs, {**current, key: mid})
+                    if trial.objective <= cand.objective + PROFILE_95:
+                        cand = trial
+                    span = (float(grid[lo_j]), float(grid[hi_j]))
+                    cand.nl["torque_offset_nearest_zero_Nm"] = (
+                        0.0 if span[0] <= 0.0 <= span[1] else min(span, key=abs))
+                    cand.nl["torque_offset_low_Nm"], cand.nl["torque_offset_high_Nm"] = span
+            current = dict(cand.nl)
+            best = cand
+    return best
+
+
+#: Linear coefficients (name prefixes) and nonlinear parameters of each candidate's own term.
+OWN_TERMS = {
+    "friction": ((), ("friction_Nm",)),
+    "torque_sensor_offset": ((), ("torque_offset_Nm",)),
+    "stiffness_nonlinearity": (("soft_twist",), ()),
+    "bearing_clearance": (("bearing_compliance",), ()),
+    "runout": (("runout_",), ()),
+    "thermal_expansion": (("thermal",), ()),
+    "tooth_spacing_error": (("tooth_",), ()),
+}
+
+
+CROSSING_SHARE = 0.05
+"""Half-width of the play-crossing band (share of a run's torque amplitude) left out of an
+effect's size, beside the fitted friction and sensor offset that move the flank change."""
+
+
+def on_flanks(run: PreparedRun, f: LinearFit) -> np.ndarray:
+    """Blocks of ``run`` on a flank, away from the play crossing: |T| beyond 5 % of the
+    amplitude and beyond twice the fitted friction plus the sensor offset."""
+    band = max(CROSSING_SHARE * run.amplitude_Nm,
+               2.0 * abs(f.nl.get("friction_Nm", 0.0)) + abs(f.nl.get("torque_offset_Nm", 0.0)))
+    keep = np.abs(run.torque_Nm) > band
+    return keep if keep.sum() >= 4 else np.ones_like(keep, dtype=bool)
+
+
+def effect_size_arcmin(stack: Stack, f: LinearFit, effects: Sequence[str], name: str) -> float:
+    """RMS (arcmin) of one effect's own term in a joint fit: the fitted twist minus the twist
+    with that effect switched off (its coefficients zeroed, its friction/offset set to 0),
+    each run's mean removed (the twist zero is free). Friction's size is read on the flanks
+    (:func:`on_flanks`): its loop signature is the branch separation 2 T_c / K there (seed 000
+    Fig. 6's hysteresis), while in the crossing band switching it off moves the whole-play
+    step of the flank change. A sensor offset keeps its band: at a commanded zero it holds
+    the unit on the other flank for the whole dwell, a real twist difference of the play."""
+    coefs, nls = OWN_TERMS.get(name, ((), ()))
+    beta0 = np.array([0.0 if any(n.startswith(c) for c in coefs) else b
+                      for n, b in zip(f.names, f.beta, strict=True)])
+    nl0 = {k: (0.0 if k in nls else v) for k, v in f.nl.items()}
+    teeth = teeth_of(stack)
+    sq, n = 0.0, 0
+    for run in stack.runs:
+        full = run_columns(stack, run, ("backlash", *effects), f.nl, teeth) @ f.beta
+        off = run_columns(stack, run, ("backlash", *effects), nl0, teeth) @ beta0
+        d = full - off
+        if name == "friction":
+            d = d[on_flanks(run, f)]
+        d = d - d.mean()
+        sq += float(d @ d)
+        n += d.size
+    return math.sqrt(sq / n) if n else 0.0
+
+
+def loop_params(stack: Stack, f: LinearFit) -> LoopParams:
+    """The analysis.effects parameters of a fit."""
+    comp = f.coef("compliance")
+    teeth = {int(n.split("_")[1]): float(b) for n, b in zip(f.names, f.beta, strict=True)
+             if n.startswith("tooth_")}
+    return LoopParams(
+        play_arcmin=f.coef("play"),
+        stiffness_Nm_per_arcmin=1.0 / comp if comp > 0 else math.inf,
+        friction_Nm=f.nl.get("friction_Nm", 0.0),
+        soft_twist_arcmin=f.coef("soft_twist"),
+        stiffening_torque_Nm=f.nl.get("stiffening_torque_Nm", 1.0),
+        runout_coeffs_arcmin=tuple(f.coef(n) for n in
+                                   ("runout_c1", "runout_s1", "runout_c2", "runout_s2")),
+        bearing_compliance_arcmin_per_Nm=f.coef("bearing_compliance"),
+        bearing_stage_torque_Nm=f.nl.get("bearing_stage_torque_Nm", 0.0),
+        thermal_arcmin_per_K=f.coef("thermal"),
+        thermal_reference_C=stack.reference_C,
+        torque_offset_Nm=f.nl.get("torque_offset_Nm", 0.0),
+        spacing_play_arcmin=teeth,
+    )
+
+
+def predict_run(stack: Stack, f: LinearFit, effects: Sequence[str], i: int) -> np.ndarray:
+    """Residual (arcmin) of run i under fit f, with the run's own free twist offset."""
+    run = stack.runs[i]
+    teeth = teeth_of(stack)
+    X = run_columns(stack, run, effects, f.nl, teeth)
+    floating = run_floating(run, f.nl)
+    r = run.twist_arcmin - X @ f.beta
+    keep = ~floating
+    r = r - (r[keep].mean() if keep.any() else r.mean())
+    return censor_floating(r, X, f.beta, floating)[0]
+
+
+def run_lost_motion(stack: Stack, params: LoopParams, i: int) -> float:
+    """Lost motion (arcmin, +-3 % of rated) the model predicts for run i's conditions."""
+    run = stack.runs[i]
+    return model_lost_motion_arcmin(
+        params, run.rated_torque_Nm, 3.0, input_angle_deg=run.input_angle_deg,
+        temperature_C=run.mean_temperature_C, z_internal=stack.z_internal,
+        z_external=stack.z_external, amplitude_Nm=run.amplitude_Nm)

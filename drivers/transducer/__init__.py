@@ -1,0 +1,1 @@
+"""The serial ASCII torque transducer: its protocol (pure parsing) and the serial driver."""

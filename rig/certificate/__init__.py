@@ -1,0 +1,461 @@
+"""The test certificate of a unit: one page, HTML and PDF, from a stored run or a campaign.
+
+What it shows comes from the record only (run.json, campaign.json, samples): the header
+(:mod:`rig.certificate.header`), the unit data, the sensors with their calibration references,
+the loop, the metrics with their uncertainties against the limits in force, the outcome
+(OK / NOT OK / INCOMPLETE, rig/outcome.py), for a campaign the lost motion against the input
+position with the nominal model and the production batch band, and the diagnosis verdict when
+one was made for the campaign (a rig-diagnosis/1 file in its folder, the page's diagnosis
+cache, or a result of ``rig reanalyse`` in the store). Drawn by the jinja2 template
+rig/templates/certificate.html; the PDF by WeasyPrint.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rig.certificate.header import NOT_RECORDED, header_fields, template_env
+from rig.errors import RigError
+from rig.outcome import LIMIT_KEYS, campaign_outcome, not_applicable, run_outcome
+from rig.runformat import CAMPAIGN_JSON, RUN_JSON, Campaign, Run, read_run, read_run_or_campaign
+from rig.store import Store
+from rig.store.ids import ID_PATTERN, StoreError, UnknownIdError
+
+__all__ = ["CertificateError", "Subject", "certificate_context", "render_certificate",
+           "html_to_pdf", "resolve_subject", "write_certificate", "certificate_bytes"]
+
+log = logging.getLogger(__name__)
+
+OUTCOME_WORDS = {"ok": "OK", "not_ok": "NOT OK", "incomplete": "INCOMPLETE"}
+METRICS = (
+    ("lost_motion_arcmin", "lost motion", "arcmin", ".3f"),
+    ("backlash_arcmin", "backlash", "arcmin", ".3f"),
+    ("stiffness_Nm_per_arcmin", "torsional stiffness", "N·m/arcmin", ".2f"),
+    ("loop_area_J", "loop area (hysteresis loss)", "J", ".3g"),
+    ("torque_offset_Nm", "torque offset", "N·m", ".4f"),
+)
+"""(result key, label, unit, format) of the metrics on the certificate."""
+LIMIT_OF_METRIC = {metric: (key, side) for key, (metric, side) in LIMIT_KEYS.items()}
+DIAGNOSIS_FORMAT = "rig-diagnosis/1"
+CALIBRATION_ORDER = ("sensor", "id", "certificate", "date", "due", "due_date", "uncertainty")
+
+
+class CertificateError(RigError):
+    """A certificate cannot be made (no such run or campaign, nothing to certify)."""
+
+
+@dataclass
+class Subject:
+    """What a certificate is of: a run or campaign folder, and the store holding it (if known;
+    the store is asked only for a campaign's stored diagnosis)."""
+
+    path: Path
+    store: Store | None = None
+
+
+# --------------------------------------------------------------------------- resolving
+
+
+def resolve_subject(target: str, store: str | Path, samples: str | Path | None = None
+                    ) -> Subject:
+    """A run or campaign folder path, else a run or campaign id of the store ``store``.
+    CertificateError (one line) when it is neither."""
+    path = Path(target)
+    if path.exists():
+        if path.is_file() and path.name in (RUN_JSON, CAMPAIGN_JSON):
+            path = path.parent
+        if not (path / RUN_JSON).is_file() and not (path / CAMPAIGN_JSON).is_file():
+            raise CertificateError(f"{target}: not a run folder (no {RUN_JSON}) or a campaign "
+                                   f"folder (no {CAMPAIGN_JSON})")
+        return Subject(path.resolve(), _store_beside(path.resolve()))
+    if ID_PATTERN.fullmatch(target) is None:
+        raise CertificateError(f"{target}: no such run or campaign folder (and not a run or "
+                               "campaign id)")
+    try:
+        st = Store(store, create=False, recover=False, samples=samples)
+    except StoreError as exc:
+        raise CertificateError(f"{target}: no such folder, and as an id: {exc}") from exc
+    try:
+        return Subject(st.get_run(target).path, st)
+    except UnknownIdError:
+        pass
+    try:
+        return Subject(st.get_campaign(target).path, st)
+    except UnknownIdError:
+        raise CertificateError(f"{target}: no such folder, and no run or campaign with that id "
+                               f"in the store {st.location}") from None
+
+
+def _store_beside(folder: Path) -> Store | None:
+    """The folder store holding ``folder`` (runs/<id>, campaigns/<id>, campaigns/<id>/<run>)."""
+    for root in (folder.parent.parent, folder.parent.parent.parent):
+        if (root / "index.sqlite").is_file():
+            try:
+                return Store(root, create=False, recover=False)
+            except (StoreError, OSError) as exc:
+                log.warning("store at %s not opened: %s", root, exc)
+                return None
+    return None
+
+
+def _read(path: Path) -> tuple[Campaign, bool]:
+    """The subject as a campaign (a single run as a one-run campaign) and whether it is a
+    campaign. A campaign's run folders that campaign.json does not list (aborted runs) are
+    read too: the certificate names every run measured."""
+    is_camp = (path / CAMPAIGN_JSON).is_file()
+    try:
+        campaign = read_run_or_campaign(path, allow_truncated_tail=True)
+    except RigError:
+        if not is_camp:
+            raise
+        # every run aborted: campaign.json lists none; the record still has a verdict
+        meta = json.loads((path / CAMPAIGN_JSON).read_text(encoding="utf-8"))
+        if not isinstance(meta, dict) or meta.get("runs"):
+            raise
+        campaign = Campaign(meta=meta, runs=[], path=path)
+    if is_camp:
+        listed = {r.path.name for r in campaign.runs if r.path is not None}
+        for sub in sorted(p for p in path.iterdir() if p.is_dir() and p.name not in listed):
+            if (sub / RUN_JSON).is_file():
+                try:
+                    campaign.runs.append(read_run(sub, allow_truncated_tail=True))
+                except RigError as exc:
+                    log.warning("run folder %s not read: %s", sub, exc)
+        campaign.runs.sort(key=lambda r: str(r.meta.get("started_at") or ""))
+    return campaign, is_camp
+
+
+# --------------------------------------------------------------------------- figures of a run
+
+
+def _fmt(value: Any, spec: str) -> str | None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    return format(value, spec)
+
+
+def _limit_text(bound: Any, side: str | None, unit: str) -> str | None:
+    if bound is None:
+        return None
+    return f"{'≤' if side == 'above' else '≥'} {bound:g} {unit}"
+
+
+def _metric_rows(meta: dict[str, Any]) -> list[dict[str, Any]]:
+    """One row per metric of a run.json: value ± uncertainty, nominal model, limit, verdict."""
+    result = meta.get("result") or {}
+    unc = result.get("uncertainty") or {}
+    model = result.get("model") or {}
+    limits = meta.get("limits") or {}
+    rows = []
+    for key, label, unit, spec in METRICS:
+        value = result.get(key)
+        limit_key, side = LIMIT_OF_METRIC.get(key, (None, None))
+        bound = limits.get(limit_key) if limit_key else None
+        if bound is None:
+            verdict = ""
+        elif not_applicable(meta, key) is not None:
+            verdict = "not applicable"
+        elif value is None:
+            verdict = "not measured"
+        else:
+            verdict = "NOT OK" if (value > bound if side == "above" else value < bound) else "OK"
+        rows.append({
+            "key": key, "label": label, "unit": unit, "value": _fmt(value, spec),
+            "uncertainty": _fmt(unc.get(key), spec) if value is not None else None,
+            "model": _fmt(model.get(key), spec), "limit": _limit_text(bound, side, unit),
+            "verdict": verdict,
+            "why": not_applicable(meta, key) or (result.get("errors") or {}).get(key),
+        })
+    return rows
+
+
+def _run_outcome(meta: dict[str, Any]) -> tuple[str, list[str]]:
+    """(recorded outcome, causes) of a run.json (the outcome recomputed if not recorded)."""
+    outcome, causes, _ = run_outcome(meta, meta.get("limits"))
+    recorded = meta.get("outcome")
+    return (recorded if recorded in OUTCOME_WORDS else outcome), causes
+
+
+def _value_text(value: Any) -> str:
+    if isinstance(value, list | tuple):
+        return ", ".join(_value_text(v) for v in value)
+    if isinstance(value, dict):
+        return "; ".join(f"{k}: {_value_text(v)}" for k, v in value.items())
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def _calibration(meta: dict[str, Any]) -> dict[str, Any]:
+    """The run's calibration references as a table: a list of ``{"sensor": ..}`` entries or a
+    mapping sensor -> entry; with the messages of calibrations past due at the start."""
+    from rig.store.records import past_due
+
+    raw = meta.get("calibration")
+    entries: list[dict[str, Any]] = []
+    if isinstance(raw, dict):
+        for name, entry in raw.items():
+            entries.append({"sensor": name, **entry} if isinstance(entry, dict)
+                           else {"sensor": name, "reference": entry})
+    elif isinstance(raw, list):
+        entries = [e for e in raw if isinstance(e, dict)]
+    keys = list(dict.fromkeys(k for e in entries for k in e))
+    columns = [k for k in CALIBRATION_ORDER if k in keys] + \
+        [k for k in keys if k not in CALIBRATION_ORDER]
+    rows = [[_value_text(e[k]) if e.get(k) is not None else "" for k in columns]
+            for e in entries]
+    due = [{"sensor": e.get("sensor"), "due": e.get("due") or e.get("due_date")}
+           for e in entries if e.get("due") or e.get("due_date")]
+    try:
+        warnings = past_due(due, meta.get("started_at"))
+    except ValueError:
+        warnings = []
+    override = meta.get("calibration_override")
+    return {"columns": columns, "rows": rows, "warnings": warnings,
+            "override": None if override in (None, False) else _value_text(override)}
+
+
+def _loop_figure(runs: list[Run], title: str | None) -> tuple[str | None, list[str]]:
+    """The loops of the runs that can be analysed (SVG URI) and why the others cannot."""
+    from rig.analyse import analyse_run
+    from rig.certificate.plots import loop_svg
+
+    items, notes = [], []
+    for run in runs:
+        try:
+            items.append(analyse_run(run, profile=run.meta.get("profile")))
+        except Exception as exc:  # an aborted or short run has no loop to draw
+            notes.append(f"run {run.meta.get('label') or run.run_id}: no loop drawn ({exc})")
+    if not items:
+        return None, notes
+    return loop_svg(items, title=title), notes
+
+
+# --------------------------------------------------------------------------- campaign
+
+
+def _position_figure(campaign: Campaign, runs: list[Run], limits: dict[str, Any]
+                     ) -> dict[str, Any]:
+    """Lost motion against the input position with the nominal model and the batch band of the
+    design: the band as the campaign stored it (``summary.batch``), else computed the same way
+    (:func:`rig.campaign.batch_band`)."""
+    from rig.certificate.plots import position_svg
+
+    summary = campaign.meta.get("summary") or {}
+    points = []
+    for run in runs:
+        result = run.meta.get("result") or {}
+        angle = (run.meta.get("test") or {}).get("input_angle_deg")
+        value = result.get("lost_motion_arcmin")
+        if isinstance(angle, int | float) and isinstance(value, int | float):
+            points.append({"input_angle_deg": float(angle), "lost_motion_arcmin": float(value),
+                           "uncertainty": (result.get("uncertainty") or {}).get(
+                               "lost_motion_arcmin")})
+    model = (summary.get("model") or {}).get("lost_motion_arcmin")
+    if model is None:
+        models = (((r.meta.get("result") or {}).get("model") or {}).get("lost_motion_arcmin")
+                  for r in runs)
+        model = next((m for m in models if m is not None), None)
+    # the band as the campaign stored it (None: the batch model cannot use this unit)
+    batch = summary["batch"] if "batch" in summary else _batch_band(campaign, runs)
+    out: dict[str, Any] = {"figure": None, "batch": batch, "model": _fmt(model, ".3f"),
+                           "n_points": len(points)}
+    if points:
+        out["figure"] = position_svg(points, model, batch, limits.get("lost_motion_arcmin_max"))
+    if batch and batch.get("band_95_arcmin"):
+        low, high = batch["band_95_arcmin"]
+        out["band"] = f"{low:.3f} .. {high:.3f} arcmin"
+    return out
+
+
+def _batch_band(campaign: Campaign, runs: list[Run]) -> dict[str, Any] | None:
+    from analysis.loop import PROFILES
+    from rig.campaign import batch_band
+
+    unit = campaign.meta.get("unit") or (runs[0].unit if runs else {})
+    rated = next((r.test.get("rated_torque_Nm") for r in runs
+                  if r.test.get("rated_torque_Nm")), None)
+    if not unit or rated is None:
+        return None
+    try:
+        return batch_band(unit, float(rated),
+                          PROFILES.get(campaign.meta.get("profile") or "nabtesco", 3.0))
+    except (RigError, ValueError, TypeError) as exc:
+        log.warning("no batch band: %s", exc)
+        return None
+
+
+def _diagnosis_line(folder: Path, campaign_id: str | None, store: Store | None) -> str | None:
+    """The verdict of a diagnosis made for this campaign, in one line; None if none was."""
+    found: list[tuple[dict[str, Any], str]] = []
+    for path in sorted(folder.glob("*.json")):
+        if path.name == CAMPAIGN_JSON:
+            continue
+        doc = _json_or_none(path)
+        if doc is not None and doc.get("format") == DIAGNOSIS_FORMAT:
+            found.append((doc, f"{path.name} in the campaign folder"))
+    if campaign_id and store is not None:
+        cached = _json_or_none(store.root / "web" / "diagnosis" / f"{campaign_id}.json")
+        if cached is not None:
+            found.append((cached, "the control page's diagnosis"))
+        try:
+            results = store.results(campaign_id=campaign_id)
+        except (StoreError, ValueError) as exc:
+            log.warning("stored results of %s not read: %s", campaign_id, exc)
+            results = []
+        for res in results[::-1]:
+            if isinstance(res.get("diagnosis"), dict):
+                found.append((res["diagnosis"], f"rig reanalyse, backlash-rig "
+                              f"{res.get('software_version')}, {res.get('computed_at')}"))
+                break
+    for doc, source in found:
+        verdict = doc.get("verdict")
+        if isinstance(verdict, str) and verdict:
+            reason = doc.get("reason")
+            text = f"{verdict}" + (f" — {reason}" if reason else "")
+            return f"{text} (from {source})"
+    return None
+
+
+def _json_or_none(path: Path) -> dict[str, Any] | None:
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return doc if isinstance(doc, dict) else None
+
+
+# --------------------------------------------------------------------------- the page
+
+
+def certificate_context(subject: Subject) -> dict[str, Any]:
+    """Everything the template draws, from the subject's record."""
+    campaign, is_camp = _read(subject.path)
+    runs = campaign.runs
+    first = runs[0].meta if runs else {}
+    ctx: dict[str, Any] = {"is_campaign": is_camp, "folder": str(subject.path)}
+    if is_camp:
+        cmeta = campaign.meta
+        summary = cmeta.get("summary") or {}
+        ctx["header"] = header_fields(first, cmeta)
+        limits = cmeta.get("limits") or summary.get("limits") or first.get("limits") or {}
+        run_outcomes = [_run_outcome(r.meta) for r in runs]
+        outcome = cmeta.get("outcome") or summary.get("outcome")
+        if outcome not in OUTCOME_WORDS:
+            outcome = campaign_outcome([o for o, _ in run_outcomes],
+                                       str(cmeta.get("status") or "completed"))
+        causes = list(summary.get("failures") or [c for _, cs in run_outcomes for c in cs])
+        if cmeta.get("status") not in (None, "completed") and not summary.get("failures"):
+            causes.append(f"campaign {cmeta.get('status')}: "
+                          f"{summary.get('reason') or cmeta.get('reason') or 'no reason given'}")
+        ctx["runs"] = [{
+            "label": r.meta.get("label") or r.run_id, "run_id": r.run_id,
+            "position": _fmt((r.meta.get("test") or {}).get("input_angle_deg"), "g"),
+            "status": r.meta.get("status"), "metrics": {m["key"]: m for m in _metric_rows(r.meta)},
+            "outcome": OUTCOME_WORDS[o],
+        } for r, (o, _) in zip(runs, run_outcomes, strict=True)]
+        ctx["position"] = _position_figure(campaign, runs, limits)
+        lm = summary.get("lost_motion_arcmin") or {}
+        ctx["lm_summary"] = {k: _fmt(lm.get(k), ".3f") for k in ("mean", "min", "max", "std")}
+        ctx["lm_summary"]["n"] = lm.get("n")
+        sig = summary.get("runout_signature") or None
+        ctx["runout"] = None if not sig else (
+            f"{sig['amplitude']:.3f} arcmin at {sig['phase_deg']:.0f} deg "
+            f"(residual {sig['residual_rms']:.3f} arcmin)")
+        ctx["diagnosis"] = _diagnosis_line(subject.path, cmeta.get("campaign_id"),
+                                           subject.store)
+        unit = cmeta.get("unit") or first.get("unit") or {}
+        title = f"campaign {cmeta.get('name') or campaign.name}"
+    else:
+        meta = first
+        ctx["header"] = header_fields(meta)
+        limits = meta.get("limits") or {}
+        outcome, causes = _run_outcome(meta)
+        ctx["metrics"] = _metric_rows(meta)
+        ctx["run"] = {"label": meta.get("label"), "status": meta.get("status"),
+                      "reason": meta.get("reason"),
+                      "position": _fmt((meta.get("test") or {}).get("input_angle_deg"), "g")}
+        ctx["diagnosis"] = None
+        unit = meta.get("unit") or {}
+        title = None
+    ctx["metric_heads"] = [{"key": k, "label": label, "unit": u,
+                            "limit": _limit_text(limits.get(LIMIT_OF_METRIC[k][0]),
+                                                 LIMIT_OF_METRIC[k][1], u)
+                            if k in LIMIT_OF_METRIC else None}
+                           for k, label, u, _ in METRICS]
+    ctx["limits"] = [h for h in ctx["metric_heads"] if h["limit"]]
+    ctx["outcome"] = outcome
+    ctx["outcome_word"] = OUTCOME_WORDS[outcome]
+    ctx["causes"] = causes
+    ctx["unit"] = [(k, _value_text(v)) for k, v in unit.items()]
+    ctx["sensors"] = [(k, _value_text(v)) for k, v in (first.get("sensors") or {}).items()]
+    ctx["calibration"] = _calibration(first)
+    ctx["test"] = _test_line(first)
+    ctx["loop"], ctx["loop_notes"] = _loop_figure(runs, title)
+    ctx["not_recorded"] = NOT_RECORDED
+    return ctx
+
+
+def _test_line(meta: dict[str, Any]) -> str | None:
+    test = meta.get("test") or {}
+    parts = []
+    if test.get("rated_torque_Nm") is not None:
+        parts.append(f"rated torque {test['rated_torque_Nm']:g} N·m")
+    if test.get("amplitude_pct") is not None:
+        parts.append(f"amplitude {test['amplitude_pct']:g} % of rated")
+    loading = test.get("loading") or {}
+    if loading.get("mode"):
+        parts.append(f"loading {loading['mode']}")
+    if loading.get("sequence"):
+        parts.append(str(loading["sequence"]))
+    if test.get("temperature_C") is not None:
+        parts.append(f"housing {test['temperature_C']:.1f} °C")
+    return ", ".join(parts) or None
+
+
+def render_certificate(context: dict[str, Any]) -> str:
+    """The certificate page (self-contained HTML: figures inline, no external resources)."""
+    return template_env().get_template("certificate.html").render(**context)
+
+
+def html_to_pdf(html: str) -> bytes:
+    """The page as PDF (WeasyPrint; A4, one page for a run or a campaign of a few runs)."""
+    try:
+        import weasyprint
+    except (ImportError, OSError) as exc:  # OSError: pango missing
+        raise CertificateError(f"the PDF needs WeasyPrint and pango: {exc}") from exc
+    return weasyprint.HTML(string=html).write_pdf()
+
+
+def write_certificate(subject: Subject, pdf: Path | None = None, html: Path | None = None
+                      ) -> dict[str, Any]:
+    """Write the certificate as PDF and/or HTML; return its context (outcome, header ...)."""
+    context = certificate_context(subject)
+    page = render_certificate(context)
+    for path, data in ((html, page.encode("utf-8")), (pdf, html_to_pdf(page) if pdf else b"")):
+        if path is None:
+            continue
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(data)
+        except OSError as exc:
+            raise CertificateError(f"{path}: cannot write: {exc.strerror or exc}") from exc
+    return context
+
+
+def certificate_bytes(folder: str, store_root: str | None, samples: str | None, fmt: str
+                      ) -> bytes:
+    """The certificate of a run or campaign folder as ``fmt`` ("pdf" or "html") bytes; for a
+    worker process (arguments are plain strings). ``store_root``: the store (folder or URL)."""
+    store = None
+    if store_root is not None:
+        try:
+            store = Store(store_root, create=False, recover=False, samples=samples)
+        except StoreError as exc:
+            log.warning("store %s not opened: %s", store_root, exc)
+    page = render_certificate(certificate_context(Subject(Path(folder), store)))
+    return html_to_pdf(page) if fmt == "pdf" else page.encode("utf-8")

@@ -1,0 +1,153 @@
+"""The engine's view (:class:`rig.engine.io.RigIO`) of the opened drivers (:class:`RigDevices`).
+
+Time bases: the transducer, Modbus and input-motor drivers stamp samples with host
+``time.monotonic()``; python-can stamps CAN frames on the ``time.time()`` scale, so encoder
+samples are shifted by ``time.time() - time.monotonic()`` (taken at each call, a few us of
+jitter) onto the monotonic scale.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from typing import Any
+
+from drivers.errors import DeviceError, DeviceFault, DeviceProtocolError
+from rig.devices import RigDevices
+
+MAX_BAD_LINES_IN_A_ROW = 10
+
+
+class DevicesIO:
+    """Implements :class:`rig.engine.io.RigIO` over :class:`rig.devices.RigDevices`."""
+
+    def __init__(self, devices: RigDevices) -> None:
+        if devices.encoder is None or devices.transducer is None or devices.drive is None:
+            missing = [n for n in ("encoder", "transducer", "drive") if getattr(devices, n) is None]
+            raise DeviceFault("rig", "an output encoder, a torque transducer and a loading "
+                              "drive to measure with", f"missing: {', '.join(missing)}")
+        self.devices = devices
+        self.description = f"rig {devices.config.rig.rig_id} ({devices.config.source})"
+        self.has_input_encoder = devices.input_encoder is not None
+        self.has_input_motor = devices.input_motor is not None
+        self.has_climate = devices.climate is not None
+        self._bad_lines = 0
+        self._commanding = False
+
+    @property
+    def torque_limit_Nm(self) -> float:
+        """The rig's torque limit (N*m): the frozen configuration's within the drive's."""
+        return self.devices.torque_limit_Nm
+
+    @staticmethod
+    def _can_to_monotonic() -> float:
+        return time.time() - time.monotonic()
+
+    def sensors_meta(self) -> dict[str, Any]:
+        d = self.devices
+        meta: dict[str, Any] = {
+            "encoder_counts_per_rev": d.encoder.identity().counts_per_rev,
+            "torque_full_scale_Nm": d.transducer.config.full_scale_Nm,
+            "output_encoder": d.encoder.device,
+            "torque_transducer": d.transducer.device,
+            "stream_rate_Hz": d.transducer.config.stream_rate_Hz,
+        }
+        if d.encoder.period_s is not None:
+            meta["encoder_period_s"] = d.encoder.period_s
+        if d.input_encoder is not None:
+            meta["input_encoder"] = d.input_encoder.device
+        if d.torque_sensor is not None:
+            meta["crosscheck_torque_sensor"] = d.torque_sensor.name
+        return meta
+
+    def start_acquisition(self) -> None:
+        self.devices.encoder.readings()  # drop samples from before the plan
+        if self.devices.input_encoder is not None:
+            self.devices.input_encoder.readings()
+        self.devices.transducer.start_stream()
+
+    def stop_acquisition(self) -> None:
+        with contextlib.suppress(DeviceError, OSError, RuntimeError):
+            self.devices.transducer.stop_stream()
+
+    def samples_dropped(self) -> int:
+        """Encoder samples the drivers had to drop (full queues) since they opened."""
+        total = self.devices.encoder.dropped
+        if self.devices.input_encoder is not None:
+            total += self.devices.input_encoder.dropped
+        return total
+
+    def take_output(self) -> list[tuple[float, float]]:
+        shift = self._can_to_monotonic()
+        return [(r.t_s - shift, r.angle_deg) for r in self.devices.encoder.readings()]
+
+    def take_input(self) -> list[tuple[float, float]]:
+        enc = self.devices.input_encoder
+        if enc is None:
+            return []
+        shift = self._can_to_monotonic()
+        return [(r.t_s - shift, r.angle_deg) for r in enc.readings()]
+
+    def take_torque(self, timeout_s: float) -> list[tuple[float, float]]:
+        try:
+            r = self.devices.transducer.next_reading(timeout_s)
+        except DeviceProtocolError:
+            self._bad_lines += 1  # a garbled line: the stream goes on, unless it keeps failing
+            if self._bad_lines >= MAX_BAD_LINES_IN_A_ROW:
+                raise
+            return []
+        self._bad_lines = 0
+        return [(r.t_s, r.torque_Nm)]
+
+    def read_temperature(self) -> float | None:
+        climate = self.devices.climate
+        return None if climate is None else climate.state().housing_C
+
+    def read_crosscheck_torque(self) -> float | None:
+        sensor = self.devices.torque_sensor
+        return None if sensor is None else sensor.read().torque_Nm
+
+    def set_torque(self, torque_Nm: float) -> None:
+        self.devices.drive.set_torque(torque_Nm)
+
+    def enable_drive(self) -> None:
+        self.devices.drive.enable()
+        self._commanding = True
+
+    def safe_state(self) -> None:
+        self._commanding = False
+        if not self.devices.safe_state():
+            raise DeviceFault(self.devices.drive.name, "the safe state confirmed",
+                              "no reply (the drive watchdog disables it)")
+
+    def alive(self) -> None:
+        self.devices.alive()
+
+    def check(self) -> None:
+        d = self.devices
+        d.encoder.check()
+        if d.input_encoder is not None:
+            d.input_encoder.check()
+        status = d.drive.status()
+        if status.faulted:
+            raise DeviceFault(d.drive.name, "no latched drive fault",
+                              f"fault {int(status.fault_code)} {status.fault_code.name}")
+        if self._commanding and not status.enabled:
+            # fault-matrix row 2: the commanded torque can no longer be reached; whatever
+            # the loop measures from here is not the unit's
+            raise DeviceFault(d.drive.name, "the power stage enabled while the rig commands "
+                              f"torque ({status.setpoint_Nm:+.3g} N*m)",
+                              "disabled by someone else (another Modbus master, the drive's "
+                              "panel or its enable input): interlock, the run is incomplete")
+
+    def lock_input(self, angle_deg: float, timeout_s: float) -> float:
+        motor = self.devices.input_motor
+        if motor is None:
+            raise DeviceFault("input motor", "an input motor to lock the input", "none")
+        return motor.lock_at(angle_deg, timeout_s).angle_deg
+
+    def set_ambient(self, celsius: float) -> None:
+        climate = self.devices.climate
+        if climate is None:
+            raise DeviceFault("climate chamber", "a climate chamber", "none")
+        climate.set_temperature(celsius)

@@ -1,0 +1,228 @@
+"""``rig export``: a run or a campaign in the formats other tools read.
+
+A run:
+
+- ``csv``: a rig-run/1 run folder (run.json + samples.csv), :func:`rig.runformat.write_run`;
+  it reads back bit for bit.
+- ``parquet``: one file of the samples (float64 columns, text columns as strings) whose
+  schema metadata ``run.json`` holds the run.json text.
+- ``mat``: MATLAB (``scipy.io.savemat``, v5): one variable per column (numeric columns as
+  column vectors, text columns as cell arrays; a name MATLAB does not accept is changed, the
+  ``columns`` / ``variables`` cells pair them), ``run_id`` and ``meta_json``, the run.json
+  text (``jsondecode(meta_json)`` in MATLAB).
+- ``xlsx``: sheet ``samples`` and sheet ``meta`` (dotted key, value; lists as JSON text).
+  Numbers carry 16 significant digits (openpyxl writes ``%.16g``, Excel's own precision):
+  within 1e-15 relative, not bit for bit; use csv, parquet or mat for that.
+
+A campaign: its tidy results table (:mod:`rig.api.results`, one row per run, the table of
+``rig.open(...).results()``) as CSV, Parquet, MATLAB (one variable per column) or XLSX
+(sheets ``results`` and ``campaign``).
+Units follow the column names (s, N·m, deg, °C, arcmin, J).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from rig.errors import RigError
+from rig.runformat import Campaign, Run, write_run
+
+__all__ = ["FORMATS", "XLSX_MAX_ROWS", "ExportError", "default_out", "export_campaign",
+           "export_run", "matlab_names", "meta_rows", "resolve_target"]
+
+FORMATS = ("csv", "parquet", "mat", "xlsx")
+XLSX_MAX_ROWS = 1_048_576
+"""Rows of an Excel sheet, the header included."""
+
+
+class ExportError(RigError):
+    """A run or campaign that cannot be written in the format asked (one line, exit 2)."""
+
+
+def _check_format(fmt: str) -> str:
+    if fmt not in FORMATS:
+        raise ExportError(f"--format {fmt!r}: use one of {', '.join(FORMATS)}")
+    return fmt
+
+
+def default_out(name: str, fmt: str, campaign: bool) -> Path:
+    """``<name>`` (a run folder) for a run as csv, else ``<name>[-results].<fmt>``."""
+    if fmt == "csv" and not campaign:
+        return Path(name)
+    return Path(f"{name}-results.{fmt}" if campaign else f"{name}.{fmt}")
+
+
+def matlab_names(columns: list[str]) -> list[str]:
+    """Valid, distinct MATLAB variable names for ``columns`` (at most 63 characters, a
+    letter first, letters, digits and ``_``)."""
+    out: list[str] = []
+    reserved = {"run_id", "meta_json", "columns", "variables"}
+    for name in columns:
+        base = re.sub(r"\W", "_", name, flags=re.ASCII)
+        if not base or not base[0].isalpha():
+            base = f"c_{base}"
+        base = base[:63]
+        candidate, n = base, 1
+        while candidate in out or candidate in reserved:
+            n += 1
+            candidate = f"{base[:60]}_{n}"
+        out.append(candidate)
+    return out
+
+
+def meta_rows(meta: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
+    """``meta`` flattened to (dotted key, value) rows: objects opened, lists and null as
+    JSON text."""
+    rows: list[tuple[str, Any]] = []
+    for key, value in meta.items():
+        dotted = f"{prefix}{key}"
+        if isinstance(value, dict) and value:
+            rows += meta_rows(value, f"{dotted}.")
+        elif isinstance(value, str | int | float) and not isinstance(value, bool):
+            rows.append((dotted, value))
+        else:
+            rows.append((dotted, json.dumps(value, ensure_ascii=False)))
+    return rows
+
+
+def _meta_json(meta: dict[str, Any]) -> str:
+    return json.dumps(meta, ensure_ascii=False)
+
+
+def _prepare(out: Path, folder: bool = False) -> Path:
+    if folder:
+        if out.exists() and not out.is_dir():
+            raise ExportError(f"{out}: exists and is not a folder")
+    elif out.is_dir():
+        raise ExportError(f"{out}: is a folder; give a file name")
+    try:
+        (out if folder else out.parent).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ExportError(f"{out}: cannot create ({exc.strerror or exc})") from None
+    return out
+
+
+def export_run(run: Run, fmt: str, out: Path | None = None) -> Path:
+    """Write ``run`` as ``fmt`` to ``out`` (default :func:`default_out`); the path."""
+    fmt = _check_format(fmt)
+    out = _prepare(out or default_out(run.run_id, fmt, False), folder=fmt == "csv")
+    if fmt == "csv":
+        return write_run(run, out)
+    if fmt == "parquet":
+        arrays = [pa.array(run.data[c], type=pa.float64() if isinstance(run.data[c], np.ndarray)
+                           else pa.string()) for c in run.columns]
+        table = pa.Table.from_arrays(arrays, names=list(run.columns))
+        table = table.replace_schema_metadata({"run.json": _meta_json(run.meta)})
+        pq.write_table(table, out)
+    elif fmt == "mat":
+        names = matlab_names(run.columns)
+        variables: dict[str, Any] = {
+            var: (run.data[c].reshape(-1, 1) if isinstance(run.data[c], np.ndarray)
+                  else _cell(run.data[c]))
+            for var, c in zip(names, run.columns, strict=True)
+        }
+        variables.update(run_id=run.run_id, meta_json=_meta_json(run.meta),
+                         columns=_cell(run.columns), variables=_cell(names))
+        _savemat(out, variables)
+    else:
+        if run.n_samples + 1 > XLSX_MAX_ROWS:
+            raise ExportError(f"run {run.run_id}: {run.n_samples} samples do not fit an Excel "
+                              f"sheet ({XLSX_MAX_ROWS - 1} rows at most); export csv or "
+                              "parquet")
+        samples = pd.DataFrame({c: run.data[c] for c in run.columns}, columns=run.columns)
+        meta = pd.DataFrame(meta_rows(run.meta), columns=["key", "value"])
+        _xlsx(out, {"samples": samples, "meta": meta})
+    return out
+
+
+def export_campaign(campaign: Campaign, fmt: str, out: Path | None = None) -> Path:
+    """Write the campaign's results table as ``fmt`` (csv, parquet, mat, xlsx); the path."""
+    from rig.api.results import TEXT_COLUMNS, results_frame
+
+    fmt = _check_format(fmt)
+    name = campaign.meta.get("campaign_id") or campaign.name or "campaign"
+    out = _prepare(out or default_out(str(name), fmt, True))
+    table = results_frame(campaign)
+    if fmt == "csv":
+        table.to_csv(out, index=False)
+    elif fmt == "parquet":
+        arrow = pa.Table.from_pandas(table, preserve_index=False)
+        arrow = arrow.replace_schema_metadata({"campaign.json": _meta_json(campaign.meta)})
+        pq.write_table(arrow, out)
+    elif fmt == "mat":
+        names = matlab_names(list(table.columns))
+        variables: dict[str, Any] = {}
+        for var, col in zip(names, table.columns, strict=True):
+            values = table[col]
+            if col in TEXT_COLUMNS:
+                variables[var] = _cell(["" if v is None else str(v) for v in values])
+            else:
+                numbers = values.to_numpy(dtype=np.float64, na_value=np.nan)
+                variables[var] = numbers.reshape(-1, 1)
+        variables.update(meta_json=_meta_json(campaign.meta), columns=_cell(list(table.columns)),
+                         variables=_cell(names))
+        _savemat(out, variables)
+    else:
+        meta = pd.DataFrame(meta_rows(campaign.meta), columns=["key", "value"])
+        _xlsx(out, {"results": table, "campaign": meta})
+    return out
+
+
+def _cell(texts: list[str]) -> np.ndarray:
+    """A MATLAB cell column of strings."""
+    cell = np.empty((len(texts), 1), dtype=object)
+    for i, text in enumerate(texts):
+        cell[i, 0] = text
+    return cell
+
+
+def _savemat(out: Path, variables: dict[str, Any]) -> None:
+    from scipy.io import savemat
+
+    savemat(out, variables, do_compression=True, oned_as="column")
+
+
+def _xlsx(out: Path, sheets: dict[str, pd.DataFrame]) -> None:
+    with pd.ExcelWriter(out, engine="openpyxl") as writer:
+        for sheet, frame in sheets.items():
+            frame.to_excel(writer, sheet_name=sheet, index=False)
+
+
+def resolve_target(target: str, store: str | Path, samples: str | Path | None = None
+                   ) -> tuple[Path, bool]:
+    """(folder, is a campaign) of a run or campaign folder (or its run.json /
+    campaign.json), else of a run or campaign id of the store ``store``."""
+    from rig.runformat import CAMPAIGN_JSON, RUN_JSON, is_campaign
+    from rig.store import Store, StoreError, UnknownIdError
+
+    path = Path(target)
+    if path.exists():
+        if path.is_file() and path.name in (RUN_JSON, CAMPAIGN_JSON):
+            path = path.parent
+        if is_campaign(path):
+            return path, True
+        if not (path / RUN_JSON).is_file():
+            raise ExportError(f"{target}: not a run folder (no {RUN_JSON}) or a campaign "
+                              f"folder (no {CAMPAIGN_JSON})")
+        return path, False
+    try:
+        st = Store(store, create=False, recover=False, samples=samples)
+    except StoreError as exc:
+        raise ExportError(f"{target}: no such folder, and as an id: {exc}") from None
+    try:
+        return st.get_run(target).path, False
+    except UnknownIdError:
+        pass
+    try:
+        return st.get_campaign(target).path, True
+    except UnknownIdError:
+        raise ExportError(f"{target}: no such folder, and no run or campaign with that id "
+                          f"in the store {st.location}") from None

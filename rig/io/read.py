@@ -1,0 +1,205 @@
+"""Reading the mapped columns of another lab's file: delimited text (pyarrow) or NI TDMS
+(npTDMS). Values come back as float64 in the file's own units; :mod:`rig.io.importer` converts
+them. Every problem is a one-line :class:`rig.io.map.RunImportError` naming the file and the
+column (channel), and for text files the line.
+"""
+
+from __future__ import annotations
+
+import csv
+import difflib
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.csv as pacsv
+
+from rig.io.map import ImportMap, RunImportError
+
+__all__ = ["SourceData", "read_source"]
+
+NUMBER = r"^[+-]?(([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?|nan|inf|infinity)$"
+"""A number in a delimited file, once the decimal mark is a point (any case for nan/inf)."""
+
+
+@dataclass
+class SourceData:
+    """The mapped columns of a file: run column -> float64 values in the file's units.
+
+    ``where(run_column, index)``: the file, line/sample and column of a value, for errors.
+    """
+
+    values: dict[str, np.ndarray]
+    where: Callable[[str, int | None], str]
+    format: str
+
+
+def read_source(path: Path, mapping: ImportMap) -> SourceData:
+    """The columns ``mapping`` names, read from ``path`` (its format: the map's or by the
+    extension, ``.tdms`` for TDMS)."""
+    if not path.is_file():
+        raise RunImportError(f"{path}: no such file")
+    if mapping.file_format(path) == "tdms":
+        return _read_tdms(path, mapping)
+    return _read_delimited(path, mapping)
+
+
+def _wanted(mapping: ImportMap) -> dict[str, str]:
+    """Run column -> file column (channel) for every column the map names."""
+    refs = mapping.columns.model_dump(exclude_none=True)
+    return {name: ref["column"] for name, ref in refs.items()}
+
+
+def _missing(path: Path, run_column: str, name: str, have: list[str], what: str) -> str:
+    near = difflib.get_close_matches(name, have, n=1, cutoff=0.6)
+    hint = f"; did you mean {near[0]!r}?" if near else ""
+    return (f"{path}: {what} {name!r} (mapped to {run_column}) is not in the file; "
+            f"it has {have}{hint}")
+
+
+# --------------------------------------------------------------------------- delimited text
+
+
+def _header(path: Path, mapping: ImportMap) -> list[str]:
+    encoding = "utf-8-sig" if mapping.encoding.lower().replace("_", "-") in (
+        "utf-8", "utf8") else mapping.encoding
+    try:
+        with open(path, encoding=encoding, newline="") as f:
+            for _ in range(mapping.skip_rows):
+                if not f.readline():
+                    break
+            line = f.readline()
+    except LookupError:
+        raise RunImportError(f"{path}: unknown encoding {mapping.encoding!r} "
+                             "(map key 'encoding')") from None
+    except UnicodeDecodeError as exc:
+        raise RunImportError(f"{path}: not {mapping.encoding} text ({exc.reason} at byte "
+                             f"{exc.start}); set 'encoding' in the map") from None
+    except OSError as exc:
+        raise RunImportError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if not line.strip():
+        raise RunImportError(f"{path}:{mapping.skip_rows + 1}: no header line (after "
+                             f"skip_rows = {mapping.skip_rows})")
+    return [c.strip() for c in next(csv.reader([line.rstrip("\r\n")],
+                                               delimiter=mapping.delimiter))]
+
+
+def _read_delimited(path: Path, mapping: ImportMap) -> SourceData:
+    header = _header(path, mapping)
+    wanted = _wanted(mapping)
+    for run_column, name in wanted.items():
+        if name not in header:
+            raise RunImportError(_missing(path, run_column, name, header, "column"))
+        if header.count(name) > 1:
+            raise RunImportError(f"{path}:{mapping.skip_rows + 1}: column {name!r} appears "
+                                 "twice in the header")
+    header_line = mapping.skip_rows + 1
+    try:
+        table = pacsv.read_csv(
+            path,
+            read_options=pacsv.ReadOptions(skip_rows=mapping.skip_rows,
+                                           encoding=mapping.encoding,
+                                           column_names=None),
+            parse_options=pacsv.ParseOptions(delimiter=mapping.delimiter),
+            convert_options=pacsv.ConvertOptions(
+                include_columns=list(dict.fromkeys(wanted.values())),
+                column_types={name: pa.string() for name in wanted.values()},
+                strings_can_be_null=False, quoted_strings_can_be_null=False),
+        )
+    except (pa.ArrowInvalid, OSError, LookupError, UnicodeError) as exc:
+        text = " ".join(str(exc).split())
+        raise RunImportError(f"{path}: {text}") from None
+
+    def where(run_column: str, index: int | None) -> str:
+        name = wanted[run_column]
+        col = header.index(name) + 1
+        line = f"{header_line + 1 + index}:" if index is not None else ""
+        return f"{path}:{line}{col}: column {name!r} ({run_column})"
+
+    values = {run_column: _numbers(table.column(name), mapping.decimal, run_column, where)
+              for run_column, name in wanted.items()}
+    return SourceData(values, where, "csv")
+
+
+def _numbers(texts: pa.ChunkedArray, decimal: str, run_column: str,
+             where: Callable[[str, int | None], str]) -> np.ndarray:
+    """Text cells as float64: blank = missing (NaN); anything else must be a number."""
+    cells = pc.utf8_trim_whitespace(texts)
+    if decimal == ",":
+        points = pc.match_substring(cells, ".")
+        if pc.any(points).as_py():
+            i = _first(points)
+            raise RunImportError(f"{where(run_column, i)}: {cells[i].as_py()!r} has a '.' but "
+                                 "the map's decimal mark is ','")
+        cells = pc.replace_substring(cells, ",", ".")
+    blank = pc.equal(cells, "")
+    ok = pc.or_(blank, pc.match_substring_regex(cells, NUMBER, ignore_case=True))
+    if not pc.all(ok).as_py():
+        i = _first(pc.invert(ok))
+        raise RunImportError(f"{where(run_column, i)}: {texts[i].as_py()!r} is not a number")
+    numbers = pc.if_else(blank, pa.scalar(None, pa.string()), cells).cast(pa.float64())
+    return numbers.fill_null(np.nan).to_numpy()
+
+
+def _first(mask: pa.ChunkedArray) -> int:
+    return int(np.flatnonzero(mask.to_numpy(zero_copy_only=False))[0])
+
+
+# --------------------------------------------------------------------------- NI TDMS
+
+
+def _read_tdms(path: Path, mapping: ImportMap) -> SourceData:
+    from nptdms import TdmsFile
+
+    try:
+        tdms = TdmsFile.read(path)
+    except Exception as exc:  # npTDMS raises ValueError, KeyError, struct.error ... on junk
+        text = " ".join(str(exc).split()) or type(exc).__name__
+        raise RunImportError(f"{path}: not a readable TDMS file ({text})") from None
+    groups = [g.name for g in tdms.groups()]
+    if mapping.group is None:
+        if len(groups) != 1:
+            raise RunImportError(f"{path}: the file has the groups {groups}; name one with "
+                                 "'group' in the map")
+        group_name = groups[0]
+    elif mapping.group not in groups:
+        raise RunImportError(_missing(path, "group", mapping.group, groups, "group"))
+    else:
+        group_name = mapping.group
+    group = tdms[group_name]
+    have = [c.name for c in group.channels()]
+    wanted = _wanted(mapping)
+    for run_column, name in wanted.items():
+        if name not in have:
+            raise RunImportError(_missing(path, run_column, name, have,
+                                          f"channel of group {group_name!r}"))
+
+    def where(run_column: str, index: int | None) -> str:
+        name = wanted.get(run_column, wanted["torque_Nm"])
+        sample = f" sample {index + 1}" if index is not None else ""
+        return f"{path}: group {group_name!r} channel {name!r} ({run_column}){sample}"
+
+    values: dict[str, np.ndarray] = {}
+    for run_column, name in wanted.items():
+        data = np.asarray(group[name][:])
+        if data.dtype.kind not in "fiu":
+            raise RunImportError(f"{where(run_column, None)}: holds {data.dtype} values, "
+                                 "not numbers")
+        values[run_column] = data.astype(np.float64)
+    if "t_s" not in values:
+        channel = group[wanted["torque_Nm"]]
+        try:
+            values["t_s"] = np.asarray(channel.time_track(), dtype=np.float64)
+        except (KeyError, ValueError) as exc:
+            raise RunImportError(
+                f"{where('torque_Nm', None)}: the map names no t_s channel and this channel "
+                f"has no waveform timing ({exc}); add t_s to [columns]") from None
+    n = len(values["torque_Nm"])
+    for run_column, data in values.items():
+        if len(data) != n:
+            raise RunImportError(f"{where(run_column, None)}: {len(data)} samples, but the "
+                                 f"torque channel has {n}")
+    return SourceData(values, where, "tdms")

@@ -1,0 +1,1 @@
+"""The control page's HTTP routes: control, history, live stream and the quality view."""

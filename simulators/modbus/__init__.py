@@ -1,0 +1,2 @@
+"""The simulated Modbus devices (loading drive, torque sensor) on a pymodbus server, with a
+backdoor for injected faults and a test plant."""

@@ -1,0 +1,253 @@
+"""GearPlant: the simulated gear unit on the rig, behind simulators.plant.api.Plant.
+
+A deterministic time-domain model (simulators/plant/model.py) advanced to an injectable
+clock on every call, thread-safe, with sensor noise. The protocol faces read
+:meth:`GearPlant.snapshot`; tests read the true loop back with :meth:`true_parameters`,
+:meth:`true_twist_arcmin` and :meth:`true_lost_motion_arcmin`. docs/plant.md has the physics.
+
+Sign conventions: positive torque twists the output positively; the output turns opposite to
+the eccentric shaft: ``output_angle_deg = offset - input_angle_deg / ratio + twist`` with
+``ratio = z_external / (z_internal - z_external)`` (8 for 45/40).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import threading
+
+import numpy as np
+
+from simulators.clock import Clock, MonotonicClock
+from simulators.plant.api import PlantSnapshot
+from simulators.plant.config import PlantConfig
+from simulators.plant.geometry import ARCMIN_PER_RAD
+from simulators.plant.model import PlantModel
+
+_FAST_FORWARD_MIN_STEPS = 16
+
+
+class GearPlant:
+    """The unit on the rig (implements simulators.plant.api.Plant; thread-safe).
+
+    ``clock`` defaults to a MonotonicClock (real time); pass a ManualClock for tests. The
+    model advances in fixed steps of ``rig.step_s`` on a grid started at construction; a
+    snapshot between grid points is interpolated linearly. While the plant is at rest
+    (drive settled, output still) long waits are crossed in one long implicit step.
+    """
+
+    def __init__(self, config: PlantConfig, clock: Clock | None = None) -> None:
+        self.config = config
+        self.clock = clock if clock is not None else MonotonicClock()
+        self._lock = threading.Lock()
+        self._model = PlantModel(config)
+        self._t0 = self.clock.now_s()
+        self._n = 0
+        self._rng = np.random.default_rng(config.noise.seed)
+        self._twist_noise_deg = config.noise.twist_arcsec_rms / 3600.0
+        self._torque_noise = config.noise.torque_Nm_rms
+        self._prev = self._current = self._state()
+
+    # -- time ------------------------------------------------------------------------------
+    def _state(self) -> tuple[float, ...]:
+        m = self._model
+        return (m.output_angle_deg(), m.input_deg, m.flange_Nm, m.temperature_C)
+
+    def _advance(self) -> float:
+        """Step the model to the first grid point at or after the clock; return the time."""
+        now = self.clock.now_s() - self._t0
+        dt = self._model.dt
+        target = math.ceil(now / dt - 1e-9)
+        while self._n < target:
+            remaining = target - self._n
+            if remaining > _FAST_FORWARD_MIN_STEPS and self._model.is_quiescent():
+                jump = remaining - 1
+                self._model.step(jump * dt)
+                self._n += jump
+            else:
+                self._prev = self._state()
+                self._model.step(dt)
+                self._n += 1
+            self._current = self._state()
+        return now
+
+    def _interpolated(self, now: float) -> tuple[float, ...]:
+        dt = self._model.dt
+        frac = 1.0 - (self._n * dt - now) / dt
+        if frac >= 1.0 or self._n == 0:
+            return self._current
+        frac = max(frac, 0.0)
+        return tuple(p + frac * (c - p) for p, c in zip(self._prev, self._current, strict=True))
+
+    # -- Plant protocol --------------------------------------------------------------------
+    def snapshot(self) -> PlantSnapshot:
+        """Advance to the clock's time and return the sensors' view (noise included)."""
+        with self._lock:
+            now = self._advance()
+            out_deg, in_deg, true_Nm, temp = self._interpolated(now)
+            m = self._model
+            torque = m.sensor_torque_Nm(true_Nm)
+            if self._twist_noise_deg or self._torque_noise:
+                noise_twist, noise_torque = self._rng.standard_normal(2).tolist()
+                out_deg += noise_twist * self._twist_noise_deg
+                torque += noise_torque * self._torque_noise
+            return PlantSnapshot(
+                t_s=now,
+                output_angle_deg=out_deg,
+                input_angle_deg=in_deg,
+                torque_Nm=torque,
+                true_torque_Nm=true_Nm,
+                temperature_C=temp,
+                torque_command_Nm=m.command_Nm,
+                drive_enabled=m.enabled,
+            )
+
+    def command_torque(self, torque_Nm: float) -> None:
+        """Set the drive's torque setpoint (N*m); the drive clips it to its torque limit."""
+        value = float(torque_Nm)
+        if not math.isfinite(value):
+            raise ValueError(f"torque command must be a finite number of N*m, got {torque_Nm!r}")
+        with self._lock:
+            self._advance()
+            self._model.command_Nm = value
+
+    def enable_drive(self, enabled: bool) -> None:
+        """Enable the drive, or disable it (its torque decays to zero with the loop lag)."""
+        with self._lock:
+            self._advance()
+            self._model.enabled = bool(enabled)
+
+    def lock_input_at(self, angle_deg: float) -> None:
+        """Turn the eccentric shaft to ``angle_deg`` (at rig.input_speed_deg_per_s) and lock."""
+        value = float(angle_deg)
+        if not math.isfinite(value):
+            raise ValueError(f"input angle must be a finite number of deg, got {angle_deg!r}")
+        with self._lock:
+            self._advance()
+            self._model.input_target_deg = value
+
+    def set_ambient_temperature(self, celsius: float) -> None:
+        """Set the ambient/heater setpoint the housing temperature follows (deg C)."""
+        value = float(celsius)
+        if not math.isfinite(value):
+            raise ValueError(f"ambient temperature must be finite deg C, got {celsius!r}")
+        with self._lock:
+            self._advance()
+            self._model.ambient_C = value
+
+    # -- truth for tests -------------------------------------------------------------------
+    def _scratch(self) -> PlantModel:
+        model = copy.copy(self._model)
+        model.friction = copy.copy(self._model.friction)
+        return model
+
+    def true_parameters(self) -> dict:
+        """The true loop now (at the current lock angle and housing temperature).
+
+        Keys (vocabulary units): ``play_arcmin`` (the whole dead zone at zero torque: mesh
+        with runout, spacing, thermal terms, plus bearing clearance), its parts
+        ``*_play_arcmin`` and ``mesh_play_um``; ``stiffness_Nm_per_arcmin`` (the flank slope
+        at high torque: mesh in series with shaft compliance), ``mesh_stiffness_*``;
+        ``apparent_play_arcmin`` (high-torque flanks extrapolated to zero torque);
+        ``friction_torque_Nm``, ``torque_sensor_offset_Nm``, and each effect's parameters.
+        """
+        with self._lock:
+            self._advance()
+            m = self._model
+            geo = m.geometry
+            fx = self.config.effects
+            theta, temp = m.input_deg, m.temperature_C
+            mesh_um = m.mesh_play_um()
+            play = m.play_rad() * ARCMIN_PER_RAD
+            c = m.compliance
+            stiffness = 1.0 / (c.c_lin * ARCMIN_PER_RAD)
+            extra = c.soft_rad + c.bearing_c * c.bearing_torque_Nm
+            n, tooth_int, tooth_ext = geo.tooth_pair(theta)
+            params = {
+                "play_arcmin": play,
+                "play_um": mesh_um + geo.bearing_play_um,
+                "mesh_play_um": mesh_um,
+                "mesh_play_arcmin": geo.arcmin_from_um(mesh_um),
+                "nominal_play_arcmin": geo.nominal.play_arcmin,
+                "runout_play_arcmin": geo.arcmin_from_um(geo.runout_play_um(theta)),
+                "runout_center_distance_change_um": 1000.0 * (
+                    geo.center_distance_mm(theta) - geo.eccentric_distance_mm
+                ) if geo.runout_on else 0.0,
+                "spacing_play_arcmin": geo.arcmin_from_um(geo.spacing_play_um(theta)),
+                "thermal_play_arcmin": geo.arcmin_from_um(geo.thermal_play_um(temp)),
+                "bearing_play_arcmin": geo.arcmin_from_um(geo.bearing_play_um),
+                "apparent_play_arcmin": play + 2.0 * extra * ARCMIN_PER_RAD,
+                "twist_offset_arcmin": m.pitch_offset_rad() * ARCMIN_PER_RAD,
+                "stiffness_Nm_per_arcmin": stiffness,
+                "mesh_stiffness_Nm_per_arcmin": geo.nominal.stiffness_Nm_per_arcmin,
+                "mesh_stiffness_N_per_um": geo.nominal.mesh_stiffness_N_per_um,
+                "contact_ratio": geo.nominal.contact_ratio,
+                "working_pressure_angle_deg": geo.nominal.working_pressure_angle_deg,
+                "shaft_stiffness_Nm_per_arcmin": fx.shaft_compliance.stiffness_Nm_per_arcmin
+                if fx.shaft_compliance.enabled else math.inf,
+                "friction_torque_Nm": m.friction.quasi_static_level_Nm() if m.friction else 0.0,
+                "torque_sensor_offset_Nm": fx.torque_sensor_offset.offset_Nm
+                if fx.torque_sensor_offset.enabled else 0.0,
+                "torque_gain_positive": fx.direction_gain.gain_positive
+                if fx.direction_gain.enabled else 1.0,
+                "torque_gain_negative": fx.direction_gain.gain_negative
+                if fx.direction_gain.enabled else 1.0,
+                "stiffening_twist_arcmin": c.soft_rad * ARCMIN_PER_RAD,
+                "stiffening_torque_Nm": c.soft_scale_Nm if c.soft_rad else 0.0,
+                "bearing_soft_stiffness_Nm_per_arcmin": 1.0 / (c.bearing_c * ARCMIN_PER_RAD)
+                if c.bearing_c else math.inf,
+                "bearing_soft_stage_torque_Nm": c.bearing_torque_Nm,
+                "creep_stiffness_Nm_per_arcmin": 1.0 / (m.creep_c * ARCMIN_PER_RAD)
+                if m.creep_c else math.inf,
+                "creep_time_constant_s": self.config.effects.creep.time_constant_s
+                if m.creep_c else 0.0,
+                "creep_twist_arcmin": m.creep_rad * ARCMIN_PER_RAD,
+                "temperature_C": temp,
+                "input_angle_deg": theta,
+                "tooth_index": n,
+                "tooth_internal": tooth_int,
+                "tooth_external": tooth_ext,
+                "ratio": m.ratio,
+                "drive_torque_Nm": m.drive_Nm,
+                "effects": fx.enabled_names(),
+            }
+            return params
+
+    def true_twist_arcmin(self, torque_Nm: np.ndarray, start_flank: int = -1) -> np.ndarray:
+        """Quasi-static truth: the twist (arcmin, output angle minus ``-input / ratio``, zero
+        at the centre of the nominal play) along a slow path of flange torques ``torque_Nm``
+        (the torque through the unit, before the sensor's offset/gain), starting at rest on
+        ``start_flank`` after a preload (rig.preload_torque_Nm), at the current lock angle and
+        housing temperature. Friction and creep are in their slow limits."""
+        if start_flank not in (-1, 1):
+            raise ValueError(f"start_flank must be -1 or +1, got {start_flank!r}")
+        torques = np.asarray(torque_Nm, dtype=float).ravel()
+        if not np.all(np.isfinite(torques)):
+            raise ValueError("torque_Nm must be finite")
+        with self._lock:
+            self._advance()
+            model = self._scratch()
+        return np.asarray(model.quasi_static_path(torques, start_flank)) * ARCMIN_PER_RAD
+
+    def true_lost_motion_arcmin(self, rated_torque_Nm: float, pct: float) -> float:
+        """Lost motion (arcmin) of the quasi-static loop: the difference of the loop's mid
+        twists (mean of the two branches) at +pct % and -pct % of the rated torque, on a cycle
+        0 -> +T -> -T -> +T (Nabtesco/GB/T definition; includes the elastic twist)."""
+        if not (rated_torque_Nm > 0 and 0 < pct <= 100):
+            raise ValueError(f"need rated torque > 0 and 0 < pct <= 100, got "
+                             f"{rated_torque_Nm!r}, {pct!r}")
+        n = 2001
+        up = np.linspace(0.0, rated_torque_Nm, n)
+        down = np.linspace(rated_torque_Nm, -rated_torque_Nm, 2 * n)
+        back = np.linspace(-rated_torque_Nm, rated_torque_Nm, 2 * n)
+        twist = self.true_twist_arcmin(np.concatenate([up, down, back]))
+        unloading = twist[n:3 * n]
+        loading = twist[3 * n:]
+        level = rated_torque_Nm * pct / 100.0
+
+        def mid(torque: float) -> float:
+            a = np.interp(torque, down[::-1], unloading[::-1])
+            b = np.interp(torque, back, loading)
+            return 0.5 * (a + b)
+
+        return float(mid(level) - mid(-level))

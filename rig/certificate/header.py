@@ -18,7 +18,7 @@ if TYPE_CHECKING:
 
     from rig.runformat import Campaign
 
-TEMPLATES = Path(__file__).resolve().parent / "templates"
+TEMPLATES = Path(__file__).resolve().parent.parent / "templates"
 NOT_RECORDED = "not recorded"
 
 

@@ -79,8 +79,8 @@ LOADINGS = ("stepped", "ramp", "sine")
 COARSE_COUNTS = tuple(2 ** k for k in range(19, 24))
 
 #: Inspected unit data the validation units are drawn around (seed 000 Table 2 pairs 1 and 2).
-UNIT_FILES = tuple(Path(__file__).resolve().parent / "examples" / "units" / f"seed000-pair{n}.json"
-                   for n in (1, 2))
+UNITS_DIR = Path(__file__).resolve().parent.parent / "examples" / "units"
+UNIT_FILES = tuple(UNITS_DIR / f"seed000-pair{n}.json" for n in (1, 2))
 RATE_HZ = 250.0
 DURATION_S = 10.0
 RATED_NM = 10.0

@@ -15,7 +15,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-DEFAULT_PLANT_TOML = Path(__file__).resolve().parent / "default_plant.toml"
+DEFAULT_PLANT_TOML = Path(__file__).resolve().parent.parent / "default_plant.toml"
 
 EFFECT_NAMES = (
     "friction",

@@ -64,12 +64,14 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
     app.state.hub = hub
     app.state.controller = controller
 
-    from rig.web import routes_control, routes_history, routes_live
+    from rig.web.routes import control as routes_control
+    from rig.web.routes import history as routes_history
+    from rig.web.routes import live as routes_live
 
     app.include_router(routes_control.router)
     app.include_router(routes_history.router)
     app.include_router(routes_live.router)
-    from rig.web import routes_spc
+    from rig.web.routes import spc as routes_spc
 
     app.include_router(routes_spc.router)
     app.add_middleware(GuardMiddleware, loopback_only=settings.check_host)

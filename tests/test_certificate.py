@@ -54,7 +54,7 @@ def _pages(path: Path) -> int:
 @pytest.fixture(scope="module")
 def measured(tmp_path_factory: pytest.TempPathFactory) -> dict:
     """One run (limits 9' lost motion, 8' backlash: OK) and a campaign at 0 and 180 deg
-    (limit 1': NOT OK), measured in parallel."""
+    (limit 1': NOT OK), measured one after the other."""
     tmp = tmp_path_factory.mktemp("cert")
     (tmp / "camp.toml").write_text(CAMPAIGN)
     run_cmd = ["measure", "--simulated", "--unit", str(UNIT), "--serial", "SN-CERT-1",
@@ -63,10 +63,11 @@ def measured(tmp_path_factory: pytest.TempPathFactory) -> dict:
                "--json", str(tmp / "run.json")]
     camp_cmd = ["campaign", "run", str(tmp / "camp.toml"), "--simulated", "--store",
                 str(tmp / "s2"), "--json", str(tmp / "camp.json")]
-    procs = [subprocess.Popen([*RIG, *cmd], cwd=tmp, env=ENV, stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT, text=True)
-             for cmd in (run_cmd, camp_cmd)]
-    outs = [p.communicate(timeout=180)[0] for p in procs]
+    procs, outs = [], []
+    for cmd in (run_cmd, camp_cmd):  # one simulated rig at a time: a loaded CI box
+        procs.append(subprocess.Popen([*RIG, *cmd], cwd=tmp, env=ENV, stdout=subprocess.PIPE,
+                                      stderr=subprocess.STDOUT, text=True))
+        outs.append(procs[-1].communicate(timeout=180)[0])
     assert procs[0].returncode == 0, outs[0][-2000:]
     assert procs[1].returncode == 1, outs[1][-2000:]  # NOT OK against 1 arcmin
     return {"tmp": tmp, "run": json.loads((tmp / "run.json").read_text()),

@@ -133,6 +133,7 @@ class Engine:
         self._dropped_at_begin = 0
         self._frozen: FrozenTwistWatch | None = None
         self._recent: deque[MergedRow] = deque()
+        self._torque_arrivals: deque[tuple[float, float]] = deque(maxlen=4000)
         self._open: OpenRun | None = None
         self._setpoint = 0.0
         self._sample_window = 0
@@ -316,12 +317,14 @@ class Engine:
                 if not self._stop_threads.is_set():
                     self._trip(str(exc))
                 return
+            arrived = time.monotonic()
             for t, torque in samples:
                 reason = check_measured(torque, self.trip_Nm, "torque transducer")
                 if reason is not None:
                     self._trip(reason)
                 with self._lock:
                     self._merger.add_torque(t, torque)
+                    self._torque_arrivals.append((arrived, torque))
 
     def _poll_loop(self) -> None:
         opt = self.options
@@ -371,32 +374,31 @@ class Engine:
             self._cross_pending.append((t0, t1, torque))
 
     def _compare_crosscheck(self) -> str | None:
-        """Compare each pending cross-check reading with the transducer's torque of the same
-        instant, once merged rows cover it: the distance (N*m) to the range the transducer
-        read from the request to the reply, ±``crosscheck_window_s`` (a ramp moves the torque
-        between the two reads; comparing with the newest merged row, which lags, read 14-22 %
-        of rated apart on a healthy rig). Returns a trip reason beyond the limit. Called
-        holding ``_lock``."""
+        """Compare each pending cross-check reading with the torque transducer's readings that
+        arrived on this PC while the cross-check sensor was read (both in this PC's clock:
+        the merged rows carry the encoder's clock, which is not the Modbus read's, and an
+        offset between the two read 14-22 % of rated apart on a healthy rig). Compared only
+        when the transducer's torque has stood still for ``crosscheck_still_s`` before the
+        read, so a ramp or a late line cannot look like a disagreement; a transducer stream
+        that is late by more than that shows as one. Returns a trip reason beyond the limit.
+        Called holding ``_lock``."""
         w = self.options.crosscheck_window_s
         pending = self._cross_pending
-        if not pending or not self._recent or self._open is None:
-            if self._open is None:
-                pending.clear()
+        arrivals = self._torque_arrivals
+        if self._open is None:
+            pending.clear()
             return None
-        t_end = self._recent[-1].t_mono_s
+        if not pending or not arrivals:
+            return None
+        t_end = arrivals[-1][0]
         reason = None
         while pending and pending[0][1] + w <= t_end:
             t0, t1, value = pending.popleft()
-            # the reading is of some instant between the request and the reply (a loaded
-            # machine stretches that): compare with everything the transducer read then
-            near = [r.torque_Nm for r in self._recent if t0 - w <= r.t_mono_s <= t1 + w]
-            before = [r.torque_Nm for r in self._recent
-                      if t0 - self.options.crosscheck_still_s <= r.t_mono_s <= t1 + w]
+            near = [v for t, v in arrivals if t0 - w <= t <= t1 + w]
+            before = [v for t, v in arrivals
+                      if t0 - self.options.crosscheck_still_s <= t <= t1 + w]
             limit = self._cross_limit_Nm
             if not near or (limit is not None and max(before) - min(before) > 0.25 * limit):
-                # the torque moved around the read: which instant each channel's reading is
-                # of is not known well enough on a loaded PC (a serial line time-stamped on
-                # arrival); compare only when it has stood still for crosscheck_still_s
                 continue
             diff = max(0.0, min(near) - value, value - max(near))
             self._open.note_crosscheck(diff)

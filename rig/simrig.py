@@ -297,7 +297,7 @@ class SimulatedRig:
         cmd = [sys.executable, "-c", "from rig.cli import main; main()", "sim",
                "--transducer", self.transducer_transport, "--modbus", self.modbus_transport,
                "--sync-period", repr(self.sync_period_s),
-               "--stream-rate", repr(self.stream_rate_Hz)]
+               "--stream-rate", repr(self.stream_rate_Hz), "--exit-with-parent"]
         arg = self.plant_config_arg
         if isinstance(arg, PlantConfig):
             raise ValueError("out of process the plant config must be a TOML path (or None)")
@@ -374,14 +374,19 @@ def _write_stats(sim: SimulatedRig, path: Path) -> None:
     os.replace(tmp, path)
 
 
-def serve_until_signalled(sim: SimulatedRig, poll_s: float = 0.2) -> int:
-    """Run ``sim`` (started) until SIGTERM/SIGINT; then stop cleanly and return 0."""
+def serve_until_signalled(sim: SimulatedRig, poll_s: float = 0.2,
+                          parent_pid: int | None = None) -> int:
+    """Run ``sim`` (started) until SIGTERM/SIGINT, or until the process ``parent_pid`` is no
+    longer this one's parent (it died: an orphaned simulator would load the PC for ever);
+    then stop cleanly and return 0."""
     done = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: done.set())
                 for sig in (signal.SIGTERM, signal.SIGINT)}
     stats_path = os.environ.get("RIG_SIM_STATS")
     try:
         while not done.wait(poll_s):
+            if parent_pid is not None and os.getppid() != parent_pid:
+                break
             if stats_path:
                 _write_stats(sim, Path(stats_path))
     finally:

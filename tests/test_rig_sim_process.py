@@ -177,3 +177,34 @@ def test_rig_sim_refuses_a_bad_plant_file(tmp_path):
                           text=True, timeout=60)
     assert proc.returncode == 2 and proc.stdout == ""
     assert f"rig: error: {plant}: key rig.step_s" in proc.stderr
+
+
+def test_a_simulator_started_by_a_killed_program_stops_too():
+    """A measuring program that starts `rig sim` out of process and is killed with -9 leaves
+    no simulator behind: orphans kept the CI box loaded for the rest of the suite."""
+    import os
+
+    parent = subprocess.Popen(
+        [sys.executable, "-c", "import time\nfrom rig.simrig import SimulatedRig\n"
+         "s = SimulatedRig(None, in_process=False)\ns.start()\n"
+         "print(s.process.pid, flush=True)\ntime.sleep(600)"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = _first_line(parent)
+        assert line.strip(), parent.stderr.read() if parent.poll() is not None else "no pid"
+        child = int(line)
+        os.kill(parent.pid, signal.SIGKILL)
+        parent.wait(10)
+        deadline = time.monotonic() + 15
+        while time.monotonic() < deadline:
+            try:
+                os.kill(child, 0)
+            except ProcessLookupError:
+                break
+            time.sleep(0.1)
+        else:
+            os.kill(child, signal.SIGKILL)
+            pytest.fail("the simulator outlived the program that started it")
+    finally:
+        if parent.poll() is None:
+            parent.kill()

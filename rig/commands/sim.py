@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 from enum import StrEnum
 from pathlib import Path
@@ -46,6 +47,9 @@ def register(app: typer.Typer) -> None:
             min=1, max=99, help="SCHED_FIFO priority of the simulated devices (they stand in "
             "for hardware a busy PC cannot starve), also written as [rig] realtime_priority "
             "into the rig config. Default: $RIG_SIM_REALTIME_PRIORITY, else none.")] = None,
+        exit_with_parent: Annotated[bool, typer.Option(
+            "--exit-with-parent", help="Stop when the process that started this one is gone "
+            "(a measuring program killed with -9 leaves no simulator behind).")] = False,
     ) -> None:
         """Start the simulated rig on 127.0.0.1 and serve until SIGINT/SIGTERM.
 
@@ -70,4 +74,5 @@ def register(app: typer.Typer) -> None:
 
         apply_realtime_priority(sim_rig.realtime_priority, what="simulated rig")
         print(json.dumps(addresses), flush=True)
-        raise typer.Exit(serve_until_signalled(sim_rig))
+        raise typer.Exit(serve_until_signalled(
+            sim_rig, parent_pid=os.getppid() if exit_with_parent else None))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import stat
 from pathlib import Path
 from typing import Any
@@ -17,7 +18,8 @@ import numpy as np
 
 from rig.errors import RigError
 
-__all__ = ["MAX_JSON_BYTES", "finite_for_json", "parse_json_text", "read_json_file"]
+__all__ = ["MAX_JSON_BYTES", "check_bounded_file", "finite_for_json", "parse_json_text",
+           "read_json_file"]
 
 MAX_JSON_BYTES = 4 * 1024 * 1024
 """A unit or a run.json is a few kB; 4 MB leaves room for long notes and refuses the absurd."""
@@ -31,12 +33,7 @@ def read_json_file(path: str | Path, error: type[RigError], what: str,
         info = file.stat()
     except OSError as exc:
         raise error(f"cannot read {file}, the {what} ({exc.strerror or exc})") from exc
-    if not stat.S_ISREG(info.st_mode):
-        raise error(f"{file}: the {what} must be a regular file, not a device, FIFO or "
-                    "directory")
-    if info.st_size > max_bytes:
-        raise error(f"{file}: the {what} is {info.st_size} bytes, more than the "
-                    f"{max_bytes} a {what} can be")
+    check_bounded_file(file, info, error, what, max_bytes)
     try:
         text = file.read_text(encoding="utf-8")
     except OSError as exc:
@@ -44,6 +41,18 @@ def read_json_file(path: str | Path, error: type[RigError], what: str,
     except UnicodeDecodeError as exc:
         raise error(f"{file}: not UTF-8 text ({exc.reason} at byte {exc.start})") from exc
     return parse_json_text(text, str(file), error)
+
+
+def check_bounded_file(file: Path, info: os.stat_result, error: type[RigError], what: str,
+                       max_bytes: int) -> None:
+    """``error`` unless ``file`` (its ``stat``) is a regular file of at most ``max_bytes``:
+    a device or FIFO (``/dev/zero``) would be read for ever."""
+    if not stat.S_ISREG(info.st_mode):
+        raise error(f"{file}: the {what} must be a regular file, not a device, FIFO or "
+                    "directory")
+    if info.st_size > max_bytes:
+        raise error(f"{file}: the {what} is {info.st_size} bytes, more than the "
+                    f"{max_bytes} a {what} can be")
 
 
 def parse_json_text(text: str, where: str, error: type[RigError], **kwargs: Any) -> Any:

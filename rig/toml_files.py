@@ -7,7 +7,6 @@ value that fails validation, the dotted key (``file: drive.torque_limit_Nm: ...`
 from __future__ import annotations
 
 import re
-import stat
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -15,6 +14,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from rig.errors import RigError
+from rig.json_files import check_bounded_file
 
 MAX_TOML_BYTES = 1024 * 1024
 """A rig configuration or a campaign is a few kB; 1 MB refuses the absurd before reading."""
@@ -28,12 +28,7 @@ def read_toml(path: str | Path, error: type[RigError], what: str) -> dict[str, A
         info = file.stat()
     except OSError as exc:
         raise error(f"{file}: cannot read the {what} ({exc.strerror or exc})") from exc
-    if not stat.S_ISREG(info.st_mode):
-        raise error(f"{file}: the {what} must be a regular file, not a device, FIFO or "
-                    "directory")
-    if info.st_size > MAX_TOML_BYTES:
-        raise error(f"{file}: the {what} is {info.st_size} bytes, more than the "
-                    f"{MAX_TOML_BYTES} a {what} can be")
+    check_bounded_file(file, info, error, what, MAX_TOML_BYTES)
     try:
         text = file.read_text(encoding="utf-8")
     except OSError as exc:

@@ -831,7 +831,7 @@ def _read_samples(folder: Path, allow_truncated_tail: bool) -> Samples:
     csv_path = folder / SAMPLES_CSV
     try:
         return read_samples_csv(csv_path, allow_truncated_tail)
-    except RunFormatError:
+    except (RunFormatError, OSError):  # OSError: pyarrow found the CSV gone while opening it
         if csv_path.exists() or not parquet.is_file():
             raise
     return read_samples_parquet(parquet)  # the store finalised the run meanwhile

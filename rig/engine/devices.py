@@ -4,6 +4,11 @@ Time bases: the transducer, Modbus and input-motor drivers stamp samples with ho
 ``time.monotonic()``; python-can stamps CAN frames on the ``time.time()`` scale, so encoder
 samples are shifted by ``time.time() - time.monotonic()`` (taken at each call, a few us of
 jitter) onto the monotonic scale.
+
+Those are arrival times, late by whatever a busy PC adds. The streamed channels are given
+the times of their devices' clocks instead (:class:`rig.engine.steady_clock.SteadyClock`):
+the transducer's device time of each line, and for an encoder with a steady period (SYNC
+producer or event timer) its sample number times that period.
 """
 
 from __future__ import annotations
@@ -13,7 +18,9 @@ import time
 from typing import Any
 
 from drivers.errors import DeviceError, DeviceFault, DeviceProtocolError
+from drivers.transducer.protocol import DEVICE_TIME_MODULO_S
 from rig.devices import RigDevices
+from rig.engine.steady_clock import SteadyClock
 
 MAX_BAD_LINES_IN_A_ROW = 10
 
@@ -33,6 +40,9 @@ class DevicesIO:
         self.has_climate = devices.climate is not None
         self._bad_lines = 0
         self._commanding = False
+        self._torque_clock = SteadyClock(modulo_s=DEVICE_TIME_MODULO_S)
+        self._output_clock = SteadyClock()
+        self._input_clock = SteadyClock()
 
     @property
     def torque_limit_Nm(self) -> float:
@@ -78,15 +88,24 @@ class DevicesIO:
         return total
 
     def take_output(self) -> list[tuple[float, float]]:
-        shift = self._can_to_monotonic()
-        return [(r.t_s - shift, r.angle_deg) for r in self.devices.encoder.readings()]
+        return self._encoder_samples(self.devices.encoder, self._output_clock)
 
     def take_input(self) -> list[tuple[float, float]]:
         enc = self.devices.input_encoder
         if enc is None:
             return []
+        return self._encoder_samples(enc, self._input_clock)
+
+    def _encoder_samples(self, encoder: Any, clock: SteadyClock
+                         ) -> list[tuple[float, float]]:
+        """(t_s, angle_deg) of the new samples: sample number x period on the encoder's steady
+        clock where it has one, else the receive time."""
         shift = self._can_to_monotonic()
-        return [(r.t_s - shift, r.angle_deg) for r in enc.readings()]
+        period = encoder.period_s
+        if not period:
+            return [(r.t_s - shift, r.angle_deg) for r in encoder.readings()]
+        return [(clock.stamp(r.seq * period, r.t_s - shift), r.angle_deg)
+                for r in encoder.readings()]
 
     def take_torque(self, timeout_s: float) -> list[tuple[float, float]]:
         try:
@@ -97,7 +116,7 @@ class DevicesIO:
                 raise
             return []
         self._bad_lines = 0
-        return [(r.t_s, r.torque_Nm)]
+        return [(self._torque_clock.stamp(r.device_t_s, r.t_s), r.torque_Nm)]
 
     def read_temperature(self) -> float | None:
         climate = self.devices.climate

@@ -1,0 +1,65 @@
+"""SteadyClock (rig/engine/steady_clock.py): sample times from the device's clock, not from
+their arrival on a busy PC. The arrivals here are drawn independently of the code under test:
+a transport delay, plus the PC's extra delays (exponential waits and bursts where a starved
+receive thread reads many lines at once and stamps them alike)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from drivers.transducer.protocol import DEVICE_TIME_MODULO_S
+from rig.engine.steady_clock import SteadyClock
+
+PERIOD = 0.002  # s, a 500 Hz stream
+
+
+def _busy_pc_arrivals(t_true: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Arrival times: 0.3 ms transport, exponential waits (mean 2 ms), and 20 bursts where the
+    receive thread slept 40 ms and stamped every line it then read with one time."""
+    arrival = t_true + 0.0003 + rng.exponential(0.002, t_true.size)
+    for start in rng.integers(0, t_true.size - 30, 20):
+        wake = arrival[start] + 0.040
+        burst = (t_true >= t_true[start]) & (t_true < wake)
+        arrival[burst] = np.maximum(arrival[burst], wake)
+    return np.maximum.accumulate(arrival)  # one receive thread: arrivals keep their order
+
+
+def test_a_busy_pc_delay_is_removed_and_the_transport_delay_kept():
+    rng = np.random.default_rng(7)
+    t_true = 100.0 + PERIOD * np.arange(5000)  # host time the device took each sample
+    arrival = _busy_pc_arrivals(t_true, rng)
+    device_offset = -96.1234  # the device's clock started elsewhere
+    clock = SteadyClock()
+    stamps = np.array([clock.stamp(t + device_offset, a) for t, a in zip(t_true, arrival)])
+    raw_error = arrival - t_true
+    error = stamps - t_true
+    assert raw_error.max() > 0.035  # the bursts are there in the arrivals
+    assert np.all(stamps <= arrival + 1e-12)  # never after the sample came
+    settled = error[500:]  # after the first window
+    assert 0.0003 - 1e-9 <= settled.min() and settled.max() < 0.0006, (
+        settled.min(), settled.max())
+
+
+def test_a_constant_lag_is_kept_for_the_lag_check():
+    t_true = PERIOD * np.arange(2000)
+    clock = SteadyClock()
+    stamps = [clock.stamp(t, t + 0.8) for t in t_true]  # a stream 0.8 s behind
+    assert abs(stamps[-1] - (t_true[-1] + 0.8)) < 1e-9
+
+
+def test_device_clock_wrap_restart_and_drift():
+    clock = SteadyClock(modulo_s=DEVICE_TIME_MODULO_S)
+    host = 5000.0
+    t_dev = DEVICE_TIME_MODULO_S - 0.5
+    out = []
+    for _ in range(1000):  # across the wrap at 1e5 s
+        out.append(clock.stamp(t_dev % DEVICE_TIME_MODULO_S, host + 0.001))
+        t_dev += PERIOD
+        host += PERIOD
+    assert np.allclose(np.diff(out), PERIOD, atol=1e-9) and clock.restarts == 0
+    out = [clock.stamp(0.0 + k * PERIOD, host + k * PERIOD) for k in range(10)]  # restart
+    assert clock.restarts == 1 and abs(out[-1] - (host + 9 * PERIOD)) < 1e-9
+    drifting = SteadyClock()  # a device clock 100 ppm fast, over 60 s
+    t = np.arange(0, 60, PERIOD)
+    stamps = [drifting.stamp(x * (1 + 1e-4), x + 0.0005) for x in t]
+    assert abs(stamps[-1] - (t[-1] + 0.0005)) < 2e-4

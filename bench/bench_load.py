@@ -8,8 +8,11 @@ Target: completed, 0 samples lost, keepalive gap under half the watchdog.
 
 Then the same with real-time priority (``[rig] realtime_priority`` = 20 for the engine, the
 same for the simulated devices), the names prefixed ``load_rt_``: what SCHED_FIFO buys.
-``BENCH_LOAD_REPEATS`` (default 1) repeats the normal-scheduler scenario;
-``load_completed_runs`` counts the completed ones. ``BENCH_LOAD_RT=0`` skips the RT pass.
+``BENCH_LOAD_REPEATS`` (default 1): campaigns measured one after the other under the same
+load in the normal-scheduler pass; ``load_completed_runs`` counts those completed in a row.
+Beside them, ``rig campaign run examples/campaigns/seed000-pair1.toml --simulated`` runs on
+its own simulated rig under the same load: ``load_cli_campaign_completed`` (1 or 0).
+``BENCH_LOAD_RT=0`` skips the RT pass.
 """
 
 from __future__ import annotations
@@ -18,25 +21,29 @@ import os
 from collections.abc import Iterator
 from typing import Any
 
-from bench.load_scenario import run_load_scenario
+from bench.load_scenario import ROOT, run_load_scenario
 
 UNITS = {"load_campaign_completed": "1/0", "load_samples_lost": "samples",
          "load_missing_periods": "periods", "load_max_keepalive_gap_s": "s",
          "load_watchdog_s": "s", "load_acquisition_jitter_p99_ms": "ms"}
 RT_PRIORITY = 20
+EXAMPLE_CAMPAIGN = ROOT / "examples" / "campaigns" / "seed000-pair1.toml"
 
 
 def run() -> Iterator[dict[str, Any]]:
     repeats = int(os.environ.get("BENCH_LOAD_REPEATS", "1"))
-    completed = 0
-    for i in range(repeats):
-        figures = run_load_scenario()
-        completed += figures["load_campaign_completed"]
-        for name, unit in UNITS.items():
-            yield {"name": name, "value": figures[name], "unit": unit, "repeat": i,
-                   "state": figures["load_state"], "rows": figures["load_rows"]}
+    figures = run_load_scenario(repeats=repeats, cli_campaign=EXAMPLE_CAMPAIGN)
+    for name, unit in UNITS.items():
+        yield {"name": name, "value": figures[name], "unit": unit,
+               "campaigns": repeats, "state": figures["load_state"],
+               "rows": figures["load_rows"]}
+    yield {"name": "load_cli_campaign_completed",
+           "value": figures.get("load_cli_campaign_completed"), "unit": "1/0",
+           "exit": figures.get("load_cli_campaign_exit"),
+           "reason": figures.get("load_cli_campaign_reason")}
     if repeats > 1:
-        yield {"name": "load_completed_runs", "value": completed, "unit": f"of {repeats}"}
+        yield {"name": "load_completed_runs", "value": figures["load_completed_in_a_row"],
+               "unit": f"of {repeats} in a row"}
     if os.environ.get("BENCH_LOAD_RT", "1") != "0":
         figures = run_load_scenario(realtime_priority=RT_PRIORITY)
         for name, unit in UNITS.items():

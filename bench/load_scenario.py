@@ -147,11 +147,53 @@ def _measure(client: httpx.Client, body: dict[str, Any], timeout_s: float
     return _wait_state(client, ("completed", "aborted"), timeout_s)
 
 
+def _measure_under_load(client: httpx.Client, store: Any, body: dict[str, Any],
+                        diagnose_id: str, timeout_s: float) -> dict[str, Any]:
+    """One campaign started through the page's API while the load runs, with the diagnosis
+    of campaign ``diagnose_id`` requested from the page while it measures; its figures."""
+    _wait_state(client, ("idle", "completed", "aborted"), 120.0)
+    client.post("api/devices/input-lock", json={"confirm": True}, headers=AUTH)
+    r = client.post("api/control/start", json=body, headers=AUTH)
+    started = r.status_code == 200
+    diagnosis_status = None
+    if started:
+        time.sleep(1.0)
+        d = client.get(f"api/campaigns/{diagnose_id}/diagnosis.json", timeout=300)
+        diagnosis_status = d.status_code
+    done = (_wait_state(client, ("completed", "aborted"), timeout_s) if started
+            else {"state": "refused", "message": r.text})
+    result = done.get("last_result") or {}
+    campaign_id = result.get("campaign_id")
+    lost, missing, jitters, n_rows = 0, 0, [], 0
+    period_s = 0.002
+    if campaign_id:
+        for run in client.get(f"api/campaigns/{campaign_id}").json().get("runs", []):
+            loaded = store.load_run(run["run_id"])
+            t = np.asarray(loaded.data["t_s"], dtype=float)
+            period_s = float(loaded.meta.get("sensors", {}).get("encoder_period_s")
+                             or period_s)
+            run_missing, run_jitter = acquisition_figures(t, period_s)
+            missing += run_missing
+            lost += int((loaded.meta.get("result") or {}).get("samples_dropped", 0))
+            jitters.append(run_jitter)
+            n_rows += t.size
+    return {"completed": done.get("state") == "completed", "state": done.get("state"),
+            "message": done.get("fault") or done.get("message"), "samples_lost": lost,
+            "missing_periods": missing, "jitter_p99_ms": max(jitters) if jitters else None,
+            "rows": n_rows, "period_s": period_s, "diagnosis_http_status": diagnosis_status}
+
+
 def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ...] = (
         0.0, 90.0, 180.0, 270.0), steps_per_quarter: int = 4, busy: int = 3,
-        sse_clients: int = 20, timeout_s: float = 600.0, realtime_priority: int | None = None
-        ) -> dict[str, Any]:
+        sse_clients: int = 20, timeout_s: float = 600.0, realtime_priority: int | None = None,
+        repeats: int = 1, cli_campaign: Path | None = None) -> dict[str, Any]:
     """Run the scenario of the module docstring; return its figures (see module doc).
+
+    ``repeats``: measured campaigns one after the other under the same load (each with the
+    diagnosis requested while it runs); ``load_campaign_completed`` is 1 only if all
+    completed, ``load_completed_in_a_row`` counts them from the first. ``cli_campaign``: a
+    campaign file run with ``rig campaign run FILE --simulated`` (its own simulated rig)
+    beside them, under the same load (``load_cli_campaign_completed``).
 
     ``realtime_priority``: SCHED_FIFO for the simulated devices and, through the rig
     configuration they write (``[rig] realtime_priority``), for the engine process.
@@ -194,47 +236,57 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
                                        str(sse_clients)], start_new_session=True))
         time.sleep(2.0)  # the load is on before the campaign starts
 
-        body = _campaign_body("under-load", list(positions), steps_per_quarter)
-        _wait_state(client, ("idle", "completed", "aborted"), 120.0)
-        client.post("api/devices/input-lock", json={"confirm": True}, headers=AUTH)
-        r = client.post("api/control/start", json=body, headers=AUTH)
-        started = r.status_code == 200
-        diagnosis_status = None
-        if started:
-            time.sleep(1.0)
-            d = client.get(f"api/campaigns/{earlier_id}/diagnosis.json", timeout=300)
-            diagnosis_status = d.status_code
-        done = (_wait_state(client, ("completed", "aborted"), timeout_s) if started
-                else {"state": "refused", "message": r.text})
+        cli = None
+        if cli_campaign is not None:  # the engineer's CLI campaign on its own simulated rig
+            cli_json = workdir / "cli-campaign.json"
+            cli_log = stack.enter_context(open(workdir / "cli-campaign.log", "w",
+                                               encoding="utf-8"))
+            cli = subprocess.Popen([*RIG, "campaign", "run", str(cli_campaign), "--simulated",
+                                    "--store", str(workdir / "cli-store"), "--json",
+                                    str(cli_json)], stdout=cli_log, stderr=cli_log,
+                                   cwd=workdir, start_new_session=True)
+            procs.append(cli)
+        the_store = Store(store)
+        campaigns: list[dict[str, Any]] = []
+        for i in range(repeats):
+            campaigns.append(_measure_under_load(client, the_store, _campaign_body(
+                f"under-load-{i}", list(positions), steps_per_quarter), earlier_id,
+                timeout_s))
+        cli_figures: dict[str, Any] = {}
+        if cli is not None:
+            try:
+                cli.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                cli.kill()
+            doc = (json.loads(cli_json.read_text(encoding="utf-8")) if cli_json.is_file()
+                   else {})
+            cli_figures = {"load_cli_campaign_completed": int(
+                cli.returncode in (0, 1) and doc.get("status") == "completed"),
+                "load_cli_campaign_exit": cli.returncode,
+                "load_cli_campaign_reason": doc.get("reason")}
         stop_load()
-        result = done.get("last_result") or {}
-        campaign_id = result.get("campaign_id")
-        lost, missing, jitters, n_rows = 0, 0, [], 0
-        period_s = 0.002
-        if campaign_id:
-            the_store = Store(store)
-            for run in client.get(f"api/campaigns/{campaign_id}").json().get("runs", []):
-                loaded = the_store.load_run(run["run_id"])
-                t = np.asarray(loaded.data["t_s"], dtype=float)
-                period_s = float(loaded.meta.get("sensors", {}).get("encoder_period_s")
-                                 or period_s)
-                run_missing, run_jitter = acquisition_figures(t, period_s)
-                missing += run_missing
-                lost += int((loaded.meta.get("result") or {}).get("samples_dropped", 0))
-                jitters.append(run_jitter)
-                n_rows += t.size
+        completed = [c["completed"] for c in campaigns]
+        in_a_row = next((i for i, ok in enumerate(completed) if not ok), len(completed))
+        jitters = [c["jitter_p99_ms"] for c in campaigns if c["jitter_p99_ms"] is not None]
+        last = campaigns[-1]
         drive = json.loads(stats.read_text(encoding="utf-8")) if stats.is_file() else {}
         return {
-            "load_campaign_completed": int(done.get("state") == "completed"),
-            "load_samples_lost": lost,
-            "load_missing_periods": missing,
+            "load_campaign_completed": int(all(completed)),
+            "load_samples_lost": sum(c["samples_lost"] for c in campaigns),
+            "load_missing_periods": sum(c["missing_periods"] for c in campaigns),
             "load_max_keepalive_gap_s": drive.get("drive_max_write_gap_s"),
             "load_watchdog_s": drive.get("drive_watchdog_s"),
             "load_acquisition_jitter_p99_ms": max(jitters) if jitters else None,
             "load_watchdog_trips": drive.get("drive_watchdog_trips"),
-            "load_rows": n_rows,
-            "load_period_s": period_s,
-            "load_diagnosis_http_status": diagnosis_status,
-            "load_state": done.get("state"),
-            "load_message": done.get("fault") or done.get("message"),
+            "load_campaigns": repeats,
+            "load_completed_in_a_row": in_a_row,
+            "load_rows": sum(c["rows"] for c in campaigns),
+            "load_period_s": last["period_s"],
+            "load_diagnosis_http_status": next(
+                (c["diagnosis_http_status"] for c in campaigns
+                 if c["diagnosis_http_status"] != 200), 200),
+            "load_state": last["state"],
+            "load_message": next((c["message"] for c in campaigns if not c["completed"]),
+                                 last["message"]),
+            **cli_figures,
         }

@@ -212,6 +212,9 @@ class EncoderNetwork:
         self.canopen.listeners.append(_BusErrorListener(self))
         self.link_error: Exception | None = None
         self.syncs_sent = 0
+        # (SYNC number, host time.monotonic() s just before it was sent): the moments the
+        # encoders sampled, for stamping their PDOs (rig.engine.steady_clock.SyncClock)
+        self.sync_log: collections.deque[tuple[int, float]] = collections.deque(maxlen=4096)
         self.protocol_error_count = 0
         self.last_protocol_error = ""
         self._sync_task: can.broadcastmanager.ThreadBasedCyclicSendTask | None = None
@@ -256,6 +259,7 @@ class EncoderNetwork:
 
     def _count_sync(self, msg: can.Message) -> None:
         self.syncs_sent += 1
+        self.sync_log.append((self.syncs_sent, time.monotonic()))
 
     def _on_sync_error(self, exc: Exception) -> bool:
         self.link_error = exc

@@ -12,7 +12,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from bench.load_scenario import acquisition_figures, run_load_scenario
+
+EXAMPLE_CAMPAIGN = (Path(__file__).resolve().parent.parent / "examples" / "campaigns"
+                    / "seed000-pair1.toml")
 
 
 def test_acquisition_figures_count_missing_periods_not_bursts():
@@ -27,11 +32,18 @@ def test_acquisition_figures_count_missing_periods_not_bursts():
     assert acquisition_figures(burst, period)[0] == 0
 
 
-def test_campaign_from_the_page_completes_under_load(tmp_path: Path):
-    figures = run_load_scenario(tmp_path, positions=(0.0, 180.0), steps_per_quarter=2)
+@pytest.mark.timeout(900)  # ten campaigns of ~13 s each, on a PC loaded on purpose
+def test_campaigns_from_the_page_complete_ten_times_in_a_row_under_load(tmp_path: Path):
+    """Ten campaigns in a row through the page under the load (a short one-position plan
+    each, the diagnosis requested from the page during each), and the shipped example
+    campaign run from the CLI on its own simulated rig at the same time: all complete."""
+    figures = run_load_scenario(tmp_path, positions=(0.0,), steps_per_quarter=2,
+                                repeats=10, cli_campaign=EXAMPLE_CAMPAIGN)
+    assert figures["load_completed_in_a_row"] == 10, figures
     assert figures["load_campaign_completed"] == 1, figures
+    assert figures["load_cli_campaign_completed"] == 1, figures
     assert figures["load_diagnosis_http_status"] == 200, figures
     assert figures["load_watchdog_trips"] == 0, figures
     assert figures["load_max_keepalive_gap_s"] < figures["load_watchdog_s"] / 2, figures
     assert figures["load_samples_lost"] == 0, figures  # dropped between driver and store
-    assert figures["load_rows"] > 1000, figures
+    assert figures["load_rows"] > 10 * 1000, figures

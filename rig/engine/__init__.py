@@ -317,14 +317,13 @@ class Engine:
                 if not self._stop_threads.is_set():
                     self._trip(str(exc))
                 return
-            arrived = time.monotonic()
             for t, torque in samples:
                 reason = check_measured(torque, self.trip_Nm, "torque transducer")
                 if reason is not None:
                     self._trip(reason)
                 with self._lock:
                     self._merger.add_torque(t, torque)
-                    self._torque_arrivals.append((arrived, torque))
+                    self._torque_arrivals.append((t, torque))
 
     def _poll_loop(self) -> None:
         opt = self.options
@@ -374,13 +373,15 @@ class Engine:
             self._cross_pending.append((t0, t1, torque))
 
     def _compare_crosscheck(self) -> str | None:
-        """Compare each pending cross-check reading with the torque transducer's readings that
-        arrived on this PC while the cross-check sensor was read (both in this PC's clock:
-        the merged rows carry the encoder's clock, which is not the Modbus read's, and an
-        offset between the two read 14-22 % of rated apart on a healthy rig). Compared only
-        when the transducer's torque has stood still for ``crosscheck_still_s`` before the
-        read, so a ramp or a late line cannot look like a disagreement; a transducer stream
-        that is late by more than that shows as one. Returns a trip reason beyond the limit.
+        """Compare each pending cross-check reading with the torque transducer's readings taken
+        while the cross-check sensor was read, both on this PC's clock: the transducer's by its
+        device clock mapped onto the host's (rig.engine.steady_clock; a line that a busy PC
+        read late keeps the time it was measured: with arrival times, lines read 0.2 s late
+        under load looked like a disagreement and stopped healthy runs), the Modbus read by the
+        host time around it. Compared only when the transducer's torque has stood still for
+        ``crosscheck_still_s`` before the read, so a ramp cannot look like a disagreement; a
+        transducer stream that is behind by more than that shows as one. Returns a trip
+        reason beyond the limit.
         Called holding ``_lock``."""
         w = self.options.crosscheck_window_s
         pending = self._cross_pending

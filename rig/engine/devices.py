@@ -7,20 +7,22 @@ jitter) onto the monotonic scale.
 
 Those are arrival times, late by whatever a busy PC adds. The streamed channels are given
 the times of their devices' clocks instead (:class:`rig.engine.steady_clock.SteadyClock`):
-the transducer's device time of each line, and for an encoder with a steady period (SYNC
-producer or event timer) its sample number times that period.
+the transducer's device time of each line; for an encoder on the SYNC this program produces,
+the send time of the SYNC each PDO answers; for an encoder on its event timer (or a SYNC from
+elsewhere), its sample number times its period.
 """
 
 from __future__ import annotations
 
 import contextlib
+import math
 import time
 from typing import Any
 
 from drivers.errors import DeviceError, DeviceFault, DeviceProtocolError
 from drivers.transducer.protocol import DEVICE_TIME_MODULO_S
 from rig.devices import RigDevices
-from rig.engine.steady_clock import SteadyClock
+from rig.engine.steady_clock import SteadyClock, SyncClock
 
 MAX_BAD_LINES_IN_A_ROW = 10
 
@@ -43,6 +45,10 @@ class DevicesIO:
         self._torque_clock = SteadyClock(modulo_s=DEVICE_TIME_MODULO_S)
         self._output_clock = SteadyClock()
         self._input_clock = SteadyClock()
+        self._last_t: dict[str, float] = {}  # the latest time given per channel (s)
+        self._output_sync = SyncClock(devices.encoder.config.sync_every)
+        self._input_sync = SyncClock(devices.input_encoder.config.sync_every
+                                     if devices.input_encoder is not None else 1)
 
     @property
     def torque_limit_Nm(self) -> float:
@@ -88,24 +94,42 @@ class DevicesIO:
         return total
 
     def take_output(self) -> list[tuple[float, float]]:
-        return self._encoder_samples(self.devices.encoder, self._output_clock)
+        return self._encoder_samples("output", self.devices.encoder, self._output_clock,
+                                     self._output_sync)
 
     def take_input(self) -> list[tuple[float, float]]:
         enc = self.devices.input_encoder
         if enc is None:
             return []
-        return self._encoder_samples(enc, self._input_clock)
+        return self._encoder_samples("input", enc, self._input_clock, self._input_sync)
 
-    def _encoder_samples(self, encoder: Any, clock: SteadyClock
-                         ) -> list[tuple[float, float]]:
-        """(t_s, angle_deg) of the new samples: sample number x period on the encoder's steady
-        clock where it has one, else the receive time."""
+    def _in_order(self, channel: str, t: float) -> float:
+        """``t``, or just after the channel's previous time: a better estimate of the smallest
+        delay can move the times back by less than a period, and a channel's times must rise."""
+        t = max(t, self._last_t.get(channel, -math.inf) + 1e-6)
+        self._last_t[channel] = t
+        return t
+
+    def _encoder_samples(self, channel: str, encoder: Any, clock: SteadyClock,
+                         sync: SyncClock) -> list[tuple[float, float]]:
+        """(t_s, angle_deg) of the new samples (module doc): the send time of the SYNC each
+        answers; else sample number x period on the encoder's steady clock; else the receive
+        time."""
         shift = self._can_to_monotonic()
+        readings = encoder.readings()
         period = encoder.period_s
-        if not period:
-            return [(r.t_s - shift, r.angle_deg) for r in encoder.readings()]
-        return [(clock.stamp(r.seq * period, r.t_s - shift), r.angle_deg)
-                for r in encoder.readings()]
+        network = encoder.network
+        ours = (encoder.config.transmission == "sync"
+                and network.config.sync_period_s is not None)
+        syncs = list(network.sync_log) if ours and readings else []
+        out = []
+        for r in readings:
+            arrival = r.t_s - shift
+            t = sync.stamp(r.seq, arrival, syncs) if syncs else None
+            if t is None:
+                t = clock.stamp(r.seq * period, arrival) if period else arrival
+            out.append((self._in_order(channel, t), r.angle_deg))
+        return out
 
     def take_torque(self, timeout_s: float) -> list[tuple[float, float]]:
         try:
@@ -116,7 +140,11 @@ class DevicesIO:
                 raise
             return []
         self._bad_lines = 0
-        return [(self._torque_clock.stamp(r.device_t_s, r.t_s), r.torque_Nm)]
+        t = self._torque_clock.stamp(r.device_t_s, r.t_s)
+        if t <= self._last_t.get("torque", -math.inf):
+            return []  # a repeated device time (a frozen or re-sent line): no new sample
+        self._last_t["torque"] = t
+        return [(t, r.torque_Nm)]
 
     def read_temperature(self) -> float | None:
         climate = self.devices.climate

@@ -16,9 +16,11 @@ How the channels are aligned (docs/campaigns.md, "Acquisition"):
 - The Modbus torque sensor is not merged: it is the cross-check channel (the engine compares
   it with the transducer and trips on either exceeding the torque limit).
 
-Timestamp error: the receive-time jitter of each channel (python-can / pyserial thread
-wake-ups, ~0.1-1 ms). At the plans' torque rates (<= 50 N*m/s) 1 ms is < 0.05 N*m, and the
-settled points of an equal-torque loop do not move at all.
+Timestamp error: the times given to the merger come from the devices' clocks
+(:mod:`rig.engine.steady_clock`, applied in :class:`rig.engine.devices.DevicesIO`), so a busy
+PC's receive delays are removed; what remains is the transport's delay variation (~0.1-1
+ms). At the plans' torque rates (<= 50 N*m/s) 1 ms is < 0.05 N*m, and the settled points of
+an equal-torque loop do not move at all.
 """
 
 from __future__ import annotations

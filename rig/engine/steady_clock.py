@@ -15,14 +15,24 @@ of the smallest delay, and the analysis's lag check still sees it. The window fo
 drift of the device clock against the host's (50 ppm is 50 us per second) and recovers from a
 lost sample or a step within ``window_s``. A device time that goes backwards (a device
 restart) or jumps further than ``reset_s`` from what the arrivals say starts afresh.
+
+An encoder that answers the SYNC this program produces sampled when that SYNC went out, and
+the SYNC producer (a thread of this program) can itself be late on a busy PC, so a grid of
+sample number x period is late-blind there. :class:`SyncClock` stamps each position PDO with
+the recorded send time of the SYNC it answers: PDO ``n`` answers SYNC ``c + n * every``, where
+``c`` is the smallest (number of the last SYNC sent before the PDO arrived - ``n * every``)
+over the last ``window`` PDOs (a PDO comes after its SYNC, and later SYNCs may have gone out
+while it waited to be read, never fewer).
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
+from collections.abc import Sequence
 
-__all__ = ["SteadyClock"]
+__all__ = ["SteadyClock", "SyncClock"]
 
 
 class SteadyClock:
@@ -63,3 +73,38 @@ class SteadyClock:
             self._wraps += m
         self._last_raw = raw
         return raw + self._wraps
+
+
+class SyncClock:
+    """Host times (s) of an encoder's PDOs from the send times of the SYNCs they answer; see
+    the module doc. ``every``: the encoder answers every n-th SYNC."""
+
+    def __init__(self, every: int = 1, window: int = 250) -> None:
+        self.every = int(every)
+        self.window = int(window)
+        self._offsets: deque[tuple[int, int]] = deque()  # (PDO number, SYNC offset)
+
+    def stamp(self, n: int, arrival_s: float, syncs: Sequence[tuple[int, float]]
+              ) -> float | None:
+        """The send time (s, host clock) of the SYNC that PDO number ``n`` (arrived at
+        ``arrival_s``) answers, from ``syncs`` ((SYNC number, send time s), oldest first);
+        None when that SYNC is no longer (or not yet) in ``syncs``."""
+        if not syncs:
+            return None
+        i = bisect.bisect_right(syncs, arrival_s, key=lambda s: s[1]) - 1
+        if i < 0:
+            return None
+        offset = syncs[i][0] - n * self.every
+        q = self._offsets
+        if q and n < q[-1][0]:
+            q.clear()  # the PDO numbers started again: a new encoder session
+        while q and q[-1][1] >= offset:
+            q.pop()
+        q.append((n, offset))
+        while q[0][0] <= n - self.window:
+            q.popleft()
+        k = q[0][1] + n * self.every
+        j = k - syncs[0][0]
+        if 0 <= j < len(syncs) and syncs[j][0] == k:
+            return syncs[j][1]
+        return None

@@ -41,6 +41,9 @@ def run() -> Iterator[dict[str, Any]]:
            "value": figures.get("load_cli_campaign_completed"), "unit": "1/0",
            "exit": figures.get("load_cli_campaign_exit"),
            "reason": figures.get("load_cli_campaign_reason")}
+    outcomes = figures["load_outcomes"]
+    yield {"name": "load_outcomes_ok", "value": outcomes.count("ok"), "unit": f"of {repeats}",
+           "outcomes": outcomes}
     if repeats > 1:
         yield {"name": "load_completed_runs", "value": figures["load_completed_in_a_row"],
                "unit": f"of {repeats} in a row"}

@@ -166,8 +166,11 @@ def _measure_under_load(client: httpx.Client, store: Any, body: dict[str, Any],
     campaign_id = result.get("campaign_id")
     lost, missing, jitters, n_rows = 0, 0, [], 0
     period_s = 0.002
+    outcome = None
     if campaign_id:
-        for run in client.get(f"api/campaigns/{campaign_id}").json().get("runs", []):
+        doc = client.get(f"api/campaigns/{campaign_id}").json()
+        outcome = doc.get("outcome") or (doc.get("summary") or {}).get("outcome")
+        for run in doc.get("runs", []):
             loaded = store.load_run(run["run_id"])
             t = np.asarray(loaded.data["t_s"], dtype=float)
             period_s = float(loaded.meta.get("sensors", {}).get("encoder_period_s")
@@ -180,7 +183,8 @@ def _measure_under_load(client: httpx.Client, store: Any, body: dict[str, Any],
     return {"completed": done.get("state") == "completed", "state": done.get("state"),
             "message": done.get("fault") or done.get("message"), "samples_lost": lost,
             "missing_periods": missing, "jitter_p99_ms": max(jitters) if jitters else None,
-            "rows": n_rows, "period_s": period_s, "diagnosis_http_status": diagnosis_status}
+            "rows": n_rows, "period_s": period_s, "diagnosis_http_status": diagnosis_status,
+            "outcome": outcome}
 
 
 def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ...] = (
@@ -280,6 +284,7 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
             "load_watchdog_trips": drive.get("drive_watchdog_trips"),
             "load_campaigns": repeats,
             "load_completed_in_a_row": in_a_row,
+            "load_outcomes": [c["outcome"] for c in campaigns],
             "load_rows": sum(c["rows"] for c in campaigns),
             "load_period_s": last["period_s"],
             "load_diagnosis_http_status": next(

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import fcntl
+import os
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -13,6 +16,35 @@ SHARED = REPO.parent / "shared"
 @pytest.fixture
 def repo_root() -> Path:
     return REPO
+
+
+# ------------------------------------------------------- tests that load the machine on purpose
+# The suite runs on two pytest-xdist workers. Most tests wait on the simulated rig's real
+# time and share the machine well; a few load it on purpose (the load test's busy processes,
+# four simulated rigs at once, diagnosis pools of two processes) and would starve the other
+# worker's simulated devices. Those are marked ``alone``: they take an exclusive lock shared
+# by the workers, every other test takes it shared. The lock is taken outside the test's
+# timeout (the outermost wrapper of the test protocol), so waiting for it is not counted.
+
+
+def _machine_lock_path() -> Path | None:
+    run = os.environ.get("PYTEST_XDIST_TESTRUNUID")
+    return None if run is None else Path(tempfile.gettempdir()) / f"rig-tests-{run}.lock"
+
+
+@pytest.hookimpl(hookwrapper=True, tryfirst=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
+    path = _machine_lock_path()
+    if path is None:  # one process: nothing to share
+        yield
+        return
+    alone = item.get_closest_marker("alone") is not None
+    with open(path, "a+") as f:
+        fcntl.flock(f, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
 
 
 # --------------------------------------------------------------------------- the store's back-ends

@@ -16,6 +16,9 @@ import pytest
 
 from bench.load_scenario import acquisition_figures, run_load_scenario
 
+pytestmark = pytest.mark.alone  # loads the machine on purpose (tests/conftest.py)
+
+
 EXAMPLE_CAMPAIGN = (Path(__file__).resolve().parent.parent / "examples" / "campaigns"
                     / "seed000-pair1.toml")
 

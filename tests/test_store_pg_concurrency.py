@@ -24,6 +24,8 @@ import pytest
 
 from rig.store import RECOVERED_REASON, Store
 
+pytestmark = pytest.mark.alone  # loads the machine on purpose (tests/conftest.py)
+
 REPO = Path(__file__).resolve().parent.parent
 TINY = f"""
 name = "tiny-line"
@@ -48,6 +50,7 @@ WRITER = """
 import sys
 from rig.store import Store
 from rig.synthetic_runs import write_campaign
+
 url, samples, serial, n_runs, seconds = sys.argv[1:6]
 st = Store(url, samples=samples, reconnect_s=60)
 positions = tuple(90.0 * k for k in range(int(n_runs)))

@@ -134,7 +134,8 @@ def test_generator_varies_laws_units_and_noise() -> None:
     assert report["shrink"] > 0.7
 
 
-@pytest.mark.timeout(300)  # 12 campaigns diagnosed (CPU-bound)
+@pytest.mark.timeout(300)  # 12 campaigns diagnosed (CPU-bound, two processes)
+@pytest.mark.alone
 def test_small_validation_meets_the_targets(tmp_path) -> None:
     """One case of every kind (12 cases) from the widened generator, through
     ``rig validate-diagnosis --jobs 2``: every in-vocabulary effect, null, out of vocabulary,

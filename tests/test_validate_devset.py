@@ -18,7 +18,8 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.timeout(600)  # the module's fixture diagnoses ~40 campaigns
+# the module's fixture diagnoses ~40 campaigns in two processes
+pytestmark = [pytest.mark.timeout(600), pytest.mark.alone]
 DATA = Path(__file__).resolve().parent / "data" / "devset"
 RATIO = {"a": Fraction(37, 39), "b": Fraction(36, 40)}
 VOCAB_KINDS = {"friction", "stiffness_nonlinearity", "runout", "bearing_clearance",

@@ -280,7 +280,8 @@ def test_operator_page(tmp_path: Path):
         expect(page.locator("#m-cross")).to_contain_text("% of rated")
         shown = re.fullmatch(r"(\d\.\d{3}) N·m \((\d+\.\d) % of rated\)",
                              page.locator("#m-cross").inner_text().strip())
-        assert shown and 0.24 <= float(shown[1]) < 0.5, page.locator("#m-cross").inner_text()
+        # the 0.25 N*m mis-zero, less the transducer's noise within the compared window
+        assert shown and 0.2 <= float(shown[1]) < 0.5, page.locator("#m-cross").inner_text()
         assert float(shown[2]) == pytest.approx(10 * float(shown[1]), abs=0.06)
         expect(page.locator("#flags")).to_be_empty()
         shot(page, "web-result.png", full_page=True)

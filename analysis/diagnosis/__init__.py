@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -241,6 +241,41 @@ def testable(stack: Stack, cond: dict[str, tuple], varied: list[str]) -> dict[st
     return why
 
 
+ORDER2_POSITIONS = 7
+"""Distinct locking positions needed before the runout's twice-per-turn harmonic is fitted:
+the play and the six coefficients of orders 1, (2 z_ext - z_int) / z_ext and 2 must be
+determined by the positions themselves, not by the priors."""
+
+
+def choose_family_members(stack: Stack, cond: dict[str, tuple], varied: Sequence[str],
+                          why_not: dict[str, str]) -> Stack:
+    """The members of the runout and thermal families the campaign supports. A play that
+    changes with the crank angle is a periodic function of it: eq. (4) gives orders 1 and
+    (2 z_ext - z_int) / z_ext, an oval (two-lobed) ring, bore or bearing seat order 2
+    (:func:`analysis.effects.runout_harmonic_basis`). A play linear in temperature is the
+    first term of a Taylor series; expansion coefficients that change with temperature and
+    fits that tighten (housing on bearing, bearing on shaft) curve it. Each higher term is
+    kept only when the design can determine it (ORDER2_POSITIONS positions; three or more
+    temperature levels) and it earns its place on the information criterion: an in-sample
+    BIC lower by SEPARATION_BIC than the first-order member's."""
+    changes: dict[str, bool] = {}
+    n_pos = len({round(r.input_angle_deg, 1) for r in stack.runs
+                 if r.input_angle_deg is not None})
+    if not why_not.get("runout") and n_pos >= ORDER2_POSITIONS:
+        first = fit(stack, ("backlash", "runout"))
+        second = fit(replace(stack, runout_order2=True), ("backlash", "runout"))
+        if _bic(second) <= _bic(first) - SEPARATION_BIC:
+            changes["runout_order2"] = True
+    levels = {c[list(varied).index("temperature")] for c in cond.values()} \
+        if "temperature" in varied else set()
+    if not why_not.get("thermal_expansion") and len(levels) >= 3:
+        first = fit(stack, ("backlash", "thermal_expansion"))
+        second = fit(replace(stack, thermal_quadratic=True), ("backlash", "thermal_expansion"))
+        if _bic(second) <= _bic(first) - SEPARATION_BIC:
+            changes["thermal_quadratic"] = True
+    return replace(stack, cache={}, **changes) if changes else stack
+
+
 # ---------------------------------------------------------------------- cross-validation
 
 
@@ -351,7 +386,11 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             k = 2.0 * math.tan(math.radians(stack.pressure_angle_deg))
             amp_int = math.hypot(c[0], c[1])
             amp_ext = math.hypot(c[2], c[3])
-            out["amplitude_arcmin"] = amp_int + amp_ext
+            amp_2 = math.hypot(f.coef("runout_h2c"), f.coef("runout_h2s"))
+            out["amplitude_arcmin"] = amp_int + amp_ext + amp_2
+            if "runout_h2c" in f.names:
+                out["order2_amplitude_arcmin"] = amp_2
+                out["order2_play_um"] = float(arcmin_to_um(amp_2, m, z1))
             out["internal_um"] = float(arcmin_to_um(amp_int, m, z1)) / k
             out["internal_phase_deg"] = math.degrees(math.atan2(-c[1], -c[0]))
             out["external_um"] = float(arcmin_to_um(amp_ext, m, z1)) / k
@@ -367,7 +406,18 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             out["coefficient_arcmin_per_K"] = c
             out["coefficient_arcmin_per_K_ci95"] = _ci(f, "thermal", scale)
             out["coefficient_um_per_K"] = float(arcmin_to_um(c, m, z1))
-            if abs(out["coefficient_um_per_K"]) > 3.0:
+            slope = abs(out["coefficient_um_per_K"])
+            if "thermal2" in f.names:
+                c2 = f.coef("thermal2")
+                out["quadratic_arcmin_per_K2"] = c2
+                out["quadratic_um_per_K2"] = float(arcmin_to_um(c2, m, z1))
+                # the local coefficient d(play)/dT at the ends of the campaign's range
+                temps = [r.mean_temperature_C for r in stack.runs
+                         if r.mean_temperature_C is not None]
+                ends = [min(temps) - stack.reference_C, max(temps) - stack.reference_C]
+                slope = max(abs(out["coefficient_um_per_K"] + 2.0 * out["quadratic_um_per_K2"]
+                                * d) for d in ends)
+            if slope > 3.0:
                 ok = False
                 notes.append("thermal play change above 3 um/K")
         elif e == "tooth_spacing_error":
@@ -405,6 +455,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
     cfolds = folds_by_condition(stack, cond)
     rfolds = folds_by_repeat(stack, cond, varied)
     why_not = testable(stack, cond, varied)
+    stack = choose_family_members(stack, cond, varied, why_not)
 
     noise = math.sqrt(float(np.mean(np.concatenate(
         [np.full(r.twist_arcmin.size, r.sigma_arcmin**2) for r in prepared]))))
@@ -413,6 +464,8 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
     # a held-out RMS over N points is known to about noise * (2 / N)^(1/4)
     n_points = sum(r.twist_arcmin.size for r in prepared)
     threshold = max(NONE_SIGMAS, (2.0 / max(n_points, 1)) ** 0.25) * noise
+
+    amplitude = float(np.median([r.amplitude_Nm for r in prepared]))
 
     # 1. predictive and structural gaps
     nom = prepared[0].nominal
@@ -551,7 +604,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
             reason += f"; {largest} is the larger term of the joint fit"
             chosen = [models[largest], *[c for c in chosen[1:]]]
             chosen[0] = models[largest]
-    curv_name, _ = curvature_effect(models, k_nom)
+    curv_name, _ = curvature_effect(models, k_nom, amplitude)
     take_up_pair = ("bearing_clearance", "stiffness_nonlinearity")
     if curv_name is not None and verdict in take_up_pair and verdict != curv_name:
         verdict = curv_name  # one take-up family: the loaded slope names it
@@ -695,7 +748,8 @@ def series_size_arcmin(stack: Stack, f: LinearFit, effects: Sequence[str], k_nom
     return math.sqrt(sq / n) if n else 0.0
 
 
-def curvature_effect(models: dict[str, Candidate], k_nom: float) -> tuple[str | None, str]:
+def curvature_effect(models: dict[str, Candidate], k_nom: float,
+                     amplitude_Nm: float | None = None) -> tuple[str | None, str]:
     """Name the flank curvature by what physically differs: a bearing clearance being taken
     up adds compliance only below its closing torque and leaves the mesh's nominal slope at
     load (seed 004 eq. 8); Hertzian contact stiffening makes the contact itself stiffer as the
@@ -730,8 +784,33 @@ def curvature_effect(models: dict[str, Candidate], k_nom: float) -> tuple[str | 
     if dev > tol:
         return "stiffness_nonlinearity", text + ": stiffer at load, the contact hardens"
     if abs(dev) <= tol:
+        k_end = tangent_stiffness_at_amplitude(c, amplitude_Nm)
+        if k_end is not None and k_end < k_nom * (1.0 - tol):
+            return "stiffness_nonlinearity", text + (
+                f", but the tangent stiffness at the largest torque is still {k_end:.3g}: the "
+                "flank goes on hardening up to the amplitude, as a contact does; a clearance "
+                "closes at a small torque")
         return "bearing_clearance", text + ": the nominal slope is left, a clearance taken up"
     return None, ""
+
+
+def tangent_stiffness_at_amplitude(c: Candidate, amplitude_Nm: float | None) -> float | None:
+    """Tangent stiffness (N*m/arcmin) of a take-up fit at the campaign's loading amplitude
+    (median over runs): the loaded compliance plus what the take-up still adds there,
+    ``d / T_s exp(-A / T_s)`` for the saturating curve, the soft stage's compliance while
+    ``A < T_b`` for the kinked one. A clearance is closed long before rated torque (its
+    tangent is the mesh's there); a contact that hardens over the whole range is still
+    softer than its asymptote at the largest torque the campaign reaches."""
+    if not (amplitude_Nm is not None and math.isfinite(amplitude_Nm) and amplitude_Nm > 0):
+        return None
+    a = float(amplitude_Nm)
+    comp = c.fit.coef("compliance")
+    if "stiffening_torque_Nm" in c.fit.nl and "soft_twist" in c.fit.names:
+        ts = c.fit.nl["stiffening_torque_Nm"]
+        comp += c.fit.coef("soft_twist") / ts * math.exp(-a / ts) if ts > 0 else 0.0
+    elif "bearing_stage_torque_Nm" in c.fit.nl and a < c.fit.nl["bearing_stage_torque_Nm"]:
+        comp += c.fit.coef("bearing_compliance")
+    return 1.0 / comp if comp > 0 else None
 
 
 def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_play,
@@ -777,7 +856,8 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
             chosen.append(current)
         return chosen
 
-    curv, curv_why = curvature_effect(models, k_nom)
+    curv, curv_why = curvature_effect(models, k_nom, float(np.median(
+        [r.amplitude_Nm for r in stack.runs])))
     pair = {"bearing_clearance", "stiffness_nonlinearity"}
     in_pool = [c for c in pool if c.effects[0] in pair]
     if curv is not None and in_pool and models.get(curv) in pool:

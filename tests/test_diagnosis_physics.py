@@ -10,7 +10,13 @@ import numpy as np
 
 from analysis.diagnosis import Candidate, curvature_effect, series_compliance
 from analysis.diagnosis.fit import LinearFit, censor_floating
-from analysis.effects import tooth_pair_phase, tooth_repeat_period_deg
+from analysis.effects import (
+    LoopParams,
+    play_at_arcmin,
+    runout_harmonic_basis,
+    tooth_pair_phase,
+    tooth_repeat_period_deg,
+)
 
 
 def test_tooth_pair_repeats_after_lcm_mesh_steps() -> None:
@@ -56,6 +62,31 @@ def test_loaded_slope_names_the_flank_curvature() -> None:
     assert name == "stiffness_nonlinearity"
     # softer at load than nominal: neither shape, undecided
     assert curvature_effect({"stiffness_nonlinearity": _take_up_fit(1 / 20.0)}, k_nom)[0] is None
+
+
+def test_take_up_still_going_at_the_amplitude_is_contact_stiffening() -> None:
+    k_nom = 30.0
+    fit = _take_up_fit(1 / 30.5)  # nominal loaded slope, extra twist 0.2 arcmin over 1 N*m
+    # the amplitude (10 N*m) is ten torque scales out: the take-up is over, a clearance
+    assert curvature_effect({"stiffness_nonlinearity": fit}, k_nom, 10.0)[0] == \
+        "bearing_clearance"
+    # the amplitude is one torque scale: 0.2/1 * exp(-1) = 0.074 arcmin/N*m still adds to
+    # 1/30.5 at the largest torque, the flank goes on hardening there: a contact
+    name, why = curvature_effect({"stiffness_nonlinearity": fit}, k_nom, 1.0)
+    assert name == "stiffness_nonlinearity" and "hardening up to the amplitude" in why
+
+
+def test_runout_and_thermal_families_hold_higher_orders() -> None:
+    theta = np.array([0.0, 45.0, 90.0])
+    b = runout_harmonic_basis(theta)
+    assert b.shape == (3, 2)
+    assert np.allclose(b[:, 0], [1.0, 0.0, -1.0], atol=1e-12)  # cos 2 theta
+    params = LoopParams(play_arcmin=3.0, stiffness_Nm_per_arcmin=30.0,
+                        runout_order2_arcmin=(0.5, 0.0), thermal_arcmin_per_K=0.01,
+                        thermal_arcmin_per_K2=0.001, thermal_reference_C=20.0)
+    assert math.isclose(play_at_arcmin(params, 90.0, None, 45, 40), 2.5, abs_tol=1e-12)
+    assert math.isclose(float(play_at_arcmin(params, None, 30.0, 45, 40)),
+                        3.0 + 0.1 + 0.1, abs_tol=1e-12)
 
 
 def test_series_compliance_is_listed_only_when_the_loaded_slope_is_soft() -> None:

@@ -377,9 +377,18 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             out["soft_stiffness_Nm_per_arcmin"] = 1.0 / cb if cb > 0 else None
             out["soft_stage_torque_Nm"] = f.nl.get("bearing_stage_torque_Nm")
             clear = unit.get("bearing_clearance_mm")
+            take_up = cb * (f.nl.get("bearing_stage_torque_Nm") or 0.0)
+            out["take_up_twist_arcmin"] = take_up
             if isinstance(clear, list) and clear:
-                out["budget_extra_play_arcmin"] = bearing_play_arcmin(
-                    clear, stack.pressure_angle_deg, m, z1)
+                budget = bearing_play_arcmin(clear, stack.pressure_angle_deg, m, z1)
+                out["budget_extra_play_arcmin"] = budget
+                # the soft stage takes up the clearance: the twist it adds on a flank is
+                # bounded by the play the inspected clearances give (seed 000 eqs. 3 + 7),
+                # with the same factor two as the runout's
+                if budget > 0 and take_up > 2.0 * budget:
+                    ok = False
+                    notes.append(f"soft stage takes up {take_up:.3f} arcmin, above twice the "
+                                 f"inspected bearing clearances' play ({budget:.3f} arcmin)")
         elif e == "runout":
             c = [f.coef(n) for n in ("runout_c1", "runout_s1", "runout_c2", "runout_s2")]
             # play change = -2 tan(a) (|AB| - a): amplitude in play -> eccentricity (um)

@@ -74,6 +74,11 @@ def test_take_up_still_going_at_the_amplitude_is_contact_stiffening() -> None:
     # 1/30.5 at the largest torque, the flank goes on hardening there: a contact
     name, why = curvature_effect({"stiffness_nonlinearity": fit}, k_nom, 1.0)
     assert name == "stiffness_nonlinearity" and "hardening up to the amplitude" in why
+    # four torque scales (98 % closed at the amplitude): a clearance, softer tangent or not
+    soft_end = _take_up_fit(1 / 30.5)
+    soft_end.fit.beta[2] = 5.0  # 5 arcmin of take-up: 5 exp(-4) = 0.09 arcmin/N*m left
+    assert curvature_effect({"stiffness_nonlinearity": soft_end}, k_nom, 4.0)[0] == \
+        "bearing_clearance"
 
 
 def test_runout_and_thermal_families_hold_higher_orders() -> None:

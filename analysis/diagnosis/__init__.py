@@ -254,10 +254,13 @@ def choose_family_members(stack: Stack, cond: dict[str, tuple], varied: Sequence
     (2 z_ext - z_int) / z_ext, an oval (two-lobed) ring, bore or bearing seat order 2
     (:func:`analysis.effects.runout_harmonic_basis`). A play linear in temperature is the
     first term of a Taylor series; expansion coefficients that change with temperature and
-    fits that tighten (housing on bearing, bearing on shaft) curve it. Each higher term is
-    kept only when the design can determine it (ORDER2_POSITIONS positions; three or more
-    temperature levels) and it earns its place on the information criterion: an in-sample
-    BIC lower by SEPARATION_BIC than the first-order member's."""
+    fits that tighten (housing on bearing, bearing on shaft) curve it. A bearing's soft stage
+    ends where the clearance is closed: abruptly (a kink, the rollers all in contact at
+    once) or gradually (``T_b tanh(|G| / T_b)``: same initial compliance, same take-up
+    ``T_b / K_b``, as the load spreads over more rollers). Each higher member is kept only
+    when the design can determine it (ORDER2_POSITIONS positions; three or more temperature
+    levels) and it earns its place on the information criterion: an in-sample BIC lower by
+    SEPARATION_BIC than the first member's."""
     changes: dict[str, bool] = {}
     n_pos = len({round(r.input_angle_deg, 1) for r in stack.runs
                  if r.input_angle_deg is not None})
@@ -268,6 +271,12 @@ def choose_family_members(stack: Stack, cond: dict[str, tuple], varied: Sequence
             changes["runout_order2"] = True
     levels = {c[list(varied).index("temperature")] for c in cond.values()} \
         if "temperature" in varied else set()
+    if not why_not.get("bearing_clearance"):
+        first = fit_profile(stack, ("backlash", "bearing_clearance"))
+        second = fit_profile(replace(stack, bearing_smooth=True),
+                             ("backlash", "bearing_clearance"))
+        if _bic(second) <= _bic(first) - SEPARATION_BIC:
+            changes["bearing_smooth"] = True
     if not why_not.get("thermal_expansion") and len(levels) >= 3:
         first = fit(stack, ("backlash", "thermal_expansion"))
         second = fit(replace(stack, thermal_quadratic=True), ("backlash", "thermal_expansion"))
@@ -613,7 +622,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
             reason += f"; {largest} is the larger term of the joint fit"
             chosen = [models[largest], *[c for c in chosen[1:]]]
             chosen[0] = models[largest]
-    curv_name, _ = curvature_effect(models, k_nom, amplitude)
+    curv_name, _ = curvature_effect(models, k_nom, amplitude, stack.bearing_smooth)
     take_up_pair = ("bearing_clearance", "stiffness_nonlinearity")
     if curv_name is not None and verdict in take_up_pair and verdict != curv_name:
         verdict = curv_name  # one take-up family: the loaded slope names it
@@ -758,7 +767,8 @@ def series_size_arcmin(stack: Stack, f: LinearFit, effects: Sequence[str], k_nom
 
 
 def curvature_effect(models: dict[str, Candidate], k_nom: float,
-                     amplitude_Nm: float | None = None) -> tuple[str | None, str]:
+                     amplitude_Nm: float | None = None, smooth: bool = False
+                     ) -> tuple[str | None, str]:
     """Name the flank curvature by what physically differs: a bearing clearance being taken
     up adds compliance only below its closing torque and leaves the mesh's nominal slope at
     load (seed 004 eq. 8); Hertzian contact stiffening makes the contact itself stiffer as the
@@ -793,17 +803,41 @@ def curvature_effect(models: dict[str, Candidate], k_nom: float,
     if dev > tol:
         return "stiffness_nonlinearity", text + ": stiffer at load, the contact hardens"
     if abs(dev) <= tol:
-        k_end = tangent_stiffness_at_amplitude(c, amplitude_Nm)
-        if k_end is not None and k_end < k_nom * (1.0 - tol):
+        k_end = tangent_stiffness_at_amplitude(c, amplitude_Nm, smooth)
+        done = take_up_completion(c, amplitude_Nm, smooth)
+        if (k_end is not None and k_end < k_nom * (1.0 - tol)
+                and done < TAKE_UP_COMPLETE):
             return "stiffness_nonlinearity", text + (
-                f", but the tangent stiffness at the largest torque is still {k_end:.3g}: the "
-                "flank goes on hardening up to the amplitude, as a contact does; a clearance "
-                "closes at a small torque")
+                f", but at the largest torque the take-up is only {done:.0%} complete and the "
+                f"tangent stiffness still {k_end:.3g}: the flank goes on hardening up to the "
+                "amplitude, as a contact does; a clearance closes inside the loaded range")
         return "bearing_clearance", text + ": the nominal slope is left, a clearance taken up"
     return None, ""
 
 
-def tangent_stiffness_at_amplitude(c: Candidate, amplitude_Nm: float | None) -> float | None:
+TAKE_UP_COMPLETE = 0.95
+"""A take-up this far complete at the amplitude (three torque scales of the saturating
+curve) has closed inside the loaded range: a clearance. Less, and the flank is still
+hardening at the largest torque the campaign reaches: a contact."""
+
+
+def take_up_completion(c: Candidate, amplitude_Nm: float | None, smooth: bool = False
+                       ) -> float:
+    """Share of a take-up fit's total extra twist reached at the amplitude (N*m):
+    ``1 - exp(-A / T_s)`` for the saturating curve, ``tanh(A / T_b)`` for the smooth soft
+    stage, ``min(A / T_b, 1)`` for the kinked one; 1 when unknown."""
+    if not (amplitude_Nm is not None and math.isfinite(amplitude_Nm) and amplitude_Nm > 0):
+        return 1.0
+    if "stiffening_torque_Nm" in c.fit.nl and c.fit.nl["stiffening_torque_Nm"] > 0:
+        return float(-math.expm1(-amplitude_Nm / c.fit.nl["stiffening_torque_Nm"]))
+    tb = c.fit.nl.get("bearing_stage_torque_Nm", 0.0)
+    if tb > 0:
+        return math.tanh(amplitude_Nm / tb) if smooth else min(amplitude_Nm / tb, 1.0)
+    return 1.0
+
+
+def tangent_stiffness_at_amplitude(c: Candidate, amplitude_Nm: float | None,
+                                   smooth: bool = False) -> float | None:
     """Tangent stiffness (N*m/arcmin) of a take-up fit at the campaign's loading amplitude
     (median over runs): the loaded compliance plus what the take-up still adds there,
     ``d / T_s exp(-A / T_s)`` for the saturating curve, the soft stage's compliance while
@@ -817,8 +851,13 @@ def tangent_stiffness_at_amplitude(c: Candidate, amplitude_Nm: float | None) -> 
     if "stiffening_torque_Nm" in c.fit.nl and "soft_twist" in c.fit.names:
         ts = c.fit.nl["stiffening_torque_Nm"]
         comp += c.fit.coef("soft_twist") / ts * math.exp(-a / ts) if ts > 0 else 0.0
-    elif "bearing_stage_torque_Nm" in c.fit.nl and a < c.fit.nl["bearing_stage_torque_Nm"]:
-        comp += c.fit.coef("bearing_compliance")
+    elif "bearing_stage_torque_Nm" in c.fit.nl:
+        tb = c.fit.nl["bearing_stage_torque_Nm"]
+        if smooth and tb > 0:
+            if a / tb < 50.0:
+                comp += c.fit.coef("bearing_compliance") / math.cosh(a / tb) ** 2
+        elif a < tb:
+            comp += c.fit.coef("bearing_compliance")
     return 1.0 / comp if comp > 0 else None
 
 
@@ -866,7 +905,7 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
         return chosen
 
     curv, curv_why = curvature_effect(models, k_nom, float(np.median(
-        [r.amplitude_Nm for r in stack.runs])))
+        [r.amplitude_Nm for r in stack.runs])), stack.bearing_smooth)
     pair = {"bearing_clearance", "stiffness_nonlinearity"}
     in_pool = [c for c in pool if c.effects[0] in pair]
     if curv is not None and in_pool and models.get(curv) in pool:

@@ -64,6 +64,8 @@ class Stack:
     #: twice-per-turn harmonic, the thermal play's quadratic term.
     runout_order2: bool = False
     thermal_quadratic: bool = False
+    #: The bearing's soft stage closes smoothly (``T_b tanh(|G| / T_b)``) instead of at a kink.
+    bearing_smooth: bool = False
 
     @property
     def n_runs(self) -> int:
@@ -146,7 +148,9 @@ def run_columns(stack: Stack, run: PreparedRun, effects: Sequence[str], nl: dict
     if "stiffness_nonlinearity" in effects:
         cols.append(s * -np.expm1(-tau / nl["stiffening_torque_Nm"]))
     if "bearing_clearance" in effects:
-        cols.append(s * np.minimum(tau, nl["bearing_stage_torque_Nm"]))
+        tb = nl["bearing_stage_torque_Nm"]
+        cols.append(s * (tb * np.tanh(tau / tb) if stack.bearing_smooth
+                         else np.minimum(tau, tb)))
     if "runout" in effects:
         basis = runout_basis(run.input_angle_deg or 0.0, stack.z_internal, stack.z_external)
         cols += [s / 2.0 * b for b in basis]
@@ -340,7 +344,8 @@ def fit(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None = None,
 def cached_columns(stack: Stack, i: int, effects: Sequence[str], nl: dict[str, float],
                    teeth: Sequence[int]) -> np.ndarray:
     """:func:`run_columns`, memoised per stack, run, effects and nonlinear values."""
-    key = (id(stack), stack.runout_order2, stack.thermal_quadratic, i, tuple(effects),
+    key = (id(stack), stack.runout_order2, stack.thermal_quadratic, stack.bearing_smooth, i,
+           tuple(effects),
            tuple(sorted(nl.items())))
     hit = stack.cache.get(key)
     if hit is None:

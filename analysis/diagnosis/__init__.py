@@ -776,7 +776,10 @@ def curvature_effect(models: dict[str, Candidate], k_nom: float,
     Read on the best take-up fit (extra twist + linear slope): loaded stiffness within
     the tolerance of the nominal (the larger of STIFFNESS_TOLERANCE and two standard errors
     of the fitted compliance) -> bearing clearance, stiffer -> contact stiffening, softer ->
-    undecided. Returns (effect or None, why)."""
+    undecided. A nominal loaded slope with a take-up still under TAKE_UP_COMPLETE at the
+    amplitude and a tangent stiffness there measurably below the nominal is a contact that
+    hardens over the whole range (stiffening): a clearance closes inside the loaded range.
+    Returns (effect or None, why)."""
     members = [models[n] for n in ("stiffness_nonlinearity", "bearing_clearance")
                if n in models and models[n].heldout_runs > 0]
     if not members:

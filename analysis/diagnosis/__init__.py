@@ -248,40 +248,54 @@ determined by the positions themselves, not by the priors."""
 
 
 def choose_family_members(stack: Stack, cond: dict[str, tuple], varied: Sequence[str],
-                          why_not: dict[str, str]) -> Stack:
-    """The members of the runout and thermal families the campaign supports. A play that
-    changes with the crank angle is a periodic function of it: eq. (4) gives orders 1 and
+                          why_not: dict[str, str], folds: list[list[int]]) -> Stack:
+    """The members of the runout, thermal and bearing families the campaign supports. A play
+    that changes with the crank angle is a periodic function of it: eq. (4) gives orders 1 and
     (2 z_ext - z_int) / z_ext, an oval (two-lobed) ring, bore or bearing seat order 2
     (:func:`analysis.effects.runout_harmonic_basis`). A play linear in temperature is the
     first term of a Taylor series; expansion coefficients that change with temperature and
-    fits that tighten (housing on bearing, bearing on shaft) curve it. A bearing's soft stage
-    ends where the clearance is closed: abruptly (a kink, the rollers all in contact at
-    once) or gradually (``T_b tanh(|G| / T_b)``: same initial compliance, same take-up
-    ``T_b / K_b``, as the load spreads over more rollers). Each higher member is kept only
-    when the design can determine it (ORDER2_POSITIONS positions; three or more temperature
-    levels) and it earns its place on the information criterion: an in-sample BIC lower by
-    SEPARATION_BIC than the first member's."""
+    fits that tighten (housing on bearing, bearing on shaft) curve it. A higher term is fitted
+    only when the design can determine it (ORDER2_POSITIONS positions; three or more
+    temperature levels) and kept only when it earns its place as an added effect does: an
+    in-sample BIC lower by SEPARATION_BIC and a consistently smaller residual on the held-out
+    conditions (:func:`separated`). A bearing's soft stage ends where the clearance is closed:
+    abruptly (a kink, the rollers all in contact at once) or gradually (``T_b tanh(|G| /
+    T_b)``: same initial compliance, same take-up ``T_b / K_b``, as the load spreads over
+    more rollers); the two shapes have the same parameters, the better fit by SEPARATION_BIC
+    is taken."""
     changes: dict[str, bool] = {}
+
+    def earns(effect: str, flag: str) -> bool:
+        richer = replace(stack, cache={}, **{flag: True})
+        first = fit(stack, ("backlash", effect))
+        second = fit(richer, ("backlash", effect))
+        if _bic(second) > _bic(first) - SEPARATION_BIC:
+            return False
+        if not folds:
+            return False
+        cands = []
+        for st, f in ((stack, first), (richer, second)):
+            h, lm, nh, resid = _heldout(st, (effect,), folds, f)
+            cands.append(Candidate((effect,), f, h, lm, nh, "leave-one-condition-out",
+                                   delta_bic=_bic(f), heldout_resid=resid))
+        return separated(stack, cands[1], cands[0])
+
     n_pos = len({round(r.input_angle_deg, 1) for r in stack.runs
                  if r.input_angle_deg is not None})
-    if not why_not.get("runout") and n_pos >= ORDER2_POSITIONS:
-        first = fit(stack, ("backlash", "runout"))
-        second = fit(replace(stack, runout_order2=True), ("backlash", "runout"))
-        if _bic(second) <= _bic(first) - SEPARATION_BIC:
-            changes["runout_order2"] = True
+    if not why_not.get("runout") and n_pos >= ORDER2_POSITIONS and earns("runout",
+                                                                           "runout_order2"):
+        changes["runout_order2"] = True
     levels = {c[list(varied).index("temperature")] for c in cond.values()} \
         if "temperature" in varied else set()
+    if (not why_not.get("thermal_expansion") and len(levels) >= 3
+            and earns("thermal_expansion", "thermal_quadratic")):
+        changes["thermal_quadratic"] = True
     if not why_not.get("bearing_clearance"):
         first = fit_profile(stack, ("backlash", "bearing_clearance"))
-        second = fit_profile(replace(stack, bearing_smooth=True),
+        second = fit_profile(replace(stack, bearing_smooth=True, cache={}),
                              ("backlash", "bearing_clearance"))
         if _bic(second) <= _bic(first) - SEPARATION_BIC:
             changes["bearing_smooth"] = True
-    if not why_not.get("thermal_expansion") and len(levels) >= 3:
-        first = fit(stack, ("backlash", "thermal_expansion"))
-        second = fit(replace(stack, thermal_quadratic=True), ("backlash", "thermal_expansion"))
-        if _bic(second) <= _bic(first) - SEPARATION_BIC:
-            changes["thermal_quadratic"] = True
     return replace(stack, cache={}, **changes) if changes else stack
 
 
@@ -473,7 +487,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
     cfolds = folds_by_condition(stack, cond)
     rfolds = folds_by_repeat(stack, cond, varied)
     why_not = testable(stack, cond, varied)
-    stack = choose_family_members(stack, cond, varied, why_not)
+    stack = choose_family_members(stack, cond, varied, why_not, cfolds)
 
     noise = math.sqrt(float(np.mean(np.concatenate(
         [np.full(r.twist_arcmin.size, r.sigma_arcmin**2) for r in prepared]))))

@@ -395,6 +395,15 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             out["soft_twist_arcmin"] = f.coef("soft_twist")
             out["soft_twist_arcmin_ci95"] = _ci(f, "soft_twist", scale)
             out["torque_scale_Nm"] = f.nl.get("stiffening_torque_Nm")
+            # a contact's hardening is its Hertzian approach beyond the linear spring, a few
+            # um: more extra twist than the whole designed free play is a flank change
+            # (play), not a contact layer
+            nominal = stack.runs[0].nominal
+            play = nominal.play_arcmin if nominal is not None else math.nan
+            if math.isfinite(play) and play > 0 and out["soft_twist_arcmin"] > play:
+                ok = False
+                notes.append(f"contact stiffening's extra twist {out['soft_twist_arcmin']:.3f} "
+                             f"arcmin above the nominal free play ({play:.3f} arcmin)")
         elif e == "bearing_clearance":
             cb = f.coef("bearing_compliance")
             out["soft_stiffness_Nm_per_arcmin"] = 1.0 / cb if cb > 0 else None

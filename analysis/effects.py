@@ -259,6 +259,22 @@ def runout_basis(input_angle_deg: np.ndarray | float, z_internal: int, z_externa
                     axis=-1)
 
 
+def runout_harmonic_basis(input_angle_deg: np.ndarray | float, orders: tuple[int, ...] = (2,)
+                          ) -> np.ndarray:
+    """Higher harmonics of the play change over the crank turn: columns (cos h theta,
+    sin h theta) for each order h, shape (n, 2 len(orders)). Eq. (4) in first order holds
+    orders 1 and (2 z_ext - z_int) / z_ext; an out-of-round (oval, two-lobed) ring, pinion
+    bore or eccentric bearing seat moves the center distance twice per turn, and so does the
+    second-order term ``e^2 / (2 a) cos 2 theta`` of eq. (4). The inspected radial runout
+    F_r (a total indicator reading) holds every lobe, so the same tolerance budget bounds
+    them."""
+    theta = np.radians(np.asarray(input_angle_deg, dtype=float))
+    cols = []
+    for h in orders:
+        cols += [np.cos(h * theta), np.sin(h * theta)]
+    return np.stack(cols, axis=-1)
+
+
 def tooth_pair_index(input_angle_deg: np.ndarray | float, z_internal: int) -> np.ndarray:
     """Mesh index of the tooth pair in contact at the eccentric-shaft angle: one pair per
     ``360 / z_internal`` deg (seed 003's tooth frequency); ring tooth = index mod z_int."""
@@ -292,9 +308,10 @@ class LoopParams:
     """Parameters of the composed quasi-static loop; defaults are neutral (effect absent).
 
     ``play_arcmin`` and ``stiffness_Nm_per_arcmin`` are the nominal model's (backlash,
-    mesh_stiffness). ``runout_coeffs_arcmin``: play change on :func:`runout_basis`;
+    mesh_stiffness). ``runout_coeffs_arcmin``: play change on :func:`runout_basis`,
+    ``runout_order2_arcmin`` on :func:`runout_harmonic_basis` (twice per turn);
     ``spacing_play_arcmin``: play change per tooth-pair phase (:func:`tooth_pair_phase`);
-    thermal relative to ``thermal_reference_C``."""
+    thermal (linear per K and quadratic per K^2) relative to ``thermal_reference_C``."""
 
     play_arcmin: float
     stiffness_Nm_per_arcmin: float
@@ -302,10 +319,12 @@ class LoopParams:
     soft_twist_arcmin: float = 0.0
     stiffening_torque_Nm: float = 1.0
     runout_coeffs_arcmin: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    runout_order2_arcmin: tuple[float, float] = (0.0, 0.0)
     bearing_extra_play_arcmin: float = 0.0
     bearing_compliance_arcmin_per_Nm: float = 0.0
     bearing_stage_torque_Nm: float = 0.0
     thermal_arcmin_per_K: float = 0.0
+    thermal_arcmin_per_K2: float = 0.0
     thermal_reference_C: float = 20.0
     torque_offset_Nm: float = 0.0
     shaft_stiffness_Nm_per_arcmin: float = math.inf
@@ -330,11 +349,15 @@ def play_at_arcmin(params: LoopParams, input_angle_deg: float | None, temperatur
     if input_angle_deg is not None:
         play = play + float(runout_basis(input_angle_deg, z_internal, z_external)
                             @ np.asarray(params.runout_coeffs_arcmin))
+        if any(params.runout_order2_arcmin):
+            play = play + float(runout_harmonic_basis(input_angle_deg)
+                                @ np.asarray(params.runout_order2_arcmin))
         tooth = int(tooth_pair_phase(input_angle_deg, z_internal, z_external))
         play = play + params.spacing_play_arcmin.get(tooth, 0.0)
-    if temperature_C is not None and params.thermal_arcmin_per_K:
-        play = play + params.thermal_arcmin_per_K * (
-            np.asarray(temperature_C, dtype=float) - params.thermal_reference_C)
+    if temperature_C is not None and (params.thermal_arcmin_per_K
+                                      or params.thermal_arcmin_per_K2):
+        dt = np.asarray(temperature_C, dtype=float) - params.thermal_reference_C
+        play = play + params.thermal_arcmin_per_K * dt + params.thermal_arcmin_per_K2 * dt**2
     return play
 
 

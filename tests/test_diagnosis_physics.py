@@ -10,7 +10,13 @@ import numpy as np
 
 from analysis.diagnosis import Candidate, curvature_effect, series_compliance
 from analysis.diagnosis.fit import LinearFit, censor_floating
-from analysis.effects import tooth_pair_phase, tooth_repeat_period_deg
+from analysis.effects import (
+    LoopParams,
+    play_at_arcmin,
+    runout_harmonic_basis,
+    tooth_pair_phase,
+    tooth_repeat_period_deg,
+)
 
 
 def test_tooth_pair_repeats_after_lcm_mesh_steps() -> None:
@@ -58,6 +64,36 @@ def test_loaded_slope_names_the_flank_curvature() -> None:
     assert curvature_effect({"stiffness_nonlinearity": _take_up_fit(1 / 20.0)}, k_nom)[0] is None
 
 
+def test_take_up_still_going_at_the_amplitude_is_contact_stiffening() -> None:
+    k_nom = 30.0
+    fit = _take_up_fit(1 / 30.5)  # nominal loaded slope, extra twist 0.2 arcmin over 1 N*m
+    # the amplitude (10 N*m) is ten torque scales out: the take-up is over, a clearance
+    assert curvature_effect({"stiffness_nonlinearity": fit}, k_nom, 10.0)[0] == \
+        "bearing_clearance"
+    # the amplitude is one torque scale: 0.2/1 * exp(-1) = 0.074 arcmin/N*m still adds to
+    # 1/30.5 at the largest torque, the flank goes on hardening there: a contact
+    name, why = curvature_effect({"stiffness_nonlinearity": fit}, k_nom, 1.0)
+    assert name == "stiffness_nonlinearity" and "hardening up to the amplitude" in why
+    # four torque scales (98 % closed at the amplitude): a clearance, softer tangent or not
+    soft_end = _take_up_fit(1 / 30.5)
+    soft_end.fit.beta[2] = 5.0  # 5 arcmin of take-up: 5 exp(-4) = 0.09 arcmin/N*m left
+    assert curvature_effect({"stiffness_nonlinearity": soft_end}, k_nom, 4.0)[0] == \
+        "bearing_clearance"
+
+
+def test_runout_and_thermal_families_hold_higher_orders() -> None:
+    theta = np.array([0.0, 45.0, 90.0])
+    b = runout_harmonic_basis(theta)
+    assert b.shape == (3, 2)
+    assert np.allclose(b[:, 0], [1.0, 0.0, -1.0], atol=1e-12)  # cos 2 theta
+    params = LoopParams(play_arcmin=3.0, stiffness_Nm_per_arcmin=30.0,
+                        runout_order2_arcmin=(0.5, 0.0), thermal_arcmin_per_K=0.01,
+                        thermal_arcmin_per_K2=0.001, thermal_reference_C=20.0)
+    assert math.isclose(play_at_arcmin(params, 90.0, None, 45, 40), 2.5, abs_tol=1e-12)
+    assert math.isclose(float(play_at_arcmin(params, None, 30.0, 45, 40)),
+                        3.0 + 0.1 + 0.1, abs_tol=1e-12)
+
+
 def test_series_compliance_is_listed_only_when_the_loaded_slope_is_soft() -> None:
     k_nom = 30.0
     soft = _take_up_fit(1 / 20.0).fit  # 33 % softer at load than seed 004 eq. (8)
@@ -85,3 +121,22 @@ def test_lag_between_channels_is_found() -> None:
         twist = twist + rng.normal(0, 0.2 / 60, n)
         measured = np.concatenate([np.full(lag, torque[0]), torque[:n - lag]])
         assert channel_lag_samples(t, measured, twist, 0.2 / 60) == expected
+
+
+def test_no_lag_is_read_from_a_coarse_encoders_staircase() -> None:
+    """A constant-rate ramp read by a 2^19-count encoder (2.47 arcsec counts, 0.1 arcsec of
+    noise: no dither): the quantisation error holds for many samples, so a shift that fits
+    the staircase a little better is no evidence of a lag."""
+    from analysis.diagnosis.data import channel_lag_samples, resolution_of
+    from analysis.effects import LoopParams, predict_twist_arcmin
+
+    n = 2500
+    t = np.arange(n) / 250.0
+    u = np.linspace(0.0, 6.0, n)
+    torque = 10.0 * np.interp(u, [0.0, 1.0, 3.0, 5.0, 6.0], [0.0, 1.0, -1.0, 1.0, 0.0])
+    rng = np.random.default_rng(4)
+    twist = predict_twist_arcmin(LoopParams(3.0, 22.0), torque) + rng.normal(0, 0.1 / 60, n)
+    q = 360.0 * 60.0 / 2**19
+    twist = np.round(twist / q) * q
+    sigma = math.hypot(0.1 / 60, resolution_of(twist) / math.sqrt(12.0))
+    assert channel_lag_samples(t, torque + rng.normal(0, 0.005, n), twist, sigma) == 0

@@ -21,6 +21,7 @@ from rig.validate import (
     meets_targets,
     power_law_twist_arcmin,
     simulate_campaign,
+    validate_one,
 )
 from simulators.offline_forms import (
     delayed,
@@ -149,6 +150,18 @@ def test_small_validation_meets_the_targets(tmp_path) -> None:
     assert meets_targets(summary["figures"]), summary["confusion"]
     assert summary["false_alarms"] == 0 and summary["figures"]["false_alarm_share"] == 0.0
     assert {k.split()[0] for k in summary["by_form"]} == {"form", "loading"}
+
+
+@pytest.mark.parametrize(("index", "kind", "form"), [
+    (13, "runout", "2x"), (15, "thermal_expansion", "quadratic"),
+    (1, "stiffness_nonlinearity", "exponential")])
+def test_other_functional_forms_are_named(index: int, kind: str, form: str) -> None:
+    """Our generator's other forms (seed 0): a play twice per crank turn is runout (the
+    family's order-2 harmonic), a play quadratic in temperature thermal expansion, an
+    exponential hardening spread over the whole range contact stiffening."""
+    res = validate_one((0, index, kind))
+    assert (res.case.kind, res.case.form) == (kind, form)
+    assert res.verdict == kind, res.report["reason"]
 
 
 def _rig(*args: str) -> subprocess.CompletedProcess:

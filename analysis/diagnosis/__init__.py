@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -241,6 +241,64 @@ def testable(stack: Stack, cond: dict[str, tuple], varied: list[str]) -> dict[st
     return why
 
 
+ORDER2_POSITIONS = 7
+"""Distinct locking positions needed before the runout's twice-per-turn harmonic is fitted:
+the play and the six coefficients of orders 1, (2 z_ext - z_int) / z_ext and 2 must be
+determined by the positions themselves, not by the priors."""
+
+
+def choose_family_members(stack: Stack, cond: dict[str, tuple], varied: Sequence[str],
+                          why_not: dict[str, str], folds: list[list[int]]) -> Stack:
+    """The members of the runout, thermal and bearing families the campaign supports. A play
+    that changes with the crank angle is a periodic function of it: eq. (4) gives orders 1 and
+    (2 z_ext - z_int) / z_ext, an oval (two-lobed) ring, bore or bearing seat order 2
+    (:func:`analysis.effects.runout_harmonic_basis`). A play linear in temperature is the
+    first term of a Taylor series; expansion coefficients that change with temperature and
+    fits that tighten (housing on bearing, bearing on shaft) curve it. A higher term is fitted
+    only when the design can determine it (ORDER2_POSITIONS positions; three or more
+    temperature levels) and kept only when it earns its place as an added effect does: an
+    in-sample BIC lower by SEPARATION_BIC and a consistently smaller residual on the held-out
+    conditions (:func:`separated`). A bearing's soft stage ends where the clearance is closed:
+    abruptly (a kink, the rollers all in contact at once) or gradually (``T_b tanh(|G| /
+    T_b)``: same initial compliance, same take-up ``T_b / K_b``, as the load spreads over
+    more rollers); the two shapes have the same parameters, the better fit by SEPARATION_BIC
+    is taken."""
+    changes: dict[str, bool] = {}
+
+    def earns(effect: str, flag: str) -> bool:
+        richer = replace(stack, cache={}, **{flag: True})
+        first = fit(stack, ("backlash", effect))
+        second = fit(richer, ("backlash", effect))
+        if _bic(second) > _bic(first) - SEPARATION_BIC:
+            return False
+        if not folds:
+            return False
+        cands = []
+        for st, f in ((stack, first), (richer, second)):
+            h, lm, nh, resid = _heldout(st, (effect,), folds, f)
+            cands.append(Candidate((effect,), f, h, lm, nh, "leave-one-condition-out",
+                                   delta_bic=_bic(f), heldout_resid=resid))
+        return separated(stack, cands[1], cands[0])
+
+    n_pos = len({round(r.input_angle_deg, 1) for r in stack.runs
+                 if r.input_angle_deg is not None})
+    if not why_not.get("runout") and n_pos >= ORDER2_POSITIONS and earns("runout",
+                                                                           "runout_order2"):
+        changes["runout_order2"] = True
+    levels = {c[list(varied).index("temperature")] for c in cond.values()} \
+        if "temperature" in varied else set()
+    if (not why_not.get("thermal_expansion") and len(levels) >= 3
+            and earns("thermal_expansion", "thermal_quadratic")):
+        changes["thermal_quadratic"] = True
+    if not why_not.get("bearing_clearance"):
+        first = fit_profile(stack, ("backlash", "bearing_clearance"))
+        second = fit_profile(replace(stack, bearing_smooth=True, cache={}),
+                             ("backlash", "bearing_clearance"))
+        if _bic(second) <= _bic(first) - SEPARATION_BIC:
+            changes["bearing_smooth"] = True
+    return replace(stack, cache={}, **changes) if changes else stack
+
+
 # ---------------------------------------------------------------------- cross-validation
 
 
@@ -337,21 +395,43 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             out["soft_twist_arcmin"] = f.coef("soft_twist")
             out["soft_twist_arcmin_ci95"] = _ci(f, "soft_twist", scale)
             out["torque_scale_Nm"] = f.nl.get("stiffening_torque_Nm")
+            # a contact's hardening is its Hertzian approach beyond the linear spring, a few
+            # um: more extra twist than the whole designed free play is a flank change
+            # (play), not a contact layer
+            nominal = stack.runs[0].nominal
+            play = nominal.play_arcmin if nominal is not None else math.nan
+            if math.isfinite(play) and play > 0 and out["soft_twist_arcmin"] > play:
+                ok = False
+                notes.append(f"contact stiffening's extra twist {out['soft_twist_arcmin']:.3f} "
+                             f"arcmin above the nominal free play ({play:.3f} arcmin)")
         elif e == "bearing_clearance":
             cb = f.coef("bearing_compliance")
             out["soft_stiffness_Nm_per_arcmin"] = 1.0 / cb if cb > 0 else None
             out["soft_stage_torque_Nm"] = f.nl.get("bearing_stage_torque_Nm")
             clear = unit.get("bearing_clearance_mm")
+            take_up = cb * (f.nl.get("bearing_stage_torque_Nm") or 0.0)
+            out["take_up_twist_arcmin"] = take_up
             if isinstance(clear, list) and clear:
-                out["budget_extra_play_arcmin"] = bearing_play_arcmin(
-                    clear, stack.pressure_angle_deg, m, z1)
+                budget = bearing_play_arcmin(clear, stack.pressure_angle_deg, m, z1)
+                out["budget_extra_play_arcmin"] = budget
+                # the soft stage takes up the clearance: the twist it adds on a flank is
+                # bounded by the play the inspected clearances give (seed 000 eqs. 3 + 7),
+                # with the same factor two as the runout's
+                if budget > 0 and take_up > 2.0 * budget:
+                    ok = False
+                    notes.append(f"soft stage takes up {take_up:.3f} arcmin, above twice the "
+                                 f"inspected bearing clearances' play ({budget:.3f} arcmin)")
         elif e == "runout":
             c = [f.coef(n) for n in ("runout_c1", "runout_s1", "runout_c2", "runout_s2")]
             # play change = -2 tan(a) (|AB| - a): amplitude in play -> eccentricity (um)
             k = 2.0 * math.tan(math.radians(stack.pressure_angle_deg))
             amp_int = math.hypot(c[0], c[1])
             amp_ext = math.hypot(c[2], c[3])
-            out["amplitude_arcmin"] = amp_int + amp_ext
+            amp_2 = math.hypot(f.coef("runout_h2c"), f.coef("runout_h2s"))
+            out["amplitude_arcmin"] = amp_int + amp_ext + amp_2
+            if "runout_h2c" in f.names:
+                out["order2_amplitude_arcmin"] = amp_2
+                out["order2_play_um"] = float(arcmin_to_um(amp_2, m, z1))
             out["internal_um"] = float(arcmin_to_um(amp_int, m, z1)) / k
             out["internal_phase_deg"] = math.degrees(math.atan2(-c[1], -c[0]))
             out["external_um"] = float(arcmin_to_um(amp_ext, m, z1)) / k
@@ -367,7 +447,18 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             out["coefficient_arcmin_per_K"] = c
             out["coefficient_arcmin_per_K_ci95"] = _ci(f, "thermal", scale)
             out["coefficient_um_per_K"] = float(arcmin_to_um(c, m, z1))
-            if abs(out["coefficient_um_per_K"]) > 3.0:
+            slope = abs(out["coefficient_um_per_K"])
+            if "thermal2" in f.names:
+                c2 = f.coef("thermal2")
+                out["quadratic_arcmin_per_K2"] = c2
+                out["quadratic_um_per_K2"] = float(arcmin_to_um(c2, m, z1))
+                # the local coefficient d(play)/dT at the ends of the campaign's range
+                temps = [r.mean_temperature_C for r in stack.runs
+                         if r.mean_temperature_C is not None]
+                ends = [min(temps) - stack.reference_C, max(temps) - stack.reference_C]
+                slope = max(abs(out["coefficient_um_per_K"] + 2.0 * out["quadratic_um_per_K2"]
+                                * d) for d in ends)
+            if slope > 3.0:
                 ok = False
                 notes.append("thermal play change above 3 um/K")
         elif e == "tooth_spacing_error":
@@ -405,6 +496,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
     cfolds = folds_by_condition(stack, cond)
     rfolds = folds_by_repeat(stack, cond, varied)
     why_not = testable(stack, cond, varied)
+    stack = choose_family_members(stack, cond, varied, why_not, cfolds)
 
     noise = math.sqrt(float(np.mean(np.concatenate(
         [np.full(r.twist_arcmin.size, r.sigma_arcmin**2) for r in prepared]))))
@@ -413,6 +505,8 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
     # a held-out RMS over N points is known to about noise * (2 / N)^(1/4)
     n_points = sum(r.twist_arcmin.size for r in prepared)
     threshold = max(NONE_SIGMAS, (2.0 / max(n_points, 1)) ** 0.25) * noise
+
+    amplitude = float(np.median([r.amplitude_Nm for r in prepared]))
 
     # 1. predictive and structural gaps
     nom = prepared[0].nominal
@@ -551,7 +645,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
             reason += f"; {largest} is the larger term of the joint fit"
             chosen = [models[largest], *[c for c in chosen[1:]]]
             chosen[0] = models[largest]
-    curv_name, _ = curvature_effect(models, k_nom)
+    curv_name, _ = curvature_effect(models, k_nom, amplitude, stack.bearing_smooth)
     take_up_pair = ("bearing_clearance", "stiffness_nonlinearity")
     if curv_name is not None and verdict in take_up_pair and verdict != curv_name:
         verdict = curv_name  # one take-up family: the loaded slope names it
@@ -695,7 +789,9 @@ def series_size_arcmin(stack: Stack, f: LinearFit, effects: Sequence[str], k_nom
     return math.sqrt(sq / n) if n else 0.0
 
 
-def curvature_effect(models: dict[str, Candidate], k_nom: float) -> tuple[str | None, str]:
+def curvature_effect(models: dict[str, Candidate], k_nom: float,
+                     amplitude_Nm: float | None = None, smooth: bool = False
+                     ) -> tuple[str | None, str]:
     """Name the flank curvature by what physically differs: a bearing clearance being taken
     up adds compliance only below its closing torque and leaves the mesh's nominal slope at
     load (seed 004 eq. 8); Hertzian contact stiffening makes the contact itself stiffer as the
@@ -703,7 +799,10 @@ def curvature_effect(models: dict[str, Candidate], k_nom: float) -> tuple[str | 
     Read on the best take-up fit (extra twist + linear slope): loaded stiffness within
     the tolerance of the nominal (the larger of STIFFNESS_TOLERANCE and two standard errors
     of the fitted compliance) -> bearing clearance, stiffer -> contact stiffening, softer ->
-    undecided. Returns (effect or None, why)."""
+    undecided. A nominal loaded slope with a take-up still under TAKE_UP_COMPLETE at the
+    amplitude and a tangent stiffness there measurably below the nominal is a contact that
+    hardens over the whole range (stiffening): a clearance closes inside the loaded range.
+    Returns (effect or None, why)."""
     members = [models[n] for n in ("stiffness_nonlinearity", "bearing_clearance")
                if n in models and models[n].heldout_runs > 0]
     if not members:
@@ -730,8 +829,62 @@ def curvature_effect(models: dict[str, Candidate], k_nom: float) -> tuple[str | 
     if dev > tol:
         return "stiffness_nonlinearity", text + ": stiffer at load, the contact hardens"
     if abs(dev) <= tol:
+        k_end = tangent_stiffness_at_amplitude(c, amplitude_Nm, smooth)
+        done = take_up_completion(c, amplitude_Nm, smooth)
+        if (k_end is not None and k_end < k_nom * (1.0 - tol)
+                and done < TAKE_UP_COMPLETE):
+            return "stiffness_nonlinearity", text + (
+                f", but at the largest torque the take-up is only {done:.0%} complete and the "
+                f"tangent stiffness still {k_end:.3g}: the flank goes on hardening up to the "
+                "amplitude, as a contact does; a clearance closes inside the loaded range")
         return "bearing_clearance", text + ": the nominal slope is left, a clearance taken up"
     return None, ""
+
+
+TAKE_UP_COMPLETE = 0.95
+"""A take-up this far complete at the amplitude (three torque scales of the saturating
+curve) has closed inside the loaded range: a clearance. Less, and the flank is still
+hardening at the largest torque the campaign reaches: a contact."""
+
+
+def take_up_completion(c: Candidate, amplitude_Nm: float | None, smooth: bool = False
+                       ) -> float:
+    """Share of a take-up fit's total extra twist reached at the amplitude (N*m):
+    ``1 - exp(-A / T_s)`` for the saturating curve, ``tanh(A / T_b)`` for the smooth soft
+    stage, ``min(A / T_b, 1)`` for the kinked one; 1 when unknown."""
+    if not (amplitude_Nm is not None and math.isfinite(amplitude_Nm) and amplitude_Nm > 0):
+        return 1.0
+    if "stiffening_torque_Nm" in c.fit.nl and c.fit.nl["stiffening_torque_Nm"] > 0:
+        return float(-math.expm1(-amplitude_Nm / c.fit.nl["stiffening_torque_Nm"]))
+    tb = c.fit.nl.get("bearing_stage_torque_Nm", 0.0)
+    if tb > 0:
+        return math.tanh(amplitude_Nm / tb) if smooth else min(amplitude_Nm / tb, 1.0)
+    return 1.0
+
+
+def tangent_stiffness_at_amplitude(c: Candidate, amplitude_Nm: float | None,
+                                   smooth: bool = False) -> float | None:
+    """Tangent stiffness (N*m/arcmin) of a take-up fit at the campaign's loading amplitude
+    (median over runs): the loaded compliance plus what the take-up still adds there,
+    ``d / T_s exp(-A / T_s)`` for the saturating curve, the soft stage's compliance while
+    ``A < T_b`` for the kinked one. A clearance is closed long before rated torque (its
+    tangent is the mesh's there); a contact that hardens over the whole range is still
+    softer than its asymptote at the largest torque the campaign reaches."""
+    if not (amplitude_Nm is not None and math.isfinite(amplitude_Nm) and amplitude_Nm > 0):
+        return None
+    a = float(amplitude_Nm)
+    comp = c.fit.coef("compliance")
+    if "stiffening_torque_Nm" in c.fit.nl and "soft_twist" in c.fit.names:
+        ts = c.fit.nl["stiffening_torque_Nm"]
+        comp += c.fit.coef("soft_twist") / ts * math.exp(-a / ts) if ts > 0 else 0.0
+    elif "bearing_stage_torque_Nm" in c.fit.nl:
+        tb = c.fit.nl["bearing_stage_torque_Nm"]
+        if smooth and tb > 0:
+            if a / tb < 50.0:
+                comp += c.fit.coef("bearing_compliance") / math.cosh(a / tb) ** 2
+        elif a < tb:
+            comp += c.fit.coef("bearing_compliance")
+    return 1.0 / comp if comp > 0 else None
 
 
 def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_play,
@@ -777,7 +930,8 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
             chosen.append(current)
         return chosen
 
-    curv, curv_why = curvature_effect(models, k_nom)
+    curv, curv_why = curvature_effect(models, k_nom, float(np.median(
+        [r.amplitude_Nm for r in stack.runs])), stack.bearing_smooth)
     pair = {"bearing_clearance", "stiffness_nonlinearity"}
     in_pool = [c for c in pool if c.effects[0] in pair]
     if curv is not None and in_pool and models.get(curv) in pool:

@@ -111,7 +111,8 @@ def channel_lag_samples(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
     """Lag (samples) of the twist behind the torque channel (negative: ahead): the integer
     shift that best explains the loaded flanks (:func:`_flank_rss`), kept only when it
     improves them by LAG_EVIDENCE noise-units over no shift (a filter or transport delay of
-    one channel; with constant-rate ramps only it looks like friction and is not found)."""
+    one channel; with constant-rate ramps only it looks like friction and is not found). The
+    gain is counted per independent error: once per count change of a quantised twist."""
     n = torque.size
     amplitude = float(np.percentile(np.abs(torque), 99.5))
     if n < 200 or amplitude <= 0:
@@ -122,6 +123,13 @@ def channel_lag_samples(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
     if not math.isfinite(best_rss):
         return 0
     base = best_rss
+    # a quantised reading holds its error while the signal moves less than a count: on the
+    # flanks consecutive residuals are then one error, not independent ones, so the
+    # chi-square gain counts once per count the twist crosses (samples per count change;
+    # 1 when the noise dithers the reading)
+    on = np.abs(torque[core]) > 0.2 * amplitude
+    changes = int(np.count_nonzero(np.diff(twist[core][on])))
+    per_count = max(1.0, on.sum() / max(changes, 1))
     for lag in range(-lmax, lmax + 1):
         if lag == 0:
             continue
@@ -129,7 +137,7 @@ def channel_lag_samples(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
         rss = _flank_rss(shifted, twist[core], t[core], amplitude, sigma)
         if rss < best_rss:
             best, best_rss = lag, rss
-    return best if base - best_rss > LAG_EVIDENCE else 0
+    return best if (base - best_rss) / per_count > LAG_EVIDENCE else 0
 
 
 def resolution_of(values: np.ndarray) -> float:

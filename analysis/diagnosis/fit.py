@@ -28,6 +28,7 @@ from analysis.effects import (
     flank_sign,
     model_lost_motion_arcmin,
     runout_basis,
+    runout_harmonic_basis,
     tooth_pair_phase,
     um_to_arcmin,
 )
@@ -59,6 +60,12 @@ class Stack:
     reference_C: float
     rated_Nm: float
     cache: dict = field(default_factory=dict, repr=False)
+    #: Family members the campaign supports (:func:`choose_family_members`): the runout's
+    #: twice-per-turn harmonic, the thermal play's quadratic term.
+    runout_order2: bool = False
+    thermal_quadratic: bool = False
+    #: The bearing's soft stage closes smoothly (``T_b tanh(|G| / T_b)``) instead of at a kink.
+    bearing_smooth: bool = False
 
     @property
     def n_runs(self) -> int:
@@ -118,8 +125,12 @@ def column_names(stack: Stack, effects: Sequence[str], teeth: Sequence[int]) -> 
         names.append("bearing_compliance")
     if "runout" in effects:
         names += ["runout_c1", "runout_s1", "runout_c2", "runout_s2"]
+        if stack.runout_order2:
+            names += ["runout_h2c", "runout_h2s"]
     if "thermal_expansion" in effects:
         names.append("thermal")
+        if stack.thermal_quadratic:
+            names.append("thermal2")
     if "tooth_spacing_error" in effects:
         names += [f"tooth_{t}" for t in teeth]
     return names
@@ -137,13 +148,19 @@ def run_columns(stack: Stack, run: PreparedRun, effects: Sequence[str], nl: dict
     if "stiffness_nonlinearity" in effects:
         cols.append(s * -np.expm1(-tau / nl["stiffening_torque_Nm"]))
     if "bearing_clearance" in effects:
-        cols.append(s * np.minimum(tau, nl["bearing_stage_torque_Nm"]))
+        tb = nl["bearing_stage_torque_Nm"]
+        cols.append(s * (tb * np.tanh(tau / tb) if stack.bearing_smooth
+                         else np.minimum(tau, tb)))
     if "runout" in effects:
         basis = runout_basis(run.input_angle_deg or 0.0, stack.z_internal, stack.z_external)
         cols += [s / 2.0 * b for b in basis]
+        if stack.runout_order2:
+            cols += [s / 2.0 * b for b in runout_harmonic_basis(run.input_angle_deg or 0.0)]
     if "thermal_expansion" in effects:
         temp = run.temperature_C if run.temperature_C is not None else np.full(s.size, math.nan)
         cols.append(s / 2.0 * (temp - stack.reference_C))
+        if stack.thermal_quadratic:
+            cols.append(s / 2.0 * (temp - stack.reference_C) ** 2)
     if "tooth_spacing_error" in effects:
         tooth = int(tooth_pair_phase(run.input_angle_deg or 0.0, stack.z_internal,
                                      stack.z_external))
@@ -327,7 +344,9 @@ def fit(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None = None,
 def cached_columns(stack: Stack, i: int, effects: Sequence[str], nl: dict[str, float],
                    teeth: Sequence[int]) -> np.ndarray:
     """:func:`run_columns`, memoised per stack, run, effects and nonlinear values."""
-    key = (id(stack), i, tuple(effects), tuple(sorted(nl.items())))
+    key = (id(stack), stack.runout_order2, stack.thermal_quadratic, stack.bearing_smooth, i,
+           tuple(effects),
+           tuple(sorted(nl.items())))
     hit = stack.cache.get(key)
     if hit is None:
         hit = run_columns(stack, stack.runs[i], effects, nl, teeth)
@@ -498,9 +517,11 @@ def loop_params(stack: Stack, f: LinearFit) -> LoopParams:
         stiffening_torque_Nm=f.nl.get("stiffening_torque_Nm", 1.0),
         runout_coeffs_arcmin=tuple(f.coef(n) for n in
                                    ("runout_c1", "runout_s1", "runout_c2", "runout_s2")),
+        runout_order2_arcmin=(f.coef("runout_h2c"), f.coef("runout_h2s")),
         bearing_compliance_arcmin_per_Nm=f.coef("bearing_compliance"),
         bearing_stage_torque_Nm=f.nl.get("bearing_stage_torque_Nm", 0.0),
         thermal_arcmin_per_K=f.coef("thermal"),
+        thermal_arcmin_per_K2=f.coef("thermal2"),
         thermal_reference_C=stack.reference_C,
         torque_offset_Nm=f.nl.get("torque_offset_Nm", 0.0),
         spacing_play_arcmin=teeth,

@@ -126,13 +126,13 @@ def _wait_state(client: httpx.Client, states: tuple[str, ...], timeout_s: float
     raise TimeoutError(f"the page did not reach {states} in {timeout_s:.0f} s: {status}")
 
 
-def _campaign_body(name: str, positions: list[float], steps_per_quarter: int
-                   ) -> dict[str, Any]:
+def _campaign_body(name: str, positions: list[float], steps_per_quarter: int,
+                   plan: dict[str, Any] | None = None) -> dict[str, Any]:
     unit = json.loads((ROOT / "rig" / "examples" / "units" / "seed000-pair1.json")
                       .read_text(encoding="utf-8"))
     return {"kind": "campaign", "name": name, "unit": {**unit, "serial": f"load-{name}"},
             "plan": {"rated_torque_Nm": 10.0, "steps_per_quarter": steps_per_quarter,
-                     "pre_cycles": 1},
+                     "pre_cycles": 1, **(plan or {})},
             "axes": {"positions_deg": positions}}
 
 
@@ -190,14 +190,17 @@ def _measure_under_load(client: httpx.Client, store: Any, body: dict[str, Any],
 def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ...] = (
         0.0, 90.0, 180.0, 270.0), steps_per_quarter: int = 4, busy: int = 3,
         sse_clients: int = 20, timeout_s: float = 600.0, realtime_priority: int | None = None,
-        repeats: int = 1, cli_campaign: Path | None = None) -> dict[str, Any]:
+        repeats: int = 1, cli_campaign: Path | None = None,
+        plan: dict[str, Any] | None = None) -> dict[str, Any]:
     """Run the scenario of the module docstring; return its figures (see module doc).
 
     ``repeats``: measured campaigns one after the other under the same load (each with the
     diagnosis requested while it runs); ``load_campaign_completed`` is 1 only if all
     completed, ``load_completed_in_a_row`` counts them from the first. ``cli_campaign``: a
     campaign file run with ``rig campaign run FILE --simulated`` (its own simulated rig)
-    beside them, under the same load (``load_cli_campaign_completed``).
+    beside them, under the same load (``load_cli_campaign_completed``). ``plan``: keys of
+    the page's plan set over the default for the measured campaigns (the test's shorter
+    plan).
 
     ``realtime_priority``: SCHED_FIFO for the simulated devices and, through the rig
     configuration they write (``[rig] realtime_priority``), for the engine process.
@@ -254,7 +257,7 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
         campaigns: list[dict[str, Any]] = []
         for i in range(repeats):
             campaigns.append(_measure_under_load(client, the_store, _campaign_body(
-                f"under-load-{i}", list(positions), steps_per_quarter), earlier_id,
+                f"under-load-{i}", list(positions), steps_per_quarter, plan), earlier_id,
                 timeout_s))
         cli_figures: dict[str, Any] = {}
         if cli is not None:

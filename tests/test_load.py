@@ -38,10 +38,12 @@ def test_acquisition_figures_count_missing_periods_not_bursts():
 @pytest.mark.timeout(900)  # ten campaigns of ~13 s each, on a PC loaded on purpose
 def test_campaigns_from_the_page_complete_ten_times_in_a_row_under_load(tmp_path: Path):
     """Ten campaigns in a row through the page under the load (a short one-position plan
-    each, the diagnosis requested from the page during each), and the shipped example
-    campaign run from the CLI on its own simulated rig at the same time: all complete."""
+    each: no pre-cycle, the free play crossed at 0.6 N*m/s; the diagnosis requested from the
+    page during each), and the shipped example campaign run from the CLI on its own simulated
+    rig at the same time: all complete."""
     figures = run_load_scenario(tmp_path, positions=(0.0,), steps_per_quarter=2,
-                                repeats=10, cli_campaign=EXAMPLE_CAMPAIGN)
+                                repeats=10, cli_campaign=EXAMPLE_CAMPAIGN,
+                                plan={"pre_cycles": 0, "zero_rate_Nm_per_s": 0.6})
     assert figures["load_completed_in_a_row"] == 10, figures
     assert figures["load_campaign_completed"] == 1, figures
     assert figures["load_cli_campaign_completed"] == 1, figures

@@ -214,7 +214,8 @@ class EncoderNetwork:
         self.syncs_sent = 0
         # (SYNC number, host time.monotonic() s just before it was sent): the moments the
         # encoders sampled, for stamping their PDOs (rig.engine.steady_clock.SyncClock)
-        self.sync_log: collections.deque[tuple[int, float]] = collections.deque(maxlen=4096)
+        # (1024: 4 s at the simulated rig's 4 ms, 1 s at 1 ms; the engine copies it each poll)
+        self.sync_log: collections.deque[tuple[int, float]] = collections.deque(maxlen=1024)
         self.protocol_error_count = 0
         self.last_protocol_error = ""
         self._sync_task: can.broadcastmanager.ThreadBasedCyclicSendTask | None = None

@@ -119,7 +119,8 @@ def test_fault_at_phase_ends_safe_with_the_run_kept(fault: str, phase: str, tmp_
             engine, outcomes = measure_plan(session, store, PLAN, run_meta(UNIT, session),
                                             progress=progress)
         watcher.join(35)
-        assert "t" in injected, f"the phase {phase!r} never came"
+        assert "t" in injected, (f"the phase {phase!r} never came: the run ended "
+                             f"{engine.state}: {engine.stopping_reason}")
         safe_s = safe_at["t"] - injected["t"] if "t" in safe_at else None
         (outcome,) = outcomes
         run = read_run(outcome.path)

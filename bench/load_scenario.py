@@ -83,13 +83,21 @@ def acquisition_figures(t_s: np.ndarray, period_s: float) -> tuple[int, float]:
     return lost, float(np.percentile(jitter_ms, 99))
 
 
+def _sim_env(realtime_priority: int | None, device_priority: int | None) -> dict[str, str]:
+    """The environment for programs that start simulated rigs: the priorities asked, none
+    inherited."""
+    env = dict(os.environ)
+    for name, value in (("RIG_SIM_REALTIME_PRIORITY", realtime_priority),
+                        ("RIG_SIM_DEVICE_PRIORITY", device_priority)):
+        env.pop(name, None)
+        if value is not None:
+            env[name] = str(value)
+    return env
+
+
 @contextlib.contextmanager
-def _serve(store: Path, stats: Path, log: Path, realtime_priority: int | None
-           ) -> Iterator[str]:
-    env = {**os.environ, "RIG_SIM_STATS": str(stats)}
-    env.pop("RIG_SIM_REALTIME_PRIORITY", None)
-    if realtime_priority is not None:
-        env["RIG_SIM_REALTIME_PRIORITY"] = str(realtime_priority)
+def _serve(store: Path, stats: Path, log: Path, env: dict[str, str]) -> Iterator[str]:
+    env = {**env, "RIG_SIM_STATS": str(stats)}
     env.pop("RIG_WEB_TOKEN", None)
     with open(log, "w", encoding="utf-8") as err:
         proc = subprocess.Popen([*RIG, "serve", "--simulated", "--port", "0", "--store",
@@ -190,7 +198,7 @@ def _measure_under_load(client: httpx.Client, store: Any, body: dict[str, Any],
 def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ...] = (
         0.0, 90.0, 180.0, 270.0), steps_per_quarter: int = 4, busy: int = 3,
         sse_clients: int = 20, timeout_s: float = 600.0, realtime_priority: int | None = None,
-        repeats: int = 1, cli_campaign: Path | None = None,
+        device_priority: int | None = None, repeats: int = 1, cli_campaign: Path | None = None,
         plan: dict[str, Any] | None = None) -> dict[str, Any]:
     """Run the scenario of the module docstring; return its figures (see module doc).
 
@@ -204,15 +212,18 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
 
     ``realtime_priority``: SCHED_FIFO for the simulated devices and, through the rig
     configuration they write (``[rig] realtime_priority``), for the engine process.
+    ``device_priority``: SCHED_FIFO for the simulated devices only (they stand in for
+    hardware, which has its own CPU; the engine, the server and the CLI campaign's measuring
+    process stay on the normal scheduler).
     """
+    env = _sim_env(realtime_priority, device_priority)
     with contextlib.ExitStack() as stack:
         if workdir is None:
             workdir = Path(stack.enter_context(tempfile.TemporaryDirectory()))
         store = workdir / "store"
         store.mkdir(parents=True, exist_ok=True)
         stats = workdir / "sim-stats.json"
-        url = stack.enter_context(_serve(store, stats, workdir / "serve.log",
-                                        realtime_priority))
+        url = stack.enter_context(_serve(store, stats, workdir / "serve.log", env))
         client = stack.enter_context(httpx.Client(base_url=url, timeout=30))
         # the earlier campaign (no load): the one the page is asked to diagnose
         earlier = _measure(client, _campaign_body("earlier", list(positions),
@@ -251,7 +262,7 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
             cli = subprocess.Popen([*RIG, "campaign", "run", str(cli_campaign), "--simulated",
                                     "--store", str(workdir / "cli-store"), "--json",
                                     str(cli_json)], stdout=cli_log, stderr=cli_log,
-                                   cwd=workdir, start_new_session=True)
+                                   cwd=workdir, env=env, start_new_session=True)
             procs.append(cli)
         the_store = Store(store)
         campaigns: list[dict[str, Any]] = []

@@ -52,6 +52,8 @@ class RigSection(BaseModel):
     the measuring program has not called ``alive()`` for this long (None: never stops).
     ``realtime_priority`` (1-99, optional): SCHED_FIFO for the measuring process when the
     system permits it (rig/realtime.py); None: the normal scheduler.
+    ``keepalive_process``: write the drive keepalive from a small process of its own when
+    the drive is on Modbus TCP (rig/keepalive_process.py); False: the thread alone.
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
@@ -62,6 +64,7 @@ class RigSection(BaseModel):
     keepalive_period_s: float = Field(default=0.1, gt=0, le=10)
     master_timeout_s: float | None = Field(default=2.0, gt=0)
     realtime_priority: int | None = Field(default=None, ge=1, le=99, strict=True)
+    keepalive_process: bool = Field(default=True, strict=True)
 
 
 class RigConfig(BaseModel):

@@ -12,10 +12,14 @@ it holds (None where the configuration has no such device, or it failed to open 
   :class:`ModbusLink` (one RS-485 line or TCP connection, requests serialised).
 
 Drive keepalive: the drive's watchdog trips when the master writes nothing for
-``drive.watchdog_s``. A thread of the bundle writes the keepalive every
-``rig.keepalive_period_s`` while the engine shows it is alive: the engine calls
-:meth:`RigDevices.alive` at least every ``rig.master_timeout_s``; if it stops (a hung
-program), the thread stops feeding and the drive falls to its safe state by itself.
+``drive.watchdog_s``. The keepalive is written every ``rig.keepalive_period_s`` while the
+engine shows it is alive: the engine calls :meth:`RigDevices.alive` at least every
+``rig.master_timeout_s``; if it stops (a hung program), the keepalive stops and the drive
+falls to its safe state by itself. On Modbus TCP (and ``rig.keepalive_process``, the
+default) a small process of its own writes it over its own connection
+(:mod:`rig.keepalive_process`), so nothing in this process can hold it up; a thread of the
+bundle writes it whenever that process has not been acknowledged for 1.5 periods (not yet
+started, died, or an RS-485 line with one master, where the thread is the only writer).
 ``safe_state()`` (zero torque, disabled) never raises; ``close()`` stops the thread, puts the
 drive safe and closes everything.
 """
@@ -33,12 +37,16 @@ from drivers.encoder_canopen import CanopenEncoder, EncoderNetwork
 from drivers.errors import DeviceError
 from drivers.loading_drive import LoadingDrive
 from drivers.modbus.link import ModbusLink, ModbusLinkConfig
+from drivers.modbus.map import LOADING_DRIVE_MAP
 from drivers.modbus.torque_sensor import ModbusTorqueSensor
 from drivers.rig_controls import ClimateChamber, InputMotor
 from drivers.transducer.serial import SerialTorqueTransducer
 from rig.config import RigConfig, link_key
+from rig.keepalive_process import KeepaliveProcess, KeepaliveTarget
 
 log = logging.getLogger(__name__)
+
+KEEPALIVE_REGISTER = LOADING_DRIVE_MAP["keepalive"].address
 
 
 class RigDevices:
@@ -56,13 +64,14 @@ class RigDevices:
         self.climate: ClimateChamber | None = None
         self.links: dict[tuple, ModbusLink] = {}
         self.open_errors: dict[str, str] = {}
-        self.keepalives_sent = 0
-        self.keepalive_errors = 0
-        self.last_keepalive_error: str | None = None
-        self.keepalive_withheld = False
+        self._thread_errors = 0
+        self._thread_error: str | None = None
+        self._thread_withheld = False
         self._alive_mono = time.monotonic()
         self._stop = threading.Event()
         self._keepalive_thread: threading.Thread | None = None
+        self._keepalive_process: KeepaliveProcess | None = None
+        self._thread_sent = 0
         self._closed = False
 
     # -- for the engine ---------------------------------------------------------------------
@@ -75,8 +84,39 @@ class RigDevices:
         return limit
 
     def alive(self) -> None:
-        """Tell the keepalive thread the measuring program is alive (call it often)."""
+        """Tell the keepalive the measuring program is alive (call it often)."""
         self._alive_mono = time.monotonic()
+        process = self._keepalive_process
+        if process is not None:
+            process.alive()
+
+    @property
+    def keepalives_sent(self) -> int:
+        """Keepalives written (process and thread)."""
+        process = self._keepalive_process
+        return self._thread_sent + (process.sent if process is not None else 0)
+
+    @property
+    def keepalive_errors(self) -> int:
+        process = self._keepalive_process
+        return self._thread_errors + (process.errors if process is not None else 0)
+
+    @property
+    def last_keepalive_error(self) -> str | None:
+        process = self._keepalive_process
+        return (process.last_error if process is not None else None) or self._thread_error
+
+    @property
+    def keepalive_withheld(self) -> bool:
+        """True while the measuring program is silent and the keepalive is withheld."""
+        process = self._keepalive_process
+        return self._thread_withheld or (process is not None and process.withheld)
+
+    @property
+    def keepalive_process_running(self) -> bool:
+        """True while the keepalive's own process runs (see the module doc)."""
+        process = self._keepalive_process
+        return process is not None and process.running
 
     def get(self, name: str) -> Any:
         """The driver called ``name`` (a key of ``RigConfig.device_names()``), or None."""
@@ -133,18 +173,43 @@ class RigDevices:
 
     # -- keepalive --------------------------------------------------------------------------
     def start_keepalive(self) -> None:
-        """Start the drive keepalive thread (done by :func:`open_rig`; idempotent)."""
+        """Start the drive keepalive: its process where it can have one, and the thread
+        (done by :func:`open_rig`; idempotent)."""
         if self.drive is None or self._keepalive_thread is not None:
             return
         self._stop.clear()
         self.alive()
+        self._start_keepalive_process()
         self._keepalive_thread = threading.Thread(target=self._keepalive_loop,
                                                   name="rig drive keepalive", daemon=True)
         self._keepalive_thread.start()
 
+    def _start_keepalive_process(self) -> None:
+        cfg, rig = self.config.drive, self.config.rig
+        if not rig.keepalive_process or cfg is None or cfg.transport != "tcp":
+            return
+        process = KeepaliveProcess(KeepaliveTarget(
+            host=cfg.host, port=cfg.port, unit=cfg.device_id, address=KEEPALIVE_REGISTER,
+            timeout_s=cfg.timeout_s, period_s=rig.keepalive_period_s,
+            master_timeout_s=rig.master_timeout_s))
+        try:
+            process.start()
+        except OSError as exc:  # the thread alone then feeds the drive
+            log.warning("drive keepalive process did not start (%s): the thread feeds the "
+                        "drive", exc)
+            process.stop()
+            return
+        self._keepalive_process = process
+
     def stop_keepalive(self) -> None:
-        """Stop the keepalive thread and wait for it."""
+        """Stop the keepalive (process and thread) and wait for them."""
         self._stop.set()
+        process, self._keepalive_process = self._keepalive_process, None
+        if process is not None:
+            # its figures stay readable after the stop
+            self._thread_sent += process.sent
+            self._thread_errors += process.errors
+            process.stop()
         thread, self._keepalive_thread = self._keepalive_thread, None
         if thread is not None:
             thread.join(timeout=5.0 + 2 * self.config.drive.timeout_s)
@@ -163,20 +228,23 @@ class RigDevices:
                 return
             silent_s = time.monotonic() - self._alive_mono
             if master_timeout is not None and silent_s > master_timeout:
-                if not self.keepalive_withheld:
+                if not self._thread_withheld:
                     log.error("measuring program silent for %.1f s: drive keepalive withheld "
                               "(the drive watchdog will disable it)", silent_s)
-                self.keepalive_withheld = True
+                self._thread_withheld = True
                 continue
-            self.keepalive_withheld = False
+            self._thread_withheld = False
+            process = self._keepalive_process
+            if process is not None and process.fed_within(1.5 * period):
+                continue  # the keepalive process feeds the drive
             try:
                 drive.keepalive()
-                self.keepalives_sent += 1
+                self._thread_sent += 1
             except DeviceError as exc:
-                self.keepalive_errors += 1
-                if str(exc) != self.last_keepalive_error:
+                self._thread_errors += 1
+                if str(exc) != self._thread_error:
                     log.warning("drive keepalive failed: %s", exc)
-                self.last_keepalive_error = str(exc)
+                self._thread_error = str(exc)
 
 
 def _link(devices: RigDevices, cfg: ModbusLinkConfig) -> ModbusLink:

@@ -84,6 +84,7 @@ class SimulatedRig:
         stream_rate_Hz: float = 500.0,
         watchdog_s: float = 0.5,
         realtime_priority: int | None = None,
+        device_priority: int | None = None,
     ) -> None:
         if transducer not in ("pty", "tcp"):
             raise ValueError(f"transducer must be 'pty' or 'tcp', got {transducer!r}")
@@ -108,6 +109,13 @@ class SimulatedRig:
         """SCHED_FIFO for the simulated devices (they stand in for hardware, which a busy PC
         cannot starve) and ``[rig] realtime_priority`` of the rig configuration written;
         default from ``RIG_SIM_REALTIME_PRIORITY``; None: normal scheduling."""
+        env_device = os.environ.get(DEVICE_PRIORITY_ENV, "").strip()
+        self.device_priority = (device_priority if device_priority is not None
+                                else int(env_device) if env_device else None)
+        """SCHED_FIFO for the simulated devices only (the rig configuration written leaves the
+        measuring program on the normal scheduler): a load test then measures our software
+        on a busy PC against devices that, like hardware, have their own CPU. Default from
+        ``RIG_SIM_DEVICE_PRIORITY``; ``realtime_priority`` wins when both are set."""
         self._rig_config_arg = Path(rig_config_path) if rig_config_path is not None else None
         self.rig_config_path: Path | None = None
         self.addresses: dict[str, Any] = {}
@@ -313,6 +321,8 @@ class SimulatedRig:
             cmd += ["--rig-config", str(self._rig_config_arg)]
         if self.realtime_priority is not None:
             cmd += ["--realtime-priority", str(self.realtime_priority)]
+        elif self.device_priority is not None:
+            cmd += ["--device-priority", str(self.device_priority)]
         return cmd
 
     def _start_process(self) -> None:
@@ -361,6 +371,7 @@ def _terminate(proc: subprocess.Popen, timeout_s: float = 20.0) -> int:
 
 
 REALTIME_ENV = "RIG_SIM_REALTIME_PRIORITY"
+DEVICE_PRIORITY_ENV = "RIG_SIM_DEVICE_PRIORITY"
 
 
 def _write_stats(sim: SimulatedRig, path: Path) -> None:

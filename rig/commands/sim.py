@@ -47,6 +47,11 @@ def register(app: typer.Typer) -> None:
             min=1, max=99, help="SCHED_FIFO priority of the simulated devices (they stand in "
             "for hardware a busy PC cannot starve), also written as [rig] realtime_priority "
             "into the rig config. Default: $RIG_SIM_REALTIME_PRIORITY, else none.")] = None,
+        device_priority: Annotated[int | None, typer.Option(
+            min=1, max=99, help="SCHED_FIFO priority of the simulated devices only (the rig "
+            "config leaves the measuring program on the normal scheduler): for load tests of "
+            "the software against devices that, like hardware, a busy PC cannot starve. "
+            "Default: $RIG_SIM_DEVICE_PRIORITY, else none.")] = None,
         exit_with_parent: Annotated[bool, typer.Option(
             "--exit-with-parent", help="Stop when the process that started this one is gone "
             "(a measuring program killed with -9 leaves no simulator behind).")] = False,
@@ -64,7 +69,8 @@ def register(app: typer.Typer) -> None:
                                    modbus=modbus.value, port_base=port_base, seed=seed,
                                    input_encoder=input_encoder, rig_config_path=rig_config,
                                    sync_period_s=sync_period, stream_rate_Hz=stream_rate,
-                                   realtime_priority=realtime_priority)
+                                   realtime_priority=realtime_priority,
+                                   device_priority=device_priority)
             addresses = sim_rig.start()
         except (PlantConfigError, ValueError, OSError) as exc:  # bad file, port taken, ...
             for line in str(exc).splitlines():
@@ -72,7 +78,8 @@ def register(app: typer.Typer) -> None:
             raise typer.Exit(2) from exc
         from rig.realtime import apply_realtime_priority
 
-        apply_realtime_priority(sim_rig.realtime_priority, what="simulated rig")
+        apply_realtime_priority(sim_rig.realtime_priority or sim_rig.device_priority,
+                                what="simulated rig")
         print(json.dumps(addresses), flush=True)
         raise typer.Exit(serve_until_signalled(
             sim_rig, parent_pid=os.getppid() if exit_with_parent else None))

@@ -305,9 +305,22 @@ class Engine:
         self._stop_threads.clear()
         self._last_row_mono = time.monotonic()
         for target, name in ((self._torque_loop, "rig-torque"), (self._poll_loop, "rig-poll")):
-            thread = threading.Thread(target=target, name=name, daemon=True)
+            thread = threading.Thread(target=self._guarded, args=(target, name), name=name,
+                                      daemon=True)
             thread.start()
             self._threads.append(thread)
+
+    def _guarded(self, loop: Any, name: str) -> None:
+        """Run an acquisition thread's loop; an unexpected error (a bug, not a device fault)
+        stops the run at once with its name, instead of leaving the run without that thread
+        until the stale-sample trip (the traceback goes to the log)."""
+        try:
+            loop()
+        except Exception as exc:
+            log.exception("unexpected error in the %s thread", name)
+            if not self._stop_threads.is_set():
+                self._trip(f"internal error in the {name} thread: {type(exc).__name__}: {exc} "
+                           "(the traceback is in the log)")
 
     def _torque_loop(self) -> None:
         while not self._stop_threads.is_set():

@@ -231,6 +231,8 @@ def main(argv: list[str]) -> int:
         _feed(KeepaliveTarget(**json.loads(argv[1])), page, int(argv[2]))
     finally:
         page.close()
+        with contextlib.suppress(OSError):
+            os.unlink(argv[0])  # also when the measuring program was killed and cannot
     return 0
 
 

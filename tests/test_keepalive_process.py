@@ -133,7 +133,7 @@ KILLED_PROGRAM = textwrap.dedent("""
         rig.alive(); time.sleep(0.05)
     rig.drive.set_torque(1.0)
     rig.drive.enable()
-    print(rig._keepalive_process._proc.pid, flush=True)
+    print(rig._keepalive_process._proc.pid, rig._keepalive_process._path, flush=True)
     while True:
         rig.alive(); time.sleep(0.05)
 """)
@@ -149,7 +149,9 @@ def test_the_process_stops_when_the_measuring_program_is_killed(sim):
                                env=env)
     try:
         assert program.stdout is not None
-        child = int(program.stdout.readline())
+        child_pid, page = program.stdout.readline().split()
+        child = int(child_pid)
+        assert Path(page).is_file()
         drive = _drive(config)
         assert drive.status().enabled
         program.send_signal(signal.SIGKILL)
@@ -159,6 +161,7 @@ def test_the_process_stops_when_the_measuring_program_is_killed(sim):
                 and "zombie" not in _state(child):
             time.sleep(0.02)
         assert not Path(f"/proc/{child}").exists() or "zombie" in _state(child)
+        assert not Path(page).exists()  # its shared page removed by the child itself
         time.sleep(2 * config.drive.watchdog_s)
         status = drive.status()
         assert status.watchdog_tripped and not status.enabled, status

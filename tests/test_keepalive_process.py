@@ -72,36 +72,36 @@ def _drive(config: RigConfig) -> LoadingDrive:
     return LoadingDrive(config.drive, link=ModbusLink(config.drive))
 
 
+def _enable_and_hold(rig, watchdog_s: float):
+    """Enable the drive at 1 N*m, hold the interpreter for HOLD_WATCHDOGS watchdogs; the
+    drive's status after."""
+    rig.drive.set_torque(1.0)
+    rig.drive.enable()
+    held = _hold_interpreter(HOLD_WATCHDOGS * watchdog_s)
+    assert held > 2 * watchdog_s, held
+    return rig.drive.status()
+
+
 def test_the_process_feeds_the_drive_while_the_interpreter_is_held(sim):
     # master timeout far beyond the hold: the program is slow, not dead
     config = _config(sim, master_timeout_s=30.0)
-    watchdog = config.drive.watchdog_s
     with open_rig(config) as rig:
         assert rig.keepalive_process_running
         deadline = time.monotonic() + 10.0
         while rig.keepalives_sent < 3 and time.monotonic() < deadline:
             time.sleep(0.05)  # the process is up and acknowledged
-        rig.drive.set_torque(1.0)
-        rig.drive.enable()
-        held = _hold_interpreter(HOLD_WATCHDOGS * watchdog)
-        status = rig.drive.status()
-        assert held > 2 * watchdog, held
-        assert status.enabled and not status.watchdog_tripped, (held, status)
+        status = _enable_and_hold(rig, config.drive.watchdog_s)
+        assert status.enabled and not status.watchdog_tripped, status
         rig.safe_state()
 
 
 def test_without_the_process_the_same_hold_trips_the_watchdog(sim):
     """Why the process exists: the thread alone cannot write while the lock is held."""
     config = _config(sim, master_timeout_s=30.0, keepalive_process=False)
-    watchdog = config.drive.watchdog_s
     with open_rig(config) as rig:
         assert not rig.keepalive_process_running and rig.keepalive_running
-        rig.drive.set_torque(1.0)
-        rig.drive.enable()
-        held = _hold_interpreter(HOLD_WATCHDOGS * watchdog)
-        status = rig.drive.status()
-        assert held > 2 * watchdog, held
-        assert status.watchdog_tripped and not status.enabled, (held, status)
+        status = _enable_and_hold(rig, config.drive.watchdog_s)
+        assert status.watchdog_tripped and not status.enabled, status
         rig.drive.reset_fault()
 
 

@@ -204,15 +204,15 @@ class RigDevices:
     def stop_keepalive(self) -> None:
         """Stop the keepalive (process and thread) and wait for them."""
         self._stop.set()
-        process, self._keepalive_process = self._keepalive_process, None
-        if process is not None:
-            # its figures stay readable after the stop
-            self._thread_sent += process.sent
-            self._thread_errors += process.errors
-            process.stop()
         thread, self._keepalive_thread = self._keepalive_thread, None
         if thread is not None:
             thread.join(timeout=5.0 + 2 * self.config.drive.timeout_s)
+        process, self._keepalive_process = self._keepalive_process, None
+        if process is not None:
+            process.stop()
+            # its figures stay readable after the stop (the thread's counts hold them)
+            self._thread_sent += process.sent
+            self._thread_errors += process.errors
 
     @property
     def keepalive_running(self) -> bool:

@@ -75,18 +75,24 @@ class _Page:
     def __init__(self, path: str) -> None:
         with open(path, "r+b") as f:
             self._mm = mmap.mmap(f.fileno(), _SIZE)
+        self._last: tuple = _HEAD.unpack_from(self._mm, 0)
 
     def get(self) -> tuple:
-        return _HEAD.unpack_from(self._mm, 0)
+        """The head fields; after close (a reader racing the stop), the last ones read."""
+        with contextlib.suppress(ValueError):
+            self._last = _HEAD.unpack_from(self._mm, 0)
+        return self._last
 
     def set_double(self, index: int, value: float) -> None:
-        struct.pack_into("<d", self._mm, 8 * index, value)
+        with contextlib.suppress(ValueError):  # closed: a caller racing the stop
+            struct.pack_into("<d", self._mm, 8 * index, value)
 
     def set_counts(self, sent: int, errors: int) -> None:
         struct.pack_into("<qq", self._mm, 16, sent, errors)
 
     def set_flag(self, index: int, value: bool) -> None:
-        self._mm[32 + index] = 1 if value else 0
+        with contextlib.suppress(ValueError):
+            self._mm[32 + index] = 1 if value else 0
 
     def set_error(self, text: str) -> None:
         raw = text.encode("utf-8", "replace")[:_ERROR_BYTES]
@@ -94,8 +100,12 @@ class _Page:
         struct.pack_into("<H", self._mm, 34, len(raw))
 
     def error(self) -> str | None:
-        n = struct.unpack_from("<H", self._mm, 34)[0]
-        return bytes(self._mm[_HEAD.size:_HEAD.size + n]).decode("utf-8", "replace") or None
+        try:
+            n = struct.unpack_from("<H", self._mm, 34)[0]
+            raw = bytes(self._mm[_HEAD.size:_HEAD.size + n])
+        except ValueError:  # closed
+            return None
+        return raw.decode("utf-8", "replace") or None
 
     def close(self) -> None:
         with contextlib.suppress(BufferError, ValueError):
@@ -135,6 +145,7 @@ class KeepaliveProcess:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait(2.0)
+        self._page.get()  # the final figures, readable after the close
         self._page.close()
         with contextlib.suppress(OSError):
             os.unlink(self._path)

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from analysis.diagnosis import Diagnosis, diagnose
+from analysis.diagnosis import ALPHA, Diagnosis, diagnose
 from analysis.diagnosis.data import RunInput
 from analysis.errors import AnalysisError
 from analysis.loop import twist_arcmin
@@ -53,18 +53,19 @@ def run_input(run: Run) -> RunInput:
     )
 
 
-def diagnose_campaign(campaign: Campaign) -> Diagnosis:
-    """Diagnose a campaign already read; AnalysisError becomes RigError naming the campaign."""
+def diagnose_campaign(campaign: Campaign, alpha: float = ALPHA) -> Diagnosis:
+    """Diagnose a campaign already read; AnalysisError becomes RigError naming the campaign.
+    ``alpha``: level of the calibrated decisions (analysis.diagnosis.calibration)."""
     try:
-        return diagnose([run_input(r) for r in campaign.runs])
+        return diagnose([run_input(r) for r in campaign.runs], alpha=alpha)
     except AnalysisError as exc:
         raise RigError(f"campaign {campaign.path or campaign.name}: {exc}") from exc
 
 
-def diagnose_path(path: str | Path) -> tuple[Campaign, Diagnosis]:
+def diagnose_path(path: str | Path, alpha: float = ALPHA) -> tuple[Campaign, Diagnosis]:
     """Read a campaign (or one run) folder and diagnose it."""
     campaign = read_run_or_campaign(path)
-    return campaign, diagnose_campaign(campaign)
+    return campaign, diagnose_campaign(campaign, alpha)
 
 
 def report_dict(campaign: Campaign, diagnosis: Diagnosis) -> dict[str, Any]:

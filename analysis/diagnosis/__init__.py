@@ -28,7 +28,15 @@ from typing import Any
 import numpy as np
 from scipy.stats import binomtest
 
-from analysis.diagnosis.data import PreparedRun, RunInput, prepare_run
+from analysis.diagnosis.calibration import REPLICATES
+from analysis.diagnosis.data import (
+    TARGET_POINTS,
+    PreparedRun,
+    RunInput,
+    prepare_run,
+    remove_torque_zero,
+)
+from analysis.diagnosis.evidence import calibrated_evidence
 from analysis.diagnosis.fit import (
     LinearFit,
     Stack,
@@ -44,11 +52,19 @@ from analysis.diagnosis.fit import (
     teeth_of,
     temperatures_known,
 )
+from analysis.diagnosis.report_measurement import measurement_report
 from analysis.diagnosis.where import gap_map, lack_of_fit, per_run_play, play_fourier
 from analysis.effects import CANDIDATES, arcmin_to_um, bearing_play_arcmin, tooth_pair_phase
 from analysis.errors import AnalysisError
 
 ARCSEC = 60.0
+#: Default level of every calibrated decision: an effect is called when the probability that
+#: this campaign's own errors give its evidence by chance is at most this
+#: (``rig diagnose --alpha``).
+ALPHA = 0.01
+#: Coulomb friction up to this share of rated torque is the ordinary drag of every unit and
+#: rig (seals, support bearings): carried by the null model, not a finding.
+FRICTION_ALLOWANCE = 0.01
 #: The structural gap counts when its systematic part exceeds this many noise RMS.
 NONE_SIGMAS = 0.8
 #: A candidate explains the gap when the systematic part left is at most this share.
@@ -481,17 +497,66 @@ def _sys(h: float, noise: float) -> float:
     return math.sqrt(max(h * h - noise * noise, 0.0))
 
 
-def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> Diagnosis:
-    """Diagnose a campaign (see the module docstring); raises AnalysisError on bad input."""
+def nuisance_friction(stack: Stack) -> float:
+    """The ordinary friction every unit and rig has (N*m): the null model's best Coulomb
+    friction between 0 and FRICTION_ALLOWANCE of rated torque (a few grid points). Carried
+    by every candidate as the measuring system's nuisance; only friction beyond it is an
+    effect."""
+    return _nuisance_friction(stack)[1]
+
+
+def _nuisance_friction(stack: Stack) -> tuple[float, float]:
+    """(objective, friction N*m) of the null with the best ordinary friction."""
+    top = FRICTION_ALLOWANCE * stack.rated_Nm
+    trials = [(fit(stack, ("backlash",), nl={"friction_Nm": float(v)}).objective, float(v))
+              for v in np.linspace(0.0, top, 6)]
+    return min(trials)
+
+
+def with_measurement_nuisance(prepared: list[PreparedRun], alpha: float
+                              ) -> tuple[Stack, dict[str, Any]]:
+    """The stack the diagnosis fits: the ordinary friction carried as a nuisance
+    (:func:`nuisance_friction`), and each run's torque zero read at its play crossings taken
+    out (analysis.diagnosis.data.remove_torque_zero) when that improves the null model by more
+    than the parameters it costs (BIC: log(n) per run read). A crossing read early by a soft
+    contact or a take-up near zero torque is no torque zero: such a reading worsens the null
+    and is not used."""
+    plain = build_stack(prepared)
+    obj_plain, f_plain = _nuisance_friction(plain)
+    zeroed_runs, zero_report = remove_torque_zero(prepared, alpha)
+    used = False
+    stack, f0 = plain, f_plain
+    if zero_report.get("runs_read"):
+        zeroed = build_stack(zeroed_runs)
+        obj_zero, f_zero = _nuisance_friction(zeroed)
+        n = sum(r.twist_arcmin.size for r in prepared)
+        if 2.0 * (obj_plain - obj_zero) >= zero_report["runs_read"] * math.log(max(n, 2)):
+            stack, f0, used = zeroed, f_zero, True
+    zero_report["used"] = used
+    if not used and zero_report.get("runs_read"):
+        zero_report["treated_as"] = ("not taken out: the crossings' zeros do not improve the "
+                                     "null model by more than they cost")
+    return replace(stack, nuisance_nl={"friction_Nm": f0}, cache={},
+                   nuisance_friction_max_Nm=FRICTION_ALLOWANCE * stack.rated_Nm), zero_report
+
+
+def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
+             alpha: float = ALPHA, replicates: int = REPLICATES, seed: int = 0) -> Diagnosis:
+    """Diagnose a campaign (see the module docstring); raises AnalysisError on bad input.
+    ``alpha``: the level at which an effect is called (each candidate's false-alarm
+    probability, :mod:`analysis.diagnosis.calibration`); ``replicates``, ``seed``: of the
+    block bootstrap that calibrates it."""
     if not runs:
         raise AnalysisError("a diagnosis needs at least one run")
-    prepared: list[PreparedRun] = [
-        prepare_run(r) if target_points is None else prepare_run(r, target_points) for r in runs
-    ]
-    stack = build_stack(prepared)
+    if not 0.0 < alpha < 1.0:
+        raise AnalysisError(f"alpha must be between 0 and 1, got {alpha!r}")
+    tp = TARGET_POINTS if target_points is None else target_points
+    prepared: list[PreparedRun] = [prepare_run(r, tp) for r in runs]
     if any(r.nominal is None for r in prepared):
         raise AnalysisError("the reference nominal model needs each run's unit data "
                             "(run.json 'unit'); a run has none usable")
+    stack, zero_report = with_measurement_nuisance(prepared, alpha)
+    prepared = list(stack.runs)
     cond, varied = conditions_of(stack)
     cfolds = folds_by_condition(stack, cond)
     rfolds = folds_by_repeat(stack, cond, varied)
@@ -594,7 +659,19 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
     reason = ""
     stiff_dev = (k_fit / k_nom - 1.0) if math.isfinite(k_nom) and math.isfinite(k_fit) else 0.0
 
-    if sys0 <= threshold:
+    # calibrated evidence (analysis.diagnosis.calibration): each testable candidate against
+    # the null, and the null's lack of fit, by a block bootstrap of the null's residuals
+    testable_names = [n for n in CANDIDATES if not why_not.get(n)]
+    cal, omni = calibrated_evidence(stack, base, (), testable_names, replicates, seed,
+                                    omnibus=True)
+    fap = {n: c.false_alarm_probability for n, c in cal.items()}
+    gap_fap = omni.false_alarm_probability if omni is not None else 1.0
+    any_effect = min(fap.values(), default=1.0) <= alpha
+    for name, c in models.items():
+        if len(c.effects) == 1 and fap.get(name, 1.0) > alpha and not c.screened_out:
+            c.notes.append(f"evidence within what this campaign's own errors give by chance "
+                           f"(false-alarm probability {fap.get(name, 1.0):.2g} > {alpha:g})")
+    if not any_effect and gap_fap > alpha:
         if stiff_dev < -STIFFNESS_TOLERANCE:
             verdict = "ambiguous"
             candidates = ["shaft_compliance", "mesh_stiffness"]
@@ -604,10 +681,12 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
         else:
             verdict = "none"
             reason = (f"held-out structural gap {h0 * ARCSEC:.2f} arcsec RMS against noise "
-                      f"{noise * ARCSEC:.2f} arcsec: within the measurement noise")
+                      f"{noise * ARCSEC:.2f} arcsec; no candidate and no lack of fit beyond "
+                      f"what this campaign's own errors give by chance at level {alpha:g}")
     else:
         verdict, candidates, next_experiment, chosen, reason = _attribute(
-            stack, models, sys0, threshold, noise, evaluate, before, nom.play_arcmin, k_nom)
+            stack, models, max(sys0, threshold * (1.0 + 1e-9)), threshold, noise, evaluate,
+            before, nom.play_arcmin, k_nom, fap=fap, alpha=alpha)
 
     ranking = []
     for c in sorted(models.values(),
@@ -623,8 +702,11 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
                                             / max(_sys(b_rms, noise), 1e-12)) ** 2, 4)
             if _sys(b_rms, noise) > 0 else 0.0,
             "params": _clean(c.params), "plausible": c.plausible, "notes": c.notes,
+            "false_alarm_probability": _nn(fap.get(c.effects[0], math.nan)),
             "evidence": {"delta_bic": round(c.delta_bic, 1), "heldout_runs": c.heldout_runs,
-                         "cv": c.scheme},
+                         "cv": c.scheme,
+                         **({"calibrated": _clean(cal[c.effects[0]].to_dict())}
+                            if c.effects[0] in cal else {})},
         })
     if "shaft_compliance" in candidates and math.isfinite(k_nom) and k_fit < k_nom:
         ks = 1.0 / (1.0 / k_fit - 1.0 / k_nom)
@@ -747,6 +829,15 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None) -> D
     report["free_play_fourier"] = fourier
     report["lack_of_fit"] = lack_of_fit(plays, {r.run_id: cond[r.run_id] for r in stack.runs})
     report["localization"] = _localize(gm, fourier, varied)
+    report["calibration"] = {
+        "alpha": alpha, "replicates": replicates, "seed": seed,
+        "method": "moving-block bootstrap of the null model's residuals, run by run; "
+                  "scaled chi-square tail; any-candidate correction by the effective number "
+                  "of tests (analysis.diagnosis.calibration)",
+        "lack_of_fit": _clean(omni.to_dict()) if omni is not None else None,
+    }
+    report["measurement"] = _clean(measurement_report(runs, prepared, stack, base, zero_report,
+                                                      tp, alpha))
     return Diagnosis(report=report, stack=stack, base=base, models=models)
 
 
@@ -888,8 +979,11 @@ def tangent_stiffness_at_amplitude(c: Candidate, amplitude_Nm: float | None,
 
 
 def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_play,
-               k_nom=math.nan):
-    """Pick the verdict among candidates, greedily adding effects (see module docstring)."""
+               k_nom=math.nan, fap=None, alpha=ALPHA):
+    """Pick the verdict among candidates, greedily adding effects (see module docstring).
+    ``fap``: each candidate's calibrated false-alarm probability; one above ``alpha`` does
+    not enter the pool."""
+    fap = fap or {}
     def sysh(c: Candidate) -> float:
         return _sys(c.heldout_rms_arcmin, noise)
 
@@ -897,7 +991,8 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
         return sysh(c) <= max(EXPLAINED_SHARE * ref, threshold)
 
     pool = [c for c in models.values()
-            if c.plausible and c.heldout_runs > 0 and not c.screened_out]
+            if c.plausible and c.heldout_runs > 0 and not c.screened_out
+            and fap.get(c.effects[0], 0.0) <= alpha]
     def additions(chosen: list[Candidate]) -> list[Candidate]:
         """Second (and third) effects: each addition is fitted jointly and kept only when it
         earns its place on the held-out runs (:func:`separated` against the model without

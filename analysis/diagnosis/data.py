@@ -10,12 +10,22 @@ the branch (loading/unloading) and the time since the last torque reversal of ea
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from analysis.diagnosis.measurement import (
+    CrossingZero,
+    best_torque_shift,
+    crossing_events,
+    crossing_zero,
+    gap_breaks,
+    settling_mask,
+    time_base,
+    torque_lag_s,
+)
 from analysis.errors import AnalysisError
 from analysis.loop import analyse_loop
 from analysis.loop.branches import white_noise_std
@@ -75,6 +85,12 @@ class PreparedRun:
     nominal: LoopModel | None
     lost_motion_arcmin: float  # measured, analysis.loop (NaN: unavailable)
     raw: RunInput = field(repr=False)
+    #: What the measuring system adds (analysis.diagnosis.measurement), for the report.
+    measurement: dict[str, Any] = field(default_factory=dict, repr=False)
+    #: Torque zero, friction and drift read at the play crossings (None: not readable).
+    crossing: CrossingZero | None = field(default=None, repr=False)
+    #: The torque zero taken out of ``torque_Nm`` (N*m per block; zeros when none).
+    zero_removed_Nm: np.ndarray | None = field(default=None, repr=False)
 
 
 #: Largest lag between the channels searched (samples).
@@ -83,61 +99,25 @@ MAX_LAG_SAMPLES = 10
 LAG_EVIDENCE = 10.0
 
 
-def _flank_rss(torque: np.ndarray, twist: np.ndarray, t: np.ndarray, amplitude: float,
-               sigma: float) -> float:
-    """Residual sum of squares (in noise units) of the loaded flanks (|T| > 20 % of the
-    amplitude, where the unit is on a flank whatever friction and play do) under a smooth
-    flank law per flank (1, T, T^2) with a constant loading/unloading separation (Coulomb
-    friction's 2F/K): what a lag between the channels adds is a separation proportional to
-    the torque rate, which this law cannot hold."""
-    on = np.abs(torque) > 0.2 * amplitude
-    if on.sum() < 30:
-        return math.nan
-    direction, _ = direction_and_reversal(t, torque, 0.02 * amplitude)
-    s = np.sign(torque)
-    cols = []
-    for sign in (1.0, -1.0):
-        m = (s == sign).astype(float)
-        cols += [m, m * torque, m * torque**2, m * direction]
-    X = np.column_stack(cols)[on]
-    y = twist[on]
-    beta, *_ = np.linalg.lstsq(X, y, rcond=None)
-    r = y - X @ beta
-    return float(r @ r) / max(sigma, 1e-12) ** 2
-
-
 def channel_lag_samples(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
                         sigma: float) -> int:
     """Lag (samples) of the twist behind the torque channel (negative: ahead): the integer
-    shift that best explains the loaded flanks (:func:`_flank_rss`), kept only when it
-    improves them by LAG_EVIDENCE noise-units over no shift (a filter or transport delay of
-    one channel; with constant-rate ramps only it looks like friction and is not found). The
-    gain is counted per independent error: once per count change of a quantised twist."""
+    shift that best explains the loaded flanks (:func:`analysis.diagnosis.measurement
+    .best_torque_shift`), kept only when it improves them by LAG_EVIDENCE noise-units over no
+    shift (a filter or transport delay of one channel; with constant-rate ramps only it looks
+    like friction and is not found). ``rig analyse`` reports it per run; the diagnosis
+    estimates the lag to a quarter sample (:func:`analysis.diagnosis.measurement
+    .torque_lag_s`)."""
     n = torque.size
     amplitude = float(np.percentile(np.abs(torque), 99.5))
     if n < 200 or amplitude <= 0:
         return 0
+    dt = float(np.median(np.diff(t)))
     lmax = min(MAX_LAG_SAMPLES, n // 100)
-    core = slice(lmax, n - lmax)
-    best, best_rss = 0, _flank_rss(torque[core], twist[core], t[core], amplitude, sigma)
-    if not math.isfinite(best_rss):
-        return 0
-    base = best_rss
-    # a quantised reading holds its error while the signal moves less than a count: on the
-    # flanks consecutive residuals are then one error, not independent ones, so the
-    # chi-square gain counts once per count the twist crosses (samples per count change;
-    # 1 when the noise dithers the reading)
-    on = np.abs(torque[core]) > 0.2 * amplitude
-    changes = int(np.count_nonzero(np.diff(twist[core][on])))
-    per_count = max(1.0, on.sum() / max(changes, 1))
-    for lag in range(-lmax, lmax + 1):
-        if lag == 0:
-            continue
-        shifted = np.roll(torque, lag)[core]  # torque of sample k - lag beside twist k
-        rss = _flank_rss(shifted, twist[core], t[core], amplitude, sigma)
-        if rss < best_rss:
-            best, best_rss = lag, rss
-    return best if (base - best_rss) / per_count > LAG_EVIDENCE else 0
+    direction, _ = direction_and_reversal(t, torque, 0.02 * amplitude)
+    tau = best_torque_shift(t, torque, twist, direction, sigma,
+                            np.arange(-lmax, lmax + 1) * dt, LAG_EVIDENCE)
+    return int(round(tau / dt)) if dt > 0 else 0
 
 
 def resolution_of(values: np.ndarray) -> float:
@@ -261,8 +241,12 @@ def dwell_lost_motion_arcmin(torque_Nm: np.ndarray, twist_arcmin: np.ndarray,
     return mids[0] - mids[1]
 
 
-def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRun:
-    """Reduce one run (see the module docstring). Raises AnalysisError on unusable input."""
+def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_lag: bool = True,
+                exclude_transients: bool = True, with_lost_motion: bool = True) -> PreparedRun:
+    """Reduce one run (see the module docstring). Raises AnalysisError on unusable input.
+    ``correct_lag`` / ``exclude_transients``: take the torque channel's lag out and leave the
+    transients after impacts out (the report's ``measurement`` compares the null model with
+    and without each); ``with_lost_motion``: measure each run's lost motion too."""
     t = np.asarray(run.t_s, dtype=float)
     torque = np.asarray(run.torque_Nm, dtype=float)
     twist = np.asarray(run.twist_arcmin, dtype=float)
@@ -292,25 +276,30 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRu
     q_torque = resolution_of(torque)
     sigma = math.hypot(white_noise_std(twist), q_twist / math.sqrt(12.0))
     sigma_t = math.hypot(white_noise_std(torque), q_torque / math.sqrt(12.0))
-    # a lag between the channels (a filter in one of them) is a sensor artifact, not a gap:
-    # found on the loaded flanks and taken out by shifting the torque channel
-    lag = channel_lag_samples(t, torque, twist, sigma)
-    if lag:
-        keep_n = t.size - abs(lag)
-        if lag > 0:
-            torque, twist, t = torque[:keep_n], twist[lag:], t[lag:]
-        else:
-            torque, twist, t = torque[-lag:], twist[:keep_n], t[:keep_n]
-        if temp is not None:
-            temp = temp[lag:] if lag > 0 else temp[:keep_n]
+    # the measuring system's own share (analysis.diagnosis.measurement): time base, the
+    # torque channel's lag (a filter or delay: taken out by reading the torque channel at the
+    # shifted time), transients after impacts, the torque zero at the play crossings
+    tbase = time_base(t)
     amplitude = float(np.percentile(np.abs(torque), 99.5))
+    direction0, _ = direction_and_reversal(t, torque, max(8.0 * sigma_t, 0.02 * amplitude))
+    lag_s = torque_lag_s(t, torque, twist, direction0, sigma, LAG_EVIDENCE)
+    if lag_s:
+        inside = (t + lag_s >= t[0]) & (t + lag_s <= t[-1])
+        torque = np.interp(t[inside] + lag_s, t, torque) if correct_lag else torque[inside]
+        t, twist = t[inside], twist[inside]
+        if temp is not None:
+            temp = temp[inside]
     if nominal is not None and math.isfinite(nominal.stiffness_Nm_per_arcmin):
         soft = 10.0 / nominal.stiffness_Nm_per_arcmin
     else:
         span_t = float(np.ptp(torque)) or 1.0
         soft = 10.0 * float(np.ptp(twist)) / span_t
     keep, jump = transit_mask(twist, torque, sigma, soft)
-    segments = _segments(keep, jump)
+    ringing = settling_mask(twist, jump)
+    if exclude_transients:
+        keep &= ~ringing
+    gaps = gap_breaks(t)
+    segments = _segments(keep, jump | gaps)
     n_keep = int(sum(b - a for a, b in segments))
     block = max(1, int(round(n_keep / target_points)))
     thr = max(8.0 * sigma_t, 0.02 * amplitude)
@@ -327,22 +316,51 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRu
         sigma_b = max(sigma_b, 0.5 * sigma / math.sqrt(block))
     else:
         sigma_b = sigma / math.sqrt(block)
+    # noise that is correlated over a block (a zero that wanders, vibration the torque
+    # channel does not see) does not average down as 1/sqrt(block): the second differences
+    # of consecutive block means of a segment measure what a block mean really scatters by.
+    # What the measured torque explains is taken out first (the twist follows the torque
+    # through the flank's compliance: ramps, steps and drive ripple are no error), so only
+    # where the flank curves (the play crossing, a take-up) is the difference not noise,
+    # and the median ignores those few
+    comp = (1.0 / nominal.stiffness_Nm_per_arcmin if nominal is not None
+            and math.isfinite(nominal.stiffness_Nm_per_arcmin)
+            and nominal.stiffness_Nm_per_arcmin > 0 else 0.0)
+    u = yb - comp * tb
+    same = (seg[2:] == seg[1:-1]) & (seg[1:-1] == seg[:-2])
+    d2b = (u[2:] - 2.0 * u[1:-1] + u[:-2])[same]
+    if d2b.size >= 20:
+        sigma_b = max(sigma_b, 1.4826 * float(np.median(np.abs(d2b))) / math.sqrt(6.0))
     # without dither (noise below a count) averaging does not shrink the quantisation error
     # of a block mean: it stays up to half a count, uniform -> q / sqrt(12)
     if white_noise_std(twist) < q_twist:
         sigma_b = max(sigma_b, q_twist / math.sqrt(12.0))
+    play = nominal.play_arcmin if nominal is not None else math.nan
+    events = crossing_events(t, torque, twist, jump, direction, amplitude, play)
+    zero = crossing_zero(events)
+    measurement = {
+        "time_base": tbase.to_dict(),
+        "torque_lag_s": lag_s,
+        "twist_resolution_arcsec": q_twist * 60.0,
+        "torque_resolution_Nm": q_torque,
+        "twist_noise_arcsec": sigma * 60.0,
+        "torque_noise_Nm": sigma_t,
+        "transient_samples": int(ringing.sum()),
+        "crossings": len(events),
+    }
     # blocks at zero torque are kept: with no torque on it the unit floats in the free play,
     # which analysis.diagnosis.fit models (censored between the flank last loaded and the
     # centre of the play); there a torque-sensor offset shows (the unit on the other flank)
     held = np.ones(tb.size, dtype=bool)
     lost_motion = math.nan
     try:
-        res = analyse_loop(t, torque, twist, rated_torque_Nm=run.rated_torque_Nm)
-        if "lost_motion_arcmin" in res.metrics:
-            lost_motion = res.metrics["lost_motion_arcmin"].value
+        if with_lost_motion:
+            res = analyse_loop(t, torque, twist, rated_torque_Nm=run.rated_torque_Nm)
+            if "lost_motion_arcmin" in res.metrics:
+                lost_motion = res.metrics["lost_motion_arcmin"].value
     except AnalysisError:
         pass
-    if not math.isfinite(lost_motion):
+    if with_lost_motion and not math.isfinite(lost_motion):
         lost_motion = dwell_lost_motion_arcmin(torque, twist, direction, run.rated_torque_Nm,
                                                max(3.0 * sigma_t, 0.01 * run.rated_torque_Nm))
     return PreparedRun(
@@ -357,4 +375,52 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS) -> PreparedRu
         input_angle_deg=run.input_angle_deg,
         mean_temperature_C=None if temp is None else float(np.mean(temp)),
         start_flank=run.start_flank, nominal=nominal, lost_motion_arcmin=lost_motion, raw=run,
+        measurement=measurement, crossing=zero,
     )
+
+
+def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float
+                       ) -> tuple[list[PreparedRun], dict[str, Any]]:
+    """Take each run's torque zero, read at its play crossings
+    (:func:`analysis.diagnosis.measurement.crossing_zero`), out of its torque.
+
+    A torque zero re-tared before every run leaves a small residual that differs from run to
+    run and may wander during the run: the measuring system's, not the unit's. A sensor
+    offset (an effect) is the same in every run. So the zeros of three or more runs are
+    compared with their own scatter (Student's t, two-sided, at ``alpha``): when their mean is
+    not distinguishable from the scatter the whole zero of each run is taken out; when it is,
+    only each run's departure from the mean (and its drift) is taken out and the common part
+    is left for the torque_sensor_offset candidate to find. With one or two runs read, only
+    the departures. Returns the runs and the report's ``torque_zero`` entry."""
+    from scipy.stats import t as student_t
+
+    est = [(i, r.crossing) for i, r in enumerate(runs) if r.crossing is not None]
+    out = list(runs)
+    if not est:
+        return out, {"runs_read": 0, "note": "no play crossing readable: zero not estimated"}
+    zeros = np.array([c.zero_Nm for _, c in est])
+    common = float(np.mean(zeros))
+    p_common: float | None = None
+    keep_common = True
+    if len(est) >= 3:
+        se = float(np.std(zeros, ddof=1)) / math.sqrt(len(est))
+        if se > 0:
+            p_common = float(2.0 * student_t.sf(abs(common) / se, len(est) - 1))
+        else:
+            p_common = 0.0 if common != 0.0 else 1.0
+        keep_common = p_common <= alpha
+    for i, c in est:
+        r = runs[i]
+        removed = c.zero_at(r.t_s) - (common if keep_common else 0.0)
+        out[i] = replace(r, torque_Nm=r.torque_Nm - removed, zero_removed_Nm=removed)
+    return out, {
+        "runs_read": len(est),
+        "per_run_Nm": {runs[i].run_id: c.zero_Nm for i, c in est},
+        "drift_Nm_per_s": {runs[i].run_id: c.drift_Nm_per_s for i, c in est},
+        "friction_at_crossings_Nm": {runs[i].run_id: c.friction_Nm for i, c in est},
+        "common_Nm": common,
+        "scatter_Nm": float(np.std(zeros, ddof=1)) if len(est) > 1 else None,
+        "common_false_alarm_probability": p_common,
+        "treated_as": ("common offset left for the diagnosis; run-to-run departures removed"
+                       if keep_common else "re-tare residual of each run, removed"),
+    }

@@ -66,6 +66,11 @@ class Stack:
     thermal_quadratic: bool = False
     #: The bearing's soft stage closes smoothly (``T_b tanh(|G| / T_b)``) instead of at a kink.
     bearing_smooth: bool = False
+    #: Nonlinear parameters every fit carries as the measuring system's nuisance (the null
+    #: included) unless the candidate fits its own: the ordinary friction allowance.
+    nuisance_nl: dict = field(default_factory=dict)
+    #: Largest ordinary friction (N*m) the nuisance may take.
+    nuisance_friction_max_Nm: float = 0.0
 
     @property
     def n_runs(self) -> int:
@@ -320,7 +325,7 @@ def fit(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None = None,
     """Fit the effects' linear coefficients for given nonlinear ones (``nl``) on ``runs``
     (indices; None: all). ``fixed`` holds play and compliance (predictive gap)."""
     idx = list(range(stack.n_runs)) if runs is None else list(runs)
-    nl = dict(nl or {})
+    nl = {**stack.nuisance_nl, **(nl or {})}
     teeth = teeth_of(stack)
     names = column_names(stack, effects, teeth)
     X = np.vstack([cached_columns(stack, i, effects, nl, teeth) for i in idx])
@@ -358,6 +363,28 @@ def nonlinear_of(effects: Sequence[str]) -> list[str]:
     return [e for e in effects if e in NONLINEAR]
 
 
+#: The ordinary friction (a nuisance of every fit, analysis.diagnosis.with_measurement_nuisance)
+#: profiled beside a candidate whose parameter it trades off with.
+ORDINARY_FRICTION = "ordinary_friction"
+
+
+def _nl_key(effect: str) -> str:
+    return "friction_Nm" if effect == ORDINARY_FRICTION else NONLINEAR[effect][0]
+
+
+def _nl_grid(stack: Stack, effect: str) -> np.ndarray:
+    if effect == ORDINARY_FRICTION:
+        return np.linspace(0.0, stack.nuisance_friction_max_Nm, 6)
+    return _grid(stack, effect)
+
+
+def _nl_start(stack: Stack, effect: str) -> float:
+    if effect == ORDINARY_FRICTION:
+        return float(stack.nuisance_nl.get("friction_Nm", 0.0))
+    grid = _grid(stack, effect)
+    return float(grid[len(grid) // 2]) if NONLINEAR[effect][3] else 0.0
+
+
 def _grid(stack: Stack, effect: str, n: int = 13) -> np.ndarray:
     _, lo, hi, log = NONLINEAR[effect]
     r = stack.rated_Nm
@@ -393,13 +420,17 @@ def fit_profile(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None
     parameter in turn) then a bounded scalar refinement. ``start``/``local``: search only near
     a previous optimum (cross-validation folds)."""
     nls = nonlinear_of(effects)
-    current = {NONLINEAR[e][0]: (start or {}).get(NONLINEAR[e][0], _grid(stack, e)[
-        len(_grid(stack, e)) // 2] if NONLINEAR[e][3] else 0.0) for e in nls}
+    if ("torque_sensor_offset" in effects and "friction" not in effects
+            and stack.nuisance_friction_max_Nm > 0):
+        # an offset moves both flank switches one way, friction splits them: with the
+        # ordinary friction held at the null's value the offset would make up for it
+        nls.append(ORDINARY_FRICTION)
+    current = {_nl_key(e): (start or {}).get(_nl_key(e), _nl_start(stack, e)) for e in nls}
     best = fit(stack, effects, runs, current)
     for _ in range(2 if len(nls) > 1 else 1):
         for e in nls:
-            key = NONLINEAR[e][0]
-            grid = _grid(stack, e)
+            key = _nl_key(e)
+            grid = _nl_grid(stack, e)
             if local and start is not None and key in start:
                 j = int(np.argmin(np.abs(grid - start[key])))
                 grid = np.unique(np.append(grid[max(0, j - 1): j + 2], start[key]))

@@ -22,12 +22,17 @@ def register(app: typer.Typer) -> None:
         html_file: Annotated[
             Path | None, typer.Option("--html", help="Write the HTML report (self-contained).")
         ] = None,
+        alpha: Annotated[
+            float, typer.Option("--alpha", min=1e-6, max=0.5,
+                                help="Level of every calibrated decision: an effect is called "
+                                     "when its false-alarm probability is at most this.")
+        ] = 0.01,
     ) -> None:
         """Where model and measurement disagree, which unmodelled effect, how far it shrinks."""
         from rig.diagnose import diagnose_path, report_dict, write_json
 
         with console.status("diagnosing..."):
-            camp, result = diagnose_path(campaign)
+            camp, result = diagnose_path(campaign, alpha=alpha)
             report = report_dict(camp, result)
         console.print(f"[bold]verdict: {report['verdict']}[/bold] — {report['reason']}")
         if report.get("candidates"):
@@ -37,13 +42,16 @@ def register(app: typer.Typer) -> None:
         loc = report["localization"]
         console.print(f"where: {loc['where']} — {loc['detail']}")
         table = Table(title="Candidates (held-out gap)")
-        for col in ("effect", "shrink", "RMS after, arcsec", "ΔBIC", "cross-validation"):
+        for col in ("effect", "shrink", "RMS after, arcsec", "false alarm", "ΔBIC",
+                    "cross-validation"):
             table.add_column(col)
         for r in report["ranking"]:
             after = (r.get("gap_after") or {}).get("rms_arcsec")
             ev = r.get("evidence", {})
+            fa = r.get("false_alarm_probability")
             table.add_row(r["effect"], "" if r.get("shrink") is None else f"{r['shrink']:.3f}",
-                          "" if after is None else f"{after:.3f}", str(ev.get("delta_bic", "")),
+                          "" if after is None else f"{after:.3f}",
+                          "" if fa is None else f"{fa:.2g}", str(ev.get("delta_bic", "")),
                           str(ev.get("cv", ev.get("from", ""))))
         console.print(table)
         console.print(f"gap before: {report['gap_before']['rms_arcsec']:.3f} arcsec RMS "

@@ -1,0 +1,107 @@
+"""Calibrated evidence of the candidates against a reference model (the null, or the model
+with the effects already chosen): the columns each candidate adds, weighted and made
+orthogonal to the reference's, scored on the reference's residuals and calibrated by
+:mod:`analysis.diagnosis.calibration`."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from analysis.diagnosis.calibration import (
+    REPLICATES,
+    Calibrated,
+    blocks_of,
+    calibrate,
+    null_basis,
+    omnibus_blocks,
+)
+from analysis.diagnosis.fit import (
+    NONLINEAR,
+    LinearFit,
+    Stack,
+    _grid,
+    column_names,
+    run_columns,
+    run_floating,
+    teeth_of,
+)
+
+#: Grid points of a nonlinear parameter scored (the profile's own grid, thinned to this).
+GRID_POINTS = 16
+
+
+def _thin(grid: np.ndarray, most: int = GRID_POINTS) -> np.ndarray:
+    if grid.size <= most:
+        return grid
+    return np.unique(np.quantile(grid, np.linspace(0.0, 1.0, most)))
+
+
+def calibrated_evidence(stack: Stack, ref: LinearFit, ref_effects: Sequence[str],
+                        names: Sequence[str], replicates: int = REPLICATES, seed: int = 0,
+                        omnibus: bool = False
+                        ) -> tuple[dict[str, Calibrated], Calibrated | None]:
+    """Each candidate's calibrated evidence against the reference fit ``ref`` (of
+    ``("backlash", *ref_effects)``), and, with ``omnibus``, the lack-of-fit test's."""
+    teeth = teeth_of(stack)
+    base_effects = ("backlash", *ref_effects)
+    ref_names = column_names(stack, base_effects, teeth)
+    rows_X, rows_y, rows_w, rows_run, keeps = [], [], [], [], []
+    tq, fl, br, amp = [], [], [], []
+    for i, run in enumerate(stack.runs):
+        keep = ~run_floating(run, ref.nl)
+        X = run_columns(stack, run, base_effects, ref.nl, teeth)
+        keeps.append(keep)
+        rows_X.append(X[keep])
+        rows_y.append(run.twist_arcmin[keep])
+        rows_w.append(np.full(int(keep.sum()), 1.0 / run.sigma_arcmin))
+        rows_run.append(np.full(int(keep.sum()), i))
+        tq.append(run.torque_Nm[keep])
+        fl.append(2.0 * X[keep, 0])
+        br.append(run.branch[keep])
+        amp.append(np.full(int(keep.sum()), run.amplitude_Nm))
+    Xr = np.vstack(rows_X)
+    w = np.concatenate(rows_w)
+    run_index = np.concatenate(rows_run)
+    if run_index.size < 10:
+        return {}, None
+    Qb = null_basis(Xr, run_index, stack.n_runs, w)
+    yw = np.concatenate(rows_y) * w
+    e = yw - Qb @ (Qb.T @ yw)
+    bounds = np.cumsum([0, *[r.size for r in rows_run]])
+    slices = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+
+    def stacked(effects: Sequence[str], nl: dict[str, float]) -> np.ndarray:
+        return np.vstack([run_columns(stack, run, effects, nl, teeth)[k]
+                          for run, k in zip(stack.runs, keeps, strict=True)])
+
+    fitted = Xr @ ref.beta
+    blocks: dict[str, list[np.ndarray]] = {}
+    for name in names:
+        if name in ref_effects:
+            continue
+        effects = (*base_effects, name)
+        cols = column_names(stack, effects, teeth)
+        own = [j for j, c in enumerate(cols) if c not in ref_names]
+        sets: list[np.ndarray] = []
+        if name in NONLINEAR:
+            key = NONLINEAR[name][0]
+            for v in _thin(_grid(stack, name)):
+                nl = {**ref.nl, key: float(v)}
+                if own:
+                    sets.append(stacked(effects, nl)[:, own])
+                elif abs(float(v) - ref.nl.get(key, 0.0)) > 0:
+                    # friction and an offset move the flank switches: the column is the change
+                    # of the reference prediction with the parameter switched to v
+                    sets.append(stacked(base_effects, nl) @ ref.beta - fitted)
+        elif own:
+            sets.append(stacked(effects, ref.nl)[:, own])
+        blocks[name] = blocks_of(sets, w, Qb)
+    cal = calibrate(blocks, e, slices, replicates, seed)
+    omni = None
+    if omnibus:
+        ob = omnibus_blocks(np.concatenate(tq), np.concatenate(fl), np.concatenate(br),
+                            np.concatenate(amp), run_index, stack.n_runs, w, Qb)
+        omni = calibrate({"omnibus": ob}, e, slices, replicates, seed).get("omnibus")
+    return cal, omni

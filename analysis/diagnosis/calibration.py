@@ -8,12 +8,14 @@ distribution is not a textbook one; it is made from the campaign itself:
 
 1. **Null residuals.** The null model (free play and stiffness, run offsets, the measuring
    system's nuisance: :mod:`analysis.diagnosis.measurement`) is fitted by weighted least
-   squares; its standardised residuals are winsorised at HUBER_C robust sigmas (an impact
-   sample that survived the transient rule must not decide alone).
-2. **Moving-block bootstrap** (Kuensch 1989), run by run, in time order: blocks as long as
-   twice the residuals' integrated autocorrelation time, so each replicate keeps the
-   residuals' correlation and distribution but breaks any alignment with torque, flank,
-   position or temperature, which is what an effect of the unit has.
+   squares. What any candidate or the lack-of-fit test could hold is projected out of its
+   standardised residuals (:func:`pure_error`): the rest is the measuring errors alone.
+   Residuals are winsorised at HUBER_C robust sigmas of those errors (an impact sample that
+   survived the transient rule must not decide alone).
+2. **Moving-block bootstrap** (Kuensch 1989) of the measuring errors, run by run, in time
+   order: blocks as long as twice their integrated autocorrelation time, so each replicate
+   keeps their correlation (ripple, a wandering zero, vibration) and distribution but has no
+   alignment with torque, flank, position or temperature, which is what an effect has.
 3. **Evidence of a candidate** is the squared norm of the residuals' projection on the
    candidate's own columns (made orthogonal to the null's), maximised over a grid of its
    nonlinear parameter: a score statistic, the chi-square gain of adding the candidate.
@@ -114,6 +116,10 @@ def orthonormal(Z: np.ndarray, Qb: np.ndarray) -> np.ndarray:
     Zp = Z - Qb @ (Qb.T @ Z)
     if Zp.size == 0:
         return np.zeros((Z.shape[0], 0))
+    if Zp.shape[1] == 1:  # one column keeps its sign (a one-sided test reads it)
+        norm = float(np.linalg.norm(Zp))
+        scale = float(np.linalg.norm(Z))
+        return Zp / norm if norm > 1e-9 * max(scale, 1e-300) else np.zeros((Z.shape[0], 0))
     U, s, _ = np.linalg.svd(Zp, full_matrices=False)
     top = float(s.max()) if s.size else 0.0
     return U[:, s > 1e-9 * max(top, 1e-300)] if top > 0 else np.zeros((Z.shape[0], 0))
@@ -127,14 +133,19 @@ def winsorise(e: np.ndarray) -> np.ndarray:
     return np.clip(e, -HUBER_C * s, HUBER_C * s)
 
 
-def score(blocks: Sequence[np.ndarray], V: np.ndarray) -> np.ndarray:
-    """max over blocks of ||Q' v||^2 for each column v of V (or the vector V)."""
+def score(blocks: Sequence[np.ndarray], V: np.ndarray, one_sided: bool = False) -> np.ndarray:
+    """max over blocks of ||Q' v||^2 for each column v of V (or the vector V). ``one_sided``:
+    single-column blocks count only a positive projection (a parameter bounded at zero: a
+    friction, a stiffening or a soft stage, which cannot take the other sign)."""
     vec = V.ndim == 1
     V2 = V[:, None] if vec else V
     best = np.zeros(V2.shape[1])
     for Q in blocks:
         if Q.shape[1]:
-            best = np.maximum(best, np.sum((Q.T @ V2) ** 2, axis=0))
+            proj = Q.T @ V2
+            if one_sided and Q.shape[1] == 1:
+                proj = np.maximum(proj, 0.0)
+            best = np.maximum(best, np.sum(proj**2, axis=0))
     return best[0] if vec else best
 
 
@@ -147,26 +158,56 @@ def scaled_chi2(samples: np.ndarray) -> tuple[float, float]:
     return v / (2.0 * m), max(2.0 * m * m / v, 0.1)
 
 
+def pure_error(e: np.ndarray, blocks: dict[str, list[np.ndarray]]) -> np.ndarray:
+    """The null residual with everything any candidate or the lack-of-fit test could hold
+    projected out, rescaled for the dimensions removed: what is left is the measuring
+    errors alone, in time order, whatever effect the data hold. Its bootstrap replicates are
+    the chance evidence; resampling the null residual itself would either count a real
+    effect as noise (short blocks) or carry its alignment with the loading into every
+    replicate (long blocks over a periodic loading)."""
+    cols = [Q for v in blocks.values() for Q in v if Q.shape[1]]
+    if not cols:
+        return e
+    U, sv, _ = np.linalg.svd(np.hstack(cols), full_matrices=False)
+    U = U[:, sv > 1e-9 * float(sv.max())]
+    left = e - U @ (U.T @ e)
+    dof = e.size - U.shape[1]
+    return left * math.sqrt(e.size / dof) if dof > 0 else left
+
+
 def calibrate(blocks: dict[str, list[np.ndarray]], e: np.ndarray, z_runs_index: list[slice],
-              replicates: int = REPLICATES, seed: int = 0) -> dict[str, Calibrated]:
+              replicates: int = REPLICATES, seed: int = 0, apart: Sequence[str] = (),
+              one_sided: Sequence[str] = ()) -> dict[str, Calibrated]:
     """Calibrated evidence of each named family of column blocks (already orthonormal and
     orthogonal to the null's columns) on the null residual ``e`` (weighted, points stacked
-    by run, ``z_runs_index`` the runs' slices). See the module docstring."""
+    by run, ``z_runs_index`` the runs' slices). See the module docstring. Names in ``apart``
+    are calibrated alone (not counted among the candidates tested together); names in
+    ``one_sided`` have single-column blocks whose parameter cannot change sign."""
     rng = np.random.default_rng(seed)
-    ew = winsorise(e)
-    E = bootstrap([ew[s] for s in z_runs_index], replicates, rng)
+    pure = pure_error(e, blocks)
+    scale = 1.4826 * float(np.median(np.abs(pure - np.median(pure))))
+    clip = HUBER_C * scale if scale > 0 else math.inf
+    ew = np.clip(e, -clip, clip)
+    E = bootstrap([np.clip(pure[s], -clip, clip) for s in z_runs_index], replicates, rng)
     names = [k for k, v in blocks.items() if any(Q.shape[1] for Q in v)]
     if not names:
         return {}
-    obs = {k: float(score(blocks[k], ew)) for k in names}
-    boot = {k: score(blocks[k], E) for k in names}
+    obs = {k: float(score(blocks[k], ew, k in one_sided)) for k in names}
+    boot = {k: score(blocks[k], E, k in one_sided) for k in names}
     fits = {k: scaled_chi2(boot[k]) for k in names}
     p_obs = {k: float(chi2.sf(obs[k] / fits[k][0], fits[k][1])) for k in names}
+    family = [k for k in names if k not in apart]
+    out: dict[str, Calibrated] = {}
+    for k in names:
+        if k not in family:
+            out[k] = Calibrated(obs[k], p_obs[k], p_obs[k], fits[k][0], fits[k][1])
+    if not family:
+        return out
+    names = family
     # effectively independent tests, from the replicates' smallest p-values
     p_rep = np.vstack([chi2.sf(boot[k] / fits[k][0], fits[k][1]) for k in names])
     m = float(np.mean(np.min(p_rep, axis=0)))
     k_eff = min(float(len(names)), max(1.0, 1.0 / max(m, 1e-12) - 1.0))
-    out = {}
     for k in names:
         p = p_obs[k]
         fap = float(-np.expm1(k_eff * np.log1p(-min(p, 1.0 - 1e-16))))

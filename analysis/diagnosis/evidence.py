@@ -98,10 +98,16 @@ def calibrated_evidence(stack: Stack, ref: LinearFit, ref_effects: Sequence[str]
         elif own:
             sets.append(stacked(effects, ref.nl)[:, own])
         blocks[name] = blocks_of(sets, w, Qb)
-    cal = calibrate(blocks, e, slices, replicates, seed)
-    omni = None
-    if omnibus:
-        ob = omnibus_blocks(np.concatenate(tq), np.concatenate(fl), np.concatenate(br),
-                            np.concatenate(amp), run_index, stack.n_runs, w, Qb)
-        omni = calibrate({"omnibus": ob}, e, slices, replicates, seed).get("omnibus")
-    return cal, omni
+    blocks[OMNIBUS] = omnibus_blocks(np.concatenate(tq), np.concatenate(fl), np.concatenate(br),
+                                     np.concatenate(amp), run_index, stack.n_runs, w, Qb)
+    cal = calibrate(blocks, e, slices, replicates, seed, apart=(OMNIBUS,),
+                    one_sided=ONE_SIDED)
+    omni = cal.pop(OMNIBUS, None)
+    return cal, (omni if omnibus else None)
+
+
+OMNIBUS = "lack_of_fit"
+#: Candidates whose columns are one signed direction each: a friction or an offset of the
+#: grid's value (the change of the prediction it makes), a stiffening's or a soft stage's
+#: extra compliance (bounded at zero).
+ONE_SIDED = ("friction", "torque_sensor_offset", "stiffness_nonlinearity", "bearing_clearance")

@@ -114,13 +114,38 @@ def settling_mask(twist: np.ndarray, jump: np.ndarray) -> np.ndarray:
     return ringing
 
 
+#: Samples whose torque has moved less than this share of the amplitude since the last
+#: reversal are left out of the lag estimate: there a friction holds the twist (the branch
+#: changes only once the torque has moved twice the friction torque, up to 30 % of rated
+#: for the largest plausible friction), which a time shift would otherwise imitate.
+HOLD_SHARE = 0.3
+
+
+def travel_since_reversal(torque: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """|torque - torque at the last reversal| (N*m) per sample, the reversal's torque being
+    the extreme reached before the direction changed."""
+    change = np.flatnonzero(np.diff(direction) != 0) + 1
+    starts = np.concatenate([[0], change])
+    out = np.zeros_like(torque)
+    prev_extreme = float(torque[0])
+    for a, b in zip(starts, [*change, torque.size], strict=True):
+        out[a:b] = np.abs(torque[a:b] - prev_extreme)
+        seg = torque[a:b]
+        if seg.size:
+            prev_extreme = float(seg.max() if direction[a] > 0 else seg.min())
+    return out
+
+
 def _flank_rss(torque: np.ndarray, twist: np.ndarray, direction: np.ndarray, amplitude: float,
-               sigma: float) -> float:
+               sigma: float, away: np.ndarray | None = None) -> float:
     """Residual sum of squares (noise units) of the loaded flanks (|T| > 20 % of the amplitude)
     under a smooth law per flank (1, T, T^2) with a constant loading/unloading separation
     (Coulomb friction's 2F/K): what a lag between the channels adds is a separation
-    proportional to the torque rate, which this law cannot hold."""
+    proportional to the torque rate, which this law cannot hold. ``away``: samples far
+    enough from a reversal (HOLD_SHARE) to count."""
     on = np.abs(torque) > 0.2 * amplitude
+    if away is not None:
+        on &= away
     if on.sum() < 30:
         return math.nan
     s = np.sign(torque)
@@ -130,7 +155,17 @@ def _flank_rss(torque: np.ndarray, twist: np.ndarray, direction: np.ndarray, amp
         cols += [m, m * torque, m * torque**2, m * direction]
     X = np.column_stack(cols)[on]
     y = twist[on]
-    beta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    # friction puts the loading branch below the unloading one (the direction's coefficient
+    # -F/K <= 0 on both flanks); a lag of the torque channel puts it above, which friction
+    # must not absorb
+    free = list(range(X.shape[1]))
+    for _ in range(3):
+        beta = np.zeros(X.shape[1])
+        beta[free], *_ = np.linalg.lstsq(X[:, free], y, rcond=None)
+        wrong = [j for j in (3, 7) if j in free and beta[j] > 0]
+        if not wrong:
+            break
+        free = [j for j in free if j not in wrong]
     r = y - X @ beta
     return float(r @ r) / max(sigma, 1e-12) ** 2
 
@@ -151,17 +186,18 @@ def best_torque_shift(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
     if core.sum() < 100:
         return 0.0
     tc, yc, dc = t[core], twist[core], direction[core]
-    base = _flank_rss(torque[core], yc, dc, amplitude, sigma)
+    away = travel_since_reversal(torque, direction)[core] > HOLD_SHARE * amplitude
+    base = _flank_rss(torque[core], yc, dc, amplitude, sigma, away)
     if not math.isfinite(base):
         return 0.0
-    on = np.abs(torque[core]) > 0.2 * amplitude
+    on = (np.abs(torque[core]) > 0.2 * amplitude) & away
     changes = int(np.count_nonzero(np.diff(yc[on])))
     per_count = max(1.0, on.sum() / max(changes, 1))
     best, best_rss = 0.0, base
     for tau in shifts_s:
         if tau == 0.0:
             continue
-        rss = _flank_rss(np.interp(tc - tau, t, torque), yc, dc, amplitude, sigma)
+        rss = _flank_rss(np.interp(tc - tau, t, torque), yc, dc, amplitude, sigma, away)
         if rss < best_rss:
             best, best_rss = float(tau), rss
     return best if (base - best_rss) / per_count > evidence else 0.0

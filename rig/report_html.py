@@ -135,6 +135,8 @@ def render_html(report: dict[str, Any], diagnosis: Diagnosis,
             "shrink": "" if r.get("shrink") is None else format(r["shrink"], ".2f"),
             "after": "" if after is None else format(after, ".3f"),
             "delta_bic": ev.get("delta_bic", ""), "cv": str(ev.get("cv", "")),
+            "fap": "" if r.get("false_alarm_probability") is None
+            else format(r["false_alarm_probability"], ".2g"),
             "params": ", ".join(f"{k}={v:.4g}" for k, v in (r.get("params") or {}).items()
                                 if isinstance(v, int | float)),
         })
@@ -142,7 +144,63 @@ def render_html(report: dict[str, Any], diagnosis: Diagnosis,
         report=report, header=header, campaign=str(report.get("campaign", "")),
         plain_words=Markup(_plain_words(report)),  # its own parts are escaped
         loops_png=_loops_figure(diagnosis, effects), gap_map_png=_gap_map_figure(report),
-        play_png=_play_figure(report), ranking=ranking)
+        play_png=_play_figure(report), ranking=ranking,
+        measurement=_measurement_rows(report.get("measurement") or {}),
+        self_check=self_check_words(report.get("self_check")))
+
+
+def _measurement_rows(m: dict[str, Any]) -> list[dict[str, str]]:
+    """One row per measuring-system term of the report's ``measurement`` key."""
+    def share(entry: dict[str, Any], key: str = "gap_share") -> str:
+        v = entry.get(key)
+        return "" if v is None else f"{v:.0%}"
+
+    rows = []
+    lag = m.get("torque_lag") or {}
+    if lag:
+        rows.append({"name": "torque channel lag", "share": share(lag),
+                     "estimate": f"{1000.0 * (lag.get('median_s') or 0.0):.2f} ms (median)"})
+    tr = m.get("impact_transients") or {}
+    if tr:
+        n = sum((tr.get("per_run_samples") or {}).values())
+        rows.append({"name": "transients after impacts", "share": share(tr),
+                     "estimate": f"{n} samples left out"})
+    z = m.get("torque_zero") or {}
+    if z:
+        est = ("not readable" if not z.get("runs_read") else
+               f"common {z.get('common_Nm', 0.0):+.4f} N·m, scatter "
+               f"{(z.get('scatter_Nm') or 0.0):.4f} N·m; {z.get('treated_as', '')}")
+        rows.append({"name": "torque zero (re-tare residual, drift)", "share": share(z),
+                     "estimate": est})
+    f = m.get("ordinary_friction") or {}
+    if f:
+        rows.append({"name": "ordinary friction", "share": share(f),
+                     "estimate": f"{f.get('friction_Nm', 0.0):.4f} N·m"})
+    q = m.get("resolution") or {}
+    if q:
+        rows.append({"name": "resolution", "share": share(q, "noise_share") + " of the noise",
+                     "estimate": f"encoder {q.get('twist_arcsec', 0.0):.3g} arcsec, torque "
+                                 f"{q.get('torque_Nm', 0.0):.3g} N·m"})
+    t = m.get("sample_times") or {}
+    if t:
+        rows.append({"name": "sample times", "share": "",
+                     "estimate": f"{1000.0 * (t.get('interval_s') or 0.0):.3g} ms, jitter "
+                                 f"{1000.0 * (t.get('jitter_s') or 0.0):.3g} ms, "
+                                 f"{t.get('gaps', 0)} gap(s)"})
+    return rows
+
+
+def self_check_words(sc: dict[str, Any] | None) -> str:
+    """'on 40 campaigns like this one: right 37, false alarms 0 of 8' (empty without one)."""
+    if not sc:
+        return ""
+    text = (f"On {sc.get('cases', 0)} campaigns like this one: right {sc.get('correct', 0)}, "
+            f"false alarms {sc.get('false_alarms', 0)} of {sc.get('nulls', 0)}")
+    wrong = [k for k, v in (sc.get("per_effect") or {}).items()
+             if isinstance(v, dict) and v.get("wrong")]
+    if wrong:
+        text += f"; missed or mistaken: {', '.join(sorted(wrong))}"
+    return text + "."
 
 
 def write_html(report: dict[str, Any], diagnosis: Diagnosis, path: str | Path,

@@ -665,6 +665,12 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
     cal, omni = calibrated_evidence(stack, base, (), testable_names, replicates, seed,
                                     omnibus=True)
     fap = {n: c.false_alarm_probability for n, c in cal.items()}
+
+    def evidence_of(current: Candidate, name: str) -> float:
+        """Calibrated false-alarm probability of adding ``name`` to ``current``."""
+        add, _ = calibrated_evidence(stack, current.fit, current.effects, [name], replicates,
+                                     seed)
+        return add[name].false_alarm_probability if name in add else 1.0
     gap_fap = omni.false_alarm_probability if omni is not None else 1.0
     any_effect = min(fap.values(), default=1.0) <= alpha
     for name, c in models.items():
@@ -686,7 +692,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
     else:
         verdict, candidates, next_experiment, chosen, reason = _attribute(
             stack, models, max(sys0, threshold * (1.0 + 1e-9)), threshold, noise, evaluate,
-            before, nom.play_arcmin, k_nom, fap=fap, alpha=alpha)
+            before, nom.play_arcmin, k_nom, fap=fap, alpha=alpha, evidence_of=evidence_of)
 
     ranking = []
     for c in sorted(models.values(),
@@ -979,10 +985,12 @@ def tangent_stiffness_at_amplitude(c: Candidate, amplitude_Nm: float | None,
 
 
 def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_play,
-               k_nom=math.nan, fap=None, alpha=ALPHA):
+               k_nom=math.nan, fap=None, alpha=ALPHA, evidence_of=None):
     """Pick the verdict among candidates, greedily adding effects (see module docstring).
     ``fap``: each candidate's calibrated false-alarm probability; one above ``alpha`` does
-    not enter the pool."""
+    not enter the pool. ``evidence_of(current, name)``: the calibrated false-alarm
+    probability of adding ``name`` to the model ``current`` (a second effect needs it at
+    most ``alpha`` too)."""
     fap = fap or {}
     def sysh(c: Candidate) -> float:
         return _sys(c.heldout_rms_arcmin, noise)
@@ -1018,7 +1026,8 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
                       for _, name, jf in joint[:ALSO_TRIALS]]
             earned = [t for t in trials if t.plausible and t.heldout_runs > 0
                       and sysh(t) ** 2 <= (1.0 - GREEDY_GAIN) * sysh(current) ** 2
-                      and separated(stack, t, current)]
+                      and separated(stack, t, current)
+                      and (evidence_of is None or evidence_of(current, t.effects[-1]) <= alpha)]
             if not earned:
                 break
             current = min(earned, key=lambda t: t.heldout_rms_arcmin)

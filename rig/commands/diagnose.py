@@ -27,6 +27,14 @@ def register(app: typer.Typer) -> None:
                                 help="Level of every calibrated decision: an effect is called "
                                      "when its false-alarm probability is at most this.")
         ] = 0.01,
+        self_check: Annotated[
+            int, typer.Option("--self-check", min=0,
+                              help="Diagnose N labelled campaigns made with this campaign's "
+                                   "design (rig validate-diagnosis --like) and put the summary "
+                                   "in the report (self_check).")
+        ] = 0,
+        jobs: Annotated[int, typer.Option("--jobs", min=1,
+                                          help="Worker processes of the self-check.")] = 2,
     ) -> None:
         """Where model and measurement disagree, which unmodelled effect, how far it shrinks."""
         from rig.diagnose import diagnose_path, report_dict, write_json
@@ -34,6 +42,13 @@ def register(app: typer.Typer) -> None:
         with console.status("diagnosing..."):
             camp, result = diagnose_path(campaign, alpha=alpha)
             report = report_dict(camp, result)
+        if self_check:
+            from rig.report_html import self_check_words
+            from rig.validate.like import self_check as run_self_check
+
+            with console.status(f"self-check on {self_check} campaigns like this one..."):
+                report["self_check"] = run_self_check(camp, cases=self_check, jobs=jobs)
+            console.print(self_check_words(report["self_check"]))
         console.print(f"[bold]verdict: {report['verdict']}[/bold] — {report['reason']}")
         if report.get("candidates"):
             console.print(f"candidates: {', '.join(report['candidates'])}")

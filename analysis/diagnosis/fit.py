@@ -256,9 +256,14 @@ def _centre(values: np.ndarray, weights: np.ndarray, run: np.ndarray, n_runs: in
     if values.ndim == 1:
         means = np.bincount(run, weights * values, minlength=n_runs) / wsum
         return values - means[run]
-    means = np.stack([np.bincount(run, weights * values[:, j], minlength=n_runs)
-                      for j in range(values.shape[1])], axis=1) / wsum[:, None]
-    return values - means[run]
+    if run.size and np.all(run[1:] >= run[:-1]):  # runs stacked one after another
+        starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+        sums = np.zeros((n_runs, values.shape[1]))
+        sums[run[starts]] = np.add.reduceat(weights[:, None] * values, starts, axis=0)
+    else:
+        sums = np.stack([np.bincount(run, weights * values[:, j], minlength=n_runs)
+                         for j in range(values.shape[1])], axis=1)
+    return values - (sums / wsum[:, None])[run]
 
 
 def _solve(X: np.ndarray, y: np.ndarray, sig: np.ndarray, run: np.ndarray, n_runs: int,

@@ -212,9 +212,14 @@ def torque_lag_s(t: np.ndarray, torque: np.ndarray, twist: np.ndarray, direction
     if n < 200 or not dt > 0:
         return 0.0
     lmax = min(max(MAX_LAG_SAMPLES, math.ceil(MAX_LAG_S / dt)), n // 100)
-    steps = np.arange(-lmax, lmax + LAG_STEP_SAMPLES / 2, LAG_STEP_SAMPLES)
-    # torque read at t - tau: a torque channel that lags by L has tau = -L
-    return -best_torque_shift(t, torque, twist, direction, sigma, steps * dt, evidence)
+    # whole samples first, then quarter samples around the best (the flanks' residual is
+    # smooth in the shift); torque read at t - tau: a channel that lags by L has tau = -L
+    coarse = best_torque_shift(t, torque, twist, direction, sigma,
+                               np.arange(-lmax, lmax + 1) * dt, -math.inf)
+    k = round(coarse / dt)
+    fine = np.arange(max(-lmax, k - 1), min(lmax, k + 1) + LAG_STEP_SAMPLES / 2,
+                     LAG_STEP_SAMPLES)
+    return -best_torque_shift(t, torque, twist, direction, sigma, fine * dt, evidence)
 
 
 @dataclass(frozen=True)

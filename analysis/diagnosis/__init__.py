@@ -38,6 +38,7 @@ from analysis.diagnosis.data import (
 )
 from analysis.diagnosis.evidence import calibrated_evidence
 from analysis.diagnosis.fit import (
+    HUBER_C,
     LinearFit,
     Stack,
     build_stack,
@@ -513,6 +514,42 @@ def _nuisance_friction(stack: Stack) -> tuple[float, float]:
     return min(trials)
 
 
+def lag_if_it_helps(runs: Sequence[RunInput], prepared: list[PreparedRun], tp: int
+                    ) -> list[PreparedRun]:
+    """The runs with their torque-channel lag taken out where that improves the run's part
+    of the null model's objective by more than it costs (BIC: log n per run). The lag is read
+    on the loaded flanks alone; a slow change of the unit (a drift, creep) can pass for one
+    there and then worsen the whole loop."""
+    lagged = [i for i, r in enumerate(prepared) if r.measurement.get("torque_lag_s")]
+    if not lagged:
+        return prepared
+    plain = list(prepared)
+    for i in lagged:
+        plain[i] = prepare_run(runs[i], tp, correct_lag=False)
+    with_lag = _run_objectives(build_stack(prepared))
+    without = _run_objectives(build_stack(plain))
+    n = sum(r.twist_arcmin.size for r in prepared)
+    out = list(plain)
+    for i in lagged:
+        rid = prepared[i].run_id
+        if 2.0 * (without[rid] - with_lag[rid]) >= math.log(max(n, 2)):
+            out[i] = prepared[i]
+    return out
+
+
+def _run_objectives(stack: Stack) -> dict[str, float]:
+    """Each run's share of the null model's robust objective (Huber, noise units), with the
+    best ordinary friction."""
+    f0 = _nuisance_friction(stack)[1]
+    null = fit(stack, ("backlash",), nl={"friction_Nm": f0})
+    out = {}
+    for run in stack.runs:
+        u = np.abs(null.residual[run.run_id]) / run.sigma_arcmin
+        out[run.run_id] = float(np.sum(np.where(u <= HUBER_C, 0.5 * u**2,
+                                                 HUBER_C * (u - 0.5 * HUBER_C))))
+    return out
+
+
 def with_measurement_nuisance(prepared: list[PreparedRun], alpha: float
                               ) -> tuple[Stack, dict[str, Any]]:
     """The stack the diagnosis fits: the ordinary friction carried as a nuisance
@@ -555,6 +592,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
     if any(r.nominal is None for r in prepared):
         raise AnalysisError("the reference nominal model needs each run's unit data "
                             "(run.json 'unit'); a run has none usable")
+    prepared = lag_if_it_helps(runs, prepared, tp)
     stack, zero_report = with_measurement_nuisance(prepared, alpha)
     prepared = list(stack.runs)
     cond, varied = conditions_of(stack)

@@ -233,7 +233,8 @@ def omnibus_blocks(torque: np.ndarray, flank: np.ndarray, branch: np.ndarray,
 
 def null_basis(X_base: np.ndarray, run_index: np.ndarray, n_runs: int, weight: np.ndarray
                ) -> np.ndarray:
-    """Orthonormal basis of the weighted null columns with one offset per run."""
+    """Orthonormal basis of the weighted null columns with one offset per run (a run index
+    of -1: a point in no run's offset)."""
     ind = (run_index[:, None] == np.arange(n_runs)[None, :]).astype(float)
     Xw = np.column_stack([X_base, ind]) * weight[:, None]
     U, s, _ = np.linalg.svd(Xw, full_matrices=False)

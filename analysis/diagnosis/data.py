@@ -341,6 +341,7 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
     measurement = {
         "time_base": tbase.to_dict(),
         "torque_lag_s": lag_s,
+        "torque_lag_taken_out": bool(lag_s) and correct_lag,
         "twist_resolution_arcsec": q_twist * 60.0,
         "torque_resolution_Nm": q_torque,
         "twist_noise_arcsec": sigma * 60.0,

@@ -47,36 +47,44 @@ def calibrated_evidence(stack: Stack, ref: LinearFit, ref_effects: Sequence[str]
     teeth = teeth_of(stack)
     base_effects = ("backlash", *ref_effects)
     ref_names = column_names(stack, base_effects, teeth)
-    rows_X, rows_y, rows_w, rows_run, keeps = [], [], [], [], []
+    # every point counts. Where the reference leaves the unit floating in the play its
+    # residual is the censored one of the reference fit (only a position past the centre
+    # of the play costs: there a torque-sensor offset shows, the unit held on the other
+    # flank), and it informs neither the reference's coefficients nor its run offsets
+    rows_X, rows_w, rows_run, rows_e, floats = [], [], [], [], []
     tq, fl, br, amp = [], [], [], []
     for i, run in enumerate(stack.runs):
-        keep = ~run_floating(run, ref.nl)
+        floating = run_floating(run, ref.nl)
         X = run_columns(stack, run, base_effects, ref.nl, teeth)
-        keeps.append(keep)
-        rows_X.append(X[keep])
-        rows_y.append(run.twist_arcmin[keep])
-        rows_w.append(np.full(int(keep.sum()), 1.0 / run.sigma_arcmin))
-        rows_run.append(np.full(int(keep.sum()), i))
-        tq.append(run.torque_Nm[keep])
-        fl.append(2.0 * X[keep, 0])
-        br.append(run.branch[keep])
-        amp.append(np.full(int(keep.sum()), run.amplitude_Nm))
+        w_run = np.full(X.shape[0], 1.0 / run.sigma_arcmin)
+        floats.append(floating)
+        rows_X.append(np.where(floating[:, None], 0.0, X))
+        rows_w.append(w_run)
+        rows_run.append(np.where(floating, -1, i))
+        rows_e.append(np.asarray(ref.residual.get(run.run_id, np.zeros(X.shape[0]))) * w_run)
+        tq.append(run.torque_Nm)
+        fl.append(2.0 * X[:, 0])
+        br.append(run.branch)
+        amp.append(np.full(X.shape[0], run.amplitude_Nm))
     Xr = np.vstack(rows_X)
     w = np.concatenate(rows_w)
     run_index = np.concatenate(rows_run)
     if run_index.size < 10:
         return {}, None
     Qb = null_basis(Xr, run_index, stack.n_runs, w)
-    yw = np.concatenate(rows_y) * w
-    e = yw - Qb @ (Qb.T @ yw)
+    e = np.concatenate(rows_e)
+    e = e - Qb @ (Qb.T @ e)
     bounds = np.cumsum([0, *[r.size for r in rows_run]])
     slices = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+    floating_ref = np.concatenate(floats)
 
     def stacked(effects: Sequence[str], nl: dict[str, float]) -> np.ndarray:
-        return np.vstack([run_columns(stack, run, effects, nl, teeth)[k]
-                          for run, k in zip(stack.runs, keeps, strict=True)])
+        return np.vstack([run_columns(stack, run, effects, nl, teeth) for run in stack.runs])
 
-    fitted = Xr @ ref.beta
+    def floating_at(nl: dict[str, float]) -> np.ndarray:
+        return np.concatenate([run_floating(run, nl) for run in stack.runs])
+
+    fitted = stacked(base_effects, ref.nl) @ ref.beta
     blocks: dict[str, list[np.ndarray]] = {}
     for name in names:
         if name in ref_effects:
@@ -90,13 +98,16 @@ def calibrated_evidence(stack: Stack, ref: LinearFit, ref_effects: Sequence[str]
             for v in _thin(_grid(stack, name)):
                 nl = {**ref.nl, key: float(v)}
                 if own:
-                    sets.append(stacked(effects, nl)[:, own])
+                    sets.append(np.where(floating_ref[:, None], 0.0,
+                                         stacked(effects, nl)[:, own]))
                 elif abs(float(v) - ref.nl.get(key, 0.0)) > 0:
                     # friction and an offset move the flank switches: the column is the change
-                    # of the reference prediction with the parameter switched to v
-                    sets.append(stacked(base_effects, nl) @ ref.beta - fitted)
+                    # of the reference prediction with the parameter switched to v (none
+                    # where the unit floats under both)
+                    change = stacked(base_effects, nl) @ ref.beta - fitted
+                    sets.append(np.where(floating_ref & floating_at(nl), 0.0, change))
         elif own:
-            sets.append(stacked(effects, ref.nl)[:, own])
+            sets.append(np.where(floating_ref[:, None], 0.0, stacked(effects, ref.nl)[:, own]))
         blocks[name] = blocks_of(sets, w, Qb)
     blocks[OMNIBUS] = omnibus_blocks(np.concatenate(tq), np.concatenate(fl), np.concatenate(br),
                                      np.concatenate(amp), run_index, stack.n_runs, w, Qb)

@@ -37,8 +37,9 @@ SETTLE_BAND = 4.0
 #: A step in time larger than this many median intervals (plus four jitter sigmas) is a gap:
 #: rows were dropped there.
 GAP_INTERVALS = 1.5
-#: Largest torque-channel lag searched: this many samples, or MAX_LAG_S, whichever is longer.
-MAX_LAG_SAMPLES = 10
+#: Largest torque-channel lag searched (s; at least one sample): a torque transducer's
+#: filter or a fieldbus delay is a few milliseconds, and a longer shift would stand in for
+#: slow changes of the unit (a drift, creep) instead.
 MAX_LAG_S = 0.03
 #: Lag grid step (samples): a quarter sample (linear interpolation between samples).
 LAG_STEP_SAMPLES = 0.25
@@ -211,7 +212,7 @@ def torque_lag_s(t: np.ndarray, torque: np.ndarray, twist: np.ndarray, direction
     dt = float(np.median(np.diff(t))) if n > 1 else 0.0
     if n < 200 or not dt > 0:
         return 0.0
-    lmax = min(max(MAX_LAG_SAMPLES, math.ceil(MAX_LAG_S / dt)), n // 100)
+    lmax = max(1, min(math.ceil(MAX_LAG_S / dt), n // 100))
     # whole samples first, then quarter samples around the best (the flanks' residual is
     # smooth in the shift); torque read at t - tau: a channel that lags by L has tau = -L
     coarse = best_torque_shift(t, torque, twist, direction, sigma,

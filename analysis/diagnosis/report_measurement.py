@@ -56,8 +56,9 @@ def measurement_report(runs: Sequence[RunInput], prepared: Sequence[PreparedRun]
     out: dict[str, Any] = {}
 
     lags = [r.measurement.get("torque_lag_s", 0.0) for r in prepared]
-    lag_share = None
-    if any(lags):
+    taken = any(r.measurement.get("torque_lag_taken_out") for r in prepared)
+    lag_share = 0.0
+    if taken:
         lag_share = _share(msr, _msr(_restacked(runs, tp, alpha, nl, used, correct_lag=False)))
     out["torque_lag"] = {
         "what": "lag of the torque channel behind the twist (a first-order filter's time "
@@ -65,7 +66,8 @@ def measurement_report(runs: Sequence[RunInput], prepared: Sequence[PreparedRun]
                 "out by reading the torque channel at the shifted time",
         "per_run_s": _per_run(prepared, "torque_lag_s"),
         "median_s": float(np.median(lags)) if lags else 0.0,
-        "gap_share": lag_share if any(lags) else 0.0,
+        "taken_out": taken,
+        "gap_share": lag_share,
     }
 
     ringing = [int(r.measurement.get("transient_samples", 0)) for r in prepared]

@@ -10,7 +10,11 @@ and the generators of rig.validate check the same code on data made another way.
 
 from __future__ import annotations
 
+import json
 import math
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -193,3 +197,26 @@ def test_an_effect_among_the_artefacts_is_found_with_a_tiny_false_alarm_probabil
     assert report["verdict"] == "friction", (report["verdict"], report["reason"])
     top = {e["effect"]: e for e in report["ranking"]}["friction"]
     assert top["false_alarm_probability"] < 1e-6
+
+
+@pytest.mark.timeout(600)
+def test_rig_diagnose_alpha_json_and_html(tmp_path: Path) -> None:
+    """The CLI as a user runs it on a development-set campaign (made by another generator):
+    --alpha reaches the report, every candidate has its false-alarm probability, the
+    measurement key is there, the HTML shows both."""
+    case = Path(__file__).resolve().parent / "data" / "devset" / "a" / "cases" / "c9bb5a88bce"
+    out, page = tmp_path / "r.json", tmp_path / "r.html"
+    proc = subprocess.run([sys.executable, "-m", "rig", "diagnose", str(case), "--alpha",
+                           "0.05", "--json", str(out), "--html", str(page)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "false alarm" in proc.stdout
+    report = json.loads(out.read_text())
+    assert report["calibration"]["alpha"] == 0.05
+    assert all("false_alarm_probability" in r for r in report["ranking"])
+    assert report["measurement"]["torque_zero"]["runs_read"] >= 1
+    html = page.read_text()
+    assert "false-alarm probability" in html and "What the measuring system added" in html
+    bad = subprocess.run([sys.executable, "-m", "rig", "diagnose", str(case), "--alpha", "2"],
+                         capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "alpha" in bad.stderr.lower()

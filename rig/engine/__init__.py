@@ -56,7 +56,7 @@ from rig.plans.steps import (
     WaitTemperature,
     describe,
 )
-from rig.store import Store
+from rig.store import Store, StoreUnavailable
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +64,9 @@ ARCMIN_PER_DEG = 60.0
 UNRECORDED_MAX_ROWS = 500_000
 """Rows kept of a run's preparation (pre-cycles, preload) before its recording begins: the
 newest ~33 min at 250 Hz, kept in an aborted run if the plan stops before the recording."""
+STORE_RETRY_PERIOD_S = 1.0
+"""While the store's database is away, the engine (paused, drive disabled) tries it this
+often (s)."""
 UNSTARTED_NOTE = ("stopped before its recording began: the samples are the preparation's "
                   "(torque zero, preload, pre-cycles), not a loop")
 
@@ -715,7 +718,15 @@ class Engine:
             if angle is not None:
                 test["input_angle_deg"] = angle
                 label = relabel_position(label, angle)
-        open_run = self._open_run(step, label, test, t0=None)
+        while True:
+            try:
+                open_run = self._open_run(step, label, dict(test), t0=None)
+                break
+            except StoreUnavailable as exc:
+                message = (f"store: PostgreSQL unreachable ({str(exc).split(': ', 1)[-1]}); "
+                           f"run {label} not begun, the campaign waits for it")
+                log.warning("%s", message)
+                self._wait_for_store(message, run_id=None)
         self._dropped_at_begin = self._dropped_total()
         with self._lock:
             self._open = open_run
@@ -794,6 +805,47 @@ class Engine:
         self.outcomes.append(outcome)
         self._publish("run_finished", message=f"run {open_run.label} completed",
                       data=outcome.to_dict())
+        if not getattr(open_run.recorder, "indexed", True):
+            self._wait_for_store(
+                f"store: PostgreSQL unreachable; run {outcome.run_id} kept locally, will be "
+                "indexed when it returns (paused, drive disabled)", run_id=outcome.run_id)
+
+    def _wait_for_store(self, message: str, run_id: str | None) -> None:
+        """The store's database is away (issue 21 item 7): pause in the safe state (zero
+        torque, drive disabled) instead of holding the drive or aborting, try the database
+        every :data:`STORE_RETRY_PERIOD_S`, index the runs kept locally (``run_id`` among
+        them) when it is back, then enable the drive again, bring back the torque the plan
+        was holding (at the rate of its last ramp, then its last settle) and go on. An abort
+        or E-stop meanwhile stops the plan as usual."""
+        restore = self._setpoint
+        with self._cmd_lock:
+            self._check_stopping()
+            self.io.safe_state()
+            self._setpoint = 0.0
+        self.state = "paused"
+        self._publish("paused", message=message)
+        while True:
+            self._sleep_until(time.monotonic() + STORE_RETRY_PERIOD_S)
+            if not self.store.reachable():
+                continue
+            self.store.index_pending()
+            if run_id is None or run_id not in self.store.pending_runs():
+                break
+        with self._cmd_lock:
+            self._check_stopping()
+            self.io.set_torque(0.0)
+            self.io.enable_drive()
+        self.state = "running"
+        self._publish("resumed", message="store reachable again: resumed"
+                      + (f" (run {run_id} indexed)" if run_id else ""))
+        if restore != 0.0:
+            done = self._steps[:self._step_index]
+            ramp = next((st for st in reversed(done) if isinstance(st, Ramp)
+                         and st.rate_Nm_per_s is not None), None)
+            self._ramp(restore, ramp.rate_Nm_per_s if ramp else 1.0, 0.02)
+            settle = next((st for st in reversed(done) if isinstance(st, Settle)), None)
+            if settle is not None:
+                self._settle(settle)
 
 
 def frozen_watch(meta: dict[str, Any], test: dict[str, Any]) -> FrozenTwistWatch | None:

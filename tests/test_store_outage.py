@@ -129,3 +129,63 @@ def test_an_outage_at_the_end_of_a_run_pauses_the_campaign_and_keeps_the_verdict
     assert [a["action"] for a in st.audit(run_id)] == ["run started", "run completed"]
     assert st.get_campaign(result["campaign_id"]).status == "completed"
     assert len(st.list_runs(campaign_id=result["campaign_id"], status="completed")) == 2
+
+
+def test_an_outage_before_a_run_begins_pauses_safely_then_restores_the_preload(
+        server, tmp_path: Path, monkeypatch, caplog):
+    """The database goes away during the preload: the run cannot begin, so the campaign
+    pauses with the drive disabled (not held at -T for the 60 s of retries); when the
+    database is back the engine brings back -T and the run is measured and indexed."""
+    from rig.runformat import read_run
+
+    monkeypatch.setenv("RIG_STORE_RUN_RETRY_S", "0.5")
+    caplog.set_level(logging.WARNING, logger="rig")
+    url = server.url()
+    samples = tmp_path / "samples"
+    store = Store(url, samples=samples, reconnect_s=3.0)
+    camp = campaign_from_mapping({**CAMPAIGN, "axes": {"positions_deg": [0.0]}})
+    paused = threading.Event()
+    engines: list[Any] = []
+    done: dict[str, Any] = {}
+
+    def progress(event: Any) -> None:
+        if event.kind == "step" and event.message.startswith("torque to -10") and \
+                not paused.is_set() and "stopped" not in done:
+            server.stop("fast")
+            done["stopped"] = True
+        if event.kind == "paused":
+            paused.set()
+
+    with SimulatedRig(PLANT, seed=5, sync_period_s=0.004, stream_rate_Hz=250.0) as sim, \
+            open_session(rig=sim.rig_config_path) as session:
+        def campaign() -> None:
+            try:
+                done["result"] = run_campaign(camp, session, store, progress=progress,
+                                              on_engine=engines.append)
+            except BaseException as exc:
+                done["error"] = exc
+
+        worker = threading.Thread(target=campaign, daemon=True)
+        worker.start()
+        while not paused.is_set():
+            assert worker.is_alive(), done
+            time.sleep(0.05)
+        time.sleep(2.0)
+        (engine,) = engines
+        drive = sim.modbus_server.drive
+        assert engine.state == "paused"
+        assert not drive.enabled and drive.setpoint_Nm == 0.0
+        assert not [p for p in samples.glob("campaigns/*/*") if p.is_dir()]  # not begun
+        lines = [r.getMessage() for r in caplog.records
+                 if r.getMessage().startswith("store: PostgreSQL unreachable")]
+        assert len(lines) == 1 and "not begun" in lines[0], lines
+        server.start()
+        worker.join(180)
+        assert not worker.is_alive() and "error" not in done, done
+    result = done["result"]
+    assert result["status"] == "completed", result
+    (run,) = result["runs"]
+    assert run["status"] == "completed" and run["outcome"] == "ok", run
+    recorded = read_run(run["path"])
+    assert recorded.torque_Nm[0] < -8.0  # the loop began from the restored preload
+    assert Store(url, samples=samples).get_run(run["run_id"]).status == "completed"

@@ -428,12 +428,15 @@ class Store:
                                                        record["audit"])
             except StoreUnavailable:
                 break
-            if not changed:
+            path.unlink(missing_ok=True)
+            if changed:
+                done.append(run_id)
+                log.warning("store: run %s indexed (kept locally during a database outage)",
+                            run_id)
+            elif (row := self._index.get_run(run_id)) is None or \
+                    row["finished_at"] != values["finished_at"]:  # not another indexer's
                 log.warning("run %s: kept locally, but the index no longer holds it as "
                             "running; its files are kept as they are", run_id)
-            path.unlink(missing_ok=True)
-            done.append(run_id)
-            log.warning("store: run %s indexed (kept locally during a database outage)", run_id)
         return done
 
     def local_run_info(self, run_id: str) -> RunInfo:

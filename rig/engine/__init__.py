@@ -158,7 +158,8 @@ class Engine:
         self._threads: list[threading.Thread] = []
         self._steps: list[Step] = []
         self._moved = False
-        """The drive was enabled by this plan (a stop outside a run then leaves a record)."""
+        """The drive was enabled or torque commanded since the plan began or its last run
+        ended: a stop before the next run's recording then leaves a record of it."""
         self._unrecorded: deque[tuple[MergedRow, float, int]] = deque(
             maxlen=UNRECORDED_MAX_ROWS)
         """Rows merged while the drive is enabled and no run is recording (the preparation
@@ -539,6 +540,8 @@ class Engine:
             self._check_stopping()
             self.io.set_torque(value)
             self._setpoint = value
+            if value != 0.0:
+                self._moved = True
 
     def _recent_rows(self, window_s: float) -> list[MergedRow]:
         with self._lock:
@@ -800,6 +803,7 @@ class Engine:
         with self._lock:
             self._open = None
             self._unrecorded.clear()
+            self._moved = False  # this run is the record of the torque applied so far
         open_run.samples_dropped = self._dropped_total() - self._dropped_at_begin
         outcome = open_run.finish_completed()
         self.outcomes.append(outcome)

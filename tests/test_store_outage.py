@@ -189,3 +189,36 @@ def test_an_outage_before_a_run_begins_pauses_safely_then_restores_the_preload(
     recorded = read_run(run["path"])
     assert recorded.torque_Nm[0] < -8.0  # the loop began from the restored preload
     assert Store(url, samples=samples).get_run(run["run_id"]).status == "completed"
+
+
+def test_a_run_kept_locally_is_indexed_at_the_next_start_not_recovered(server, tmp_path):
+    """The process that kept a run locally ends before the database returns: the next
+    opening of the store indexes the run with its metrics and outcome; recovery does not
+    turn it into "process ended during the run"."""
+    from rig.store import RECOVERED_REASON, StoreUnavailable
+
+    url, samples = server.url(), tmp_path / "samples"
+    store = Store(url, samples=samples, run_retry_s=0.3, reconnect_s=2.0)
+    rec = store.begin_run({"unit": {"serial": "NEXT-START"}},
+                          ["t_s", "torque_Nm", "output_angle_deg"])
+    for k in range(50):
+        rec.append([0.01 * k, 0.1 * k, 0.001 * k])
+    server.stop("fast")
+    info = rec.finish(result={"lost_motion_arcmin": 1.25}, extra={"outcome": "ok"})
+    assert rec.indexed is False and info.status == "completed" and info.n_samples == 50
+    assert info.metrics == {"lost_motion_arcmin": 1.25} and info.outcome == "ok"
+    assert store.pending_runs() == [rec.run_id] and not store.reachable()
+    with pytest.raises(StoreUnavailable) as caught:  # one line, not psycopg's paragraph
+        store.list_runs()
+    assert "\n" not in str(caught.value) and "unreachable" in str(caught.value)
+    store.close()
+    del store  # the process that kept it is gone
+
+    server.start()
+    again = Store(url, samples=samples)
+    assert again.indexed_at_open == [rec.run_id] and again.recovered == []
+    row = again.get_run(rec.run_id)
+    assert row.status == "completed" and row.reason != RECOVERED_REASON
+    assert row.metrics == {"lost_motion_arcmin": 1.25} and row.outcome == "ok"
+    assert row.n_samples == 50 and again.load_run(rec.run_id).n_samples == 50
+    assert again.pending_runs() == []

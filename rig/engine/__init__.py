@@ -56,11 +56,19 @@ from rig.plans.steps import (
     WaitTemperature,
     describe,
 )
-from rig.store import Store
+from rig.store import Store, StoreUnavailable
 
 log = logging.getLogger(__name__)
 
 ARCMIN_PER_DEG = 60.0
+UNRECORDED_MAX_ROWS = 500_000
+"""Rows kept of a run's preparation (pre-cycles, preload) before its recording begins: the
+newest ~33 min at 250 Hz, kept in an aborted run if the plan stops before the recording."""
+STORE_RETRY_PERIOD_S = 1.0
+"""While the store's database is away, the engine (paused, drive disabled) tries it this
+often (s)."""
+UNSTARTED_NOTE = ("stopped before its recording began: the samples are the preparation's "
+                  "(torque zero, preload, pre-cycles), not a loop")
 
 
 class EngineStopped(RigError):
@@ -148,6 +156,14 @@ class Engine:
         self._estimate = PlanEstimate()
         self._t_start = time.monotonic()
         self._threads: list[threading.Thread] = []
+        self._steps: list[Step] = []
+        self._moved = False
+        """The drive was enabled or torque commanded since the plan began or its last run
+        ended: a stop before the next run's recording then leaves a record of it."""
+        self._unrecorded: deque[tuple[MergedRow, float, int]] = deque(
+            maxlen=UNRECORDED_MAX_ROWS)
+        """Rows merged while the drive is enabled and no run is recording (the preparation
+        of the next run: preload, pre-cycles), with the setpoint and step in force."""
 
     # ------------------------------------------------------------------ control (any thread)
 
@@ -233,6 +249,10 @@ class Engine:
         preflight(steps, self.torque_limit_Nm, has_input_motor=self.io.has_input_motor,
                   has_climate=self.io.has_climate)
         self._plan = plan
+        self._steps = steps
+        self._step_index = 0
+        self._moved = False
+        self._unrecorded.clear()
         self._estimate = estimate(steps)
         self._t_start = time.monotonic()
         self.outcomes = []
@@ -246,6 +266,7 @@ class Engine:
             with self._cmd_lock:
                 self._check_stopping()
                 self.io.set_torque(0.0)
+                self._moved = True  # from here a stop leaves a run record (issue 21 item 6)
                 self.io.enable_drive()
             for i, step in enumerate(steps):
                 self._step_index = i
@@ -293,11 +314,44 @@ class Engine:
     def _finish_open(self, reason: str) -> None:
         with self._lock:
             open_run, self._open = self._open, None
+        if open_run is None:
+            open_run = self._record_unstarted(reason)
         if open_run is not None:
             open_run.samples_dropped = self._dropped_total() - self._dropped_at_begin
             self.outcomes.append(open_run.finish_aborted(reason))
             self._publish("run_finished", message=f"run {open_run.label} aborted: {reason}",
                           data=self.outcomes[-1].to_dict())
+
+    def _next_begin(self) -> BeginRun | None:
+        """The BeginRun step the plan was preparing when it stopped (None: no run ahead)."""
+        for step in self._steps[self._step_index:]:
+            if isinstance(step, BeginRun):
+                return step
+        return None
+
+    def _record_unstarted(self, reason: str) -> OpenRun | None:
+        """A stop after the drive moved but before the run's recording began: open the run
+        it was preparing in the store with the preparation's rows (pre-cycles, preload;
+        possibly none), so that every start that moved the drive leaves an aborted run with
+        its reason, samples and audit record (issue 21 item 6). None when the drive never
+        moved or no run was ahead; the record is best effort (a store error is logged)."""
+        step = self._next_begin() if self._moved else None
+        if step is None:
+            return None
+        with self._lock:
+            rows = list(self._unrecorded)
+            self._unrecorded.clear()
+        try:
+            open_run = self._open_run(step, step.label, dict(step.test),
+                                      t0=rows[0][0].t_mono_s if rows else time.monotonic())
+            for row, setpoint, index in rows:
+                open_run.append([row], setpoint, index, 0)
+            open_run.note(UNSTARTED_NOTE)
+        except Exception:  # the rig is safe already; the record is what failed
+            log.exception("the aborted run of a stop before its recording was not stored")
+            return None
+        self._dropped_at_begin = self._dropped_total()
+        return open_run
 
     # ------------------------------------------------------------------ threads
 
@@ -441,6 +495,9 @@ class Engine:
             if self._open is not None:
                 self._open.append(rows, self._setpoint, self._step_index + 1,
                                   self._sample_window)
+            elif self._moved:
+                self._unrecorded.extend((r, self._setpoint, self._step_index + 1)
+                                        for r in rows)
             mismatch = self._compare_crosscheck()
             watch = self._frozen if self._open is not None else None
             frozen = None if watch is None else watch.update(
@@ -483,6 +540,8 @@ class Engine:
             self._check_stopping()
             self.io.set_torque(value)
             self._setpoint = value
+            if value != 0.0:
+                self._moved = True
 
     def _recent_rows(self, window_s: float) -> list[MergedRow]:
         with self._lock:
@@ -662,6 +721,27 @@ class Engine:
             if angle is not None:
                 test["input_angle_deg"] = angle
                 label = relabel_position(label, angle)
+        while True:
+            try:
+                open_run = self._open_run(step, label, dict(test), t0=None)
+                break
+            except StoreUnavailable as exc:
+                message = (f"store: PostgreSQL unreachable ({str(exc).split(': ', 1)[-1]}); "
+                           f"run {label} not begun, the campaign waits for it")
+                log.warning("%s", message)
+                self._wait_for_store(message, run_id=None)
+        self._dropped_at_begin = self._dropped_total()
+        with self._lock:
+            self._open = open_run
+            self._unrecorded.clear()
+        self._zero_before = None
+        self._publish("run_started",
+                      message=f"run {step.label} ({open_run.recorder.run_id}) started")
+
+    def _open_run(self, step: BeginRun, label: str, test: dict[str, Any],
+                  t0: float | None) -> OpenRun:
+        """Begin ``step``'s run in the store (run.json, samples.csv, index, audit) and arm
+        its watches; ``t0``: the monotonic time of t_s = 0 (None: now)."""
         if self._zero_before is not None:
             test["torque_zero_before_Nm"] = self._zero_before
         if self._temperature is not None:
@@ -678,17 +758,14 @@ class Engine:
             columns.append("temperature_C")
         columns += ["torque_command_Nm", "step", "sample_window"]
         recorder = self.store.begin_run(meta, columns, campaign_id=self.campaign_id)
-        open_run = OpenRun(recorder, label, time.monotonic(), profile=self.options.profile,
+        open_run = OpenRun(recorder, label, time.monotonic() if t0 is None else t0,
+                           profile=self.options.profile,
                            limits=limits_dict(self.options.limits))
-        self._dropped_at_begin = self._dropped_total()
         self._frozen = frozen_watch(meta, test)
         share, rated = self.options.crosscheck_limit_share, test.get("rated_torque_Nm")
         self._cross_limit_Nm = (share * float(rated) if share is not None
                                 and isinstance(rated, int | float) and rated > 0 else None)
-        with self._lock:
-            self._open = open_run
-        self._zero_before = None
-        self._publish("run_started", message=f"run {step.label} ({recorder.run_id}) started")
+        return open_run
 
     def _measured_input_angle(self) -> float | None:
         """The input angle now (deg, modulo 360, 0.01 deg), from the input encoder's merged
@@ -725,11 +802,54 @@ class Engine:
         self._stop_recording()
         with self._lock:
             self._open = None
+            self._unrecorded.clear()
+            self._moved = False  # this run is the record of the torque applied so far
         open_run.samples_dropped = self._dropped_total() - self._dropped_at_begin
         outcome = open_run.finish_completed()
         self.outcomes.append(outcome)
         self._publish("run_finished", message=f"run {open_run.label} completed",
                       data=outcome.to_dict())
+        if not getattr(open_run.recorder, "indexed", True):
+            self._wait_for_store(
+                f"store: PostgreSQL unreachable; run {outcome.run_id} kept locally, will be "
+                "indexed when it returns (paused, drive disabled)", run_id=outcome.run_id)
+
+    def _wait_for_store(self, message: str, run_id: str | None) -> None:
+        """The store's database is away (issue 21 item 7): pause in the safe state (zero
+        torque, drive disabled) instead of holding the drive or aborting, try the database
+        every :data:`STORE_RETRY_PERIOD_S`, index the runs kept locally (``run_id`` among
+        them) when it is back, then enable the drive again, bring back the torque the plan
+        was holding (at the rate of its last ramp, then its last settle) and go on. An abort
+        or E-stop meanwhile stops the plan as usual."""
+        restore = self._setpoint
+        with self._cmd_lock:
+            self._check_stopping()
+            self.io.safe_state()
+            self._setpoint = 0.0
+        self.state = "paused"
+        self._publish("paused", message=message)
+        while True:
+            self._sleep_until(time.monotonic() + STORE_RETRY_PERIOD_S)
+            if not self.store.reachable():
+                continue
+            self.store.index_pending()
+            if run_id is None or run_id not in self.store.pending_runs():
+                break
+        with self._cmd_lock:
+            self._check_stopping()
+            self.io.set_torque(0.0)
+            self.io.enable_drive()
+        self.state = "running"
+        self._publish("resumed", message="store reachable again: resumed"
+                      + (f" (run {run_id} indexed)" if run_id else ""))
+        if restore != 0.0:
+            done = self._steps[:self._step_index]
+            ramp = next((st for st in reversed(done) if isinstance(st, Ramp)
+                         and st.rate_Nm_per_s is not None), None)
+            self._ramp(restore, ramp.rate_Nm_per_s if ramp else 1.0, 0.02)
+            settle = next((st for st in reversed(done) if isinstance(st, Settle)), None)
+            if settle is not None:
+                self._settle(settle)
 
 
 def frozen_watch(meta: dict[str, Any], test: dict[str, Any]) -> FrozenTwistWatch | None:

@@ -53,8 +53,10 @@ from rig.store.files import (
     write_json_atomic,
 )
 from rig.store.ids import (
+    ID_PATTERN,
     InvalidIdError,
     StoreError,
+    StoreUnavailable,
     UnknownIdError,
     id_candidates,
     safe_label,
@@ -88,6 +90,7 @@ __all__ = [
     "RunRecorder",
     "Store",
     "StoreError",
+    "StoreUnavailable",
     "UnknownIdError",
     "default_store_root",
 ]
@@ -98,6 +101,13 @@ STORE_ENV = "RIG_STORE"
 SAMPLES_ENV = "RIG_SAMPLES_DIR"
 DATABASE_SCHEMES = ("postgresql://", "postgres://")
 DEFAULT_STORE_DIR = "rig-store"
+PENDING_DIR = "pending-index"
+"""Runs finalised while the database was unreachable: one JSON file per run, removed once
+the run is indexed (docs/store.md, "A database outage")."""
+RUN_RETRY_ENV = "RIG_STORE_RUN_RETRY_S"
+DEFAULT_RUN_RETRY_S = 5.0
+"""How long a run's start or end waits for a lost database before the run is kept locally
+(s): the drive is at zero torque and enabled meanwhile, so it is short."""
 RECOVERED_REASON = "process ended during the run (found at next start)"
 RUN_RESERVED_KEYS = (
     "format", "run_id", "started_at", "finished_at", "status", "reason", "result",
@@ -148,6 +158,11 @@ class Store:
     transaction before failing (writes last milliseconds; the default is generous).
     ``reconnect_s``: how long a call to a database store retries a lost connection (a
     server restart) before failing; samples keep going to their files meanwhile.
+    ``run_retry_s`` (default ``$RIG_STORE_RUN_RETRY_S``, else 5 s): how long a run's start
+    and end wait for a lost database; past it a finishing run is finalised locally (its
+    run.json with status, metrics and outcome, its samples in Parquet) and indexed when the
+    database returns (:meth:`index_pending`: at every store opening, listing and run start,
+    or when called), and a starting run raises :class:`StoreUnavailable`.
     """
 
     def __init__(
@@ -159,8 +174,12 @@ class Store:
         busy_timeout_s: float = 30.0,
         samples: str | Path | None = None,
         reconnect_s: float = 60.0,
+        run_retry_s: float | None = None,
     ) -> None:
         self.busy_timeout_s = float(busy_timeout_s)
+        if run_retry_s is None:
+            run_retry_s = _env_seconds(RUN_RETRY_ENV, DEFAULT_RUN_RETRY_S)
+        self.run_retry_s = float(run_retry_s)
         self.url: str | None = None
         self._index: IndexBackend
         if is_database_url(root):
@@ -190,6 +209,7 @@ class Store:
         except OSError as e:
             raise StoreError(f"cannot create the store at {self.root}: {e.strerror or e}") from e
         self._index.ensure_schema()
+        self.indexed_at_open: list[str] = self.index_pending() if recover else []
         self.recovered: list[str] = self.recover() if recover else []
 
     @property
@@ -232,6 +252,12 @@ class Store:
         """
         fields = _index_fields(meta)
         columns = _check_columns(columns)
+        self.index_pending()
+        with self._index.retry_window(self.run_retry_s):
+            return self._begin_run(meta, fields, columns, campaign_id, flush_interval_s)
+
+    def _begin_run(self, meta: dict[str, Any], fields: dict[str, Any], columns: list[str],
+                   campaign_id: str | None, flush_interval_s: float) -> RunRecorder:
         folder_parent = self.root / "runs"
         if campaign_id is not None:
             camp = self.get_campaign(campaign_id)
@@ -341,7 +367,98 @@ class Store:
         audit = {"at": finished_at, "action": f"run {status}", "target": run_id,
                  "pid": os.getpid(), "host": socket.gethostname(),
                  "detail": {"reason": reason} if reason else None}
-        return self._index.finalize_run(run_id, update, audit)
+        try:
+            with self._index.retry_window(self.run_retry_s):
+                return self._index.finalize_run(run_id, update, audit)
+        except StoreUnavailable as e:
+            self._keep_locally(run_id, folder, update, audit, e)
+            return True
+
+    # ----------------------------------------------------------------------- outages
+
+    def _pending_path(self, run_id: str) -> Path:
+        return self.root / PENDING_DIR / f"{run_id}.json"
+
+    def _keep_locally(self, run_id: str, folder: Path,
+                      update: Any, audit: dict[str, Any], error: StoreUnavailable) -> None:
+        """The database is gone while a run ends: finalise the run in its files (run.json
+        with status, result and outcome; campaign.json lists a completed campaign run) and
+        queue its index row in ``pending-index/<run_id>.json`` for :meth:`index_pending`."""
+        meta = _read_json_or(folder / RUN_JSON, {})
+        values = update(meta.get("campaign_id"))
+        record = {"run_id": run_id, "path": folder.relative_to(self.root).as_posix(),
+                  "values": values, "audit": audit, "kept_at": utc_now_iso(),
+                  "error": str(error)}
+        (self.root / PENDING_DIR).mkdir(exist_ok=True)
+        write_json_atomic(self._pending_path(run_id), record)
+        cause = str(error).split(": ", 1)[-1]
+        log.warning("store: PostgreSQL unreachable (%s); run %s kept locally, will be indexed "
+                    "when it returns", cause, run_id)
+
+    def reachable(self) -> bool:
+        """Does the index answer now (one attempt; always True for the embedded index)?"""
+        try:
+            with self._index.retry_window(0.0):
+                self._index.schema_version()
+        except StoreUnavailable:
+            return False
+        return True
+
+    def pending_runs(self) -> list[str]:
+        """Ids of the runs finalised locally and not yet indexed (a database outage)."""
+        folder = self.root / PENDING_DIR
+        if not folder.is_dir():
+            return []
+        return sorted(p.stem for p in folder.glob("*.json") if ID_PATTERN.fullmatch(p.stem))
+
+    def index_pending(self) -> list[str]:
+        """Index the runs finalised locally during a database outage (one attempt each, no
+        waiting); returns the ids indexed now. Their audit records keep the time the run
+        ended. A database still unreachable leaves them queued (no error)."""
+        done = []
+        for run_id in self.pending_runs():
+            path = self._pending_path(run_id)
+            record = _read_json_or(path, None)
+            if record is None or not isinstance(record.get("values"), dict):
+                continue
+            values = record["values"]
+            try:
+                with self._index.retry_window(0.0):
+                    changed = self._index.finalize_run(run_id, lambda _cid, v=values: v,
+                                                       record["audit"])
+            except StoreUnavailable:
+                break
+            path.unlink(missing_ok=True)
+            if changed:
+                done.append(run_id)
+                log.warning("store: run %s indexed (kept locally during a database outage)",
+                            run_id)
+            elif (row := self._index.get_run(run_id)) is None or \
+                    row["finished_at"] != values["finished_at"]:  # not another indexer's
+                log.warning("run %s: kept locally, but the index no longer holds it as "
+                            "running; its files are kept as they are", run_id)
+        return done
+
+    def local_run_info(self, run_id: str) -> RunInfo:
+        """A run's row as its files say (the run was kept locally: the index is behind)."""
+        record = _read_json_or(self._pending_path(run_id), None)
+        if record is None:
+            return self.get_run(run_id)
+        values, meta = record["values"], record["values"].get("meta") or {}
+        fields = _index_fields({k: v for k, v in meta.items() if k not in RUN_RESERVED_KEYS})
+        unit = meta.get("unit") or {}
+        return RunInfo(
+            run_id=run_id, campaign_id=meta.get("campaign_id"),
+            unit_serial=fields["unit_serial"], operator=fields["operator"],
+            rig_id=fields["rig_id"], calibration=fields["calibration"],
+            software_version=str(meta.get("software_version", __version__)),
+            plan_name=fields["plan_name"], plan_version=fields["plan_version"],
+            status=values["status"], reason=values["reason"],
+            started_at=str(meta.get("started_at", "")), finished_at=values["finished_at"],
+            n_samples=values["n_samples"], path=self.root / record["path"],
+            metrics=values["metrics"], outcome=values.get("outcome"),
+            design=unit.get("design") if unit.get("design") is not None else unit.get("model"),
+        )
 
     def recover(self) -> list[str]:
         """Mark runs left "running" by a process that has ended as "aborted".
@@ -354,7 +471,10 @@ class Store:
         aborted.
         """
         recovered = []
+        pending = set(self.pending_runs())
         for run_id, path in self._index.running_runs():
+            if run_id in pending:  # finalised locally; the database was away at its end
+                continue
             folder = self.root / path
             lock = WriterLock.acquire(folder, create=False)
             if lock is None:
@@ -402,6 +522,7 @@ class Store:
         if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int)
                                   or limit < 1):
             raise ValueError(f"limit must be a positive int, got {limit!r}")
+        self.index_pending()
         rows = self._index.query_runs(RunFilter(
             campaign_id=campaign_id, status=status, serial=serial, outcome=outcome,
             design=design, since=_iso_bound(since, "since"), until=_iso_bound(until, "until"),
@@ -563,6 +684,20 @@ class Store:
 
 
 # --------------------------------------------------------------------------- helpers
+
+
+def _env_seconds(name: str, default: float) -> float:
+    """A non-negative number of seconds from the environment variable ``name``."""
+    text = os.environ.get(name, "").strip()
+    if not text:
+        return default
+    try:
+        value = float(text)
+    except ValueError:
+        raise StoreError(f"{name}={text!r}: expected a number of seconds") from None
+    if not value >= 0 or value == float("inf"):
+        raise StoreError(f"{name}={text!r}: expected a number of seconds >= 0")
+    return value
 
 
 def _iso_bound(value: Any, name: str) -> str | None:

@@ -21,6 +21,11 @@ class StoreError(RigError):
     """The store cannot do what was asked (no store, unknown id, bad state)."""
 
 
+class StoreUnavailable(StoreError):
+    """The store's database cannot be reached within the retry window (a server restart, a
+    network outage). The message is one line."""
+
+
 class InvalidIdError(StoreError, ValueError):
     """A run or campaign id given by a caller does not match :data:`ID_PATTERN`."""
 

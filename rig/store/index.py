@@ -158,6 +158,12 @@ class IndexBackend(ABC):
     #: How the store is named in messages (a path, or a URL without its password).
     location: str
 
+    @contextlib.contextmanager
+    def retry_window(self, seconds: float) -> Iterator[None]:
+        """Within the block, this thread's calls give up on a lost database after
+        ``seconds`` (a database back-end; the embedded index has nothing to wait for)."""
+        yield
+
     @abstractmethod
     def exists(self) -> bool:
         """Does the index exist already (the store was created)?"""

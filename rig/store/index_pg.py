@@ -15,12 +15,13 @@ wrong URL fails at once with a clear error.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import logging
 import os
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from typing import Any, TypeVar
 from urllib.parse import urlsplit, urlunsplit
 
@@ -28,7 +29,7 @@ import psycopg
 from psycopg.rows import dict_row
 from psycopg.types.json import Jsonb
 
-from rig.store.ids import StoreError
+from rig.store.ids import StoreError, StoreUnavailable
 from rig.store.index import (
     JSON_COLUMNS,
     RUN_INSERT_COLUMNS,
@@ -128,6 +129,12 @@ def redact(url: str) -> str:
     return urlunsplit(parts._replace(netloc=netloc))
 
 
+def first_line(error: BaseException) -> str:
+    """The first line of a driver's message (psycopg's run over several lines)."""
+    text = str(error).strip()
+    return text.splitlines()[0].strip() if text else type(error).__name__
+
+
 def _json(value: Any) -> Any:
     return None if value is None else Jsonb(value)
 
@@ -147,6 +154,7 @@ class PostgresIndex(IndexBackend):
         self.connect_timeout_s = int(connect_timeout_s)
         self._local = threading.local()
         self._ever_connected = False
+        self._outage = False
 
     # ------------------------------------------------------------------ connections
 
@@ -168,29 +176,51 @@ class PostgresIndex(IndexBackend):
         if conn is not None and self._local.pid == os.getpid():
             conn.close()
 
+    @contextlib.contextmanager
+    def retry_window(self, seconds: float) -> Iterator[None]:
+        """Within the block this thread's calls retry a lost connection for ``seconds`` (0:
+        one attempt) instead of ``reconnect_s``; then :class:`StoreUnavailable`."""
+        before = getattr(self._local, "window_s", None)
+        self._local.window_s = float(seconds)
+        try:
+            yield
+        finally:
+            self._local.window_s = before
+
     def _call(self, fn: Callable[[psycopg.Connection, int], T]) -> T:
-        """``fn(connection, attempt)``, retried on a lost connection (see the module doc)."""
+        """``fn(connection, attempt)``, retried on a lost connection (see the module doc);
+        :class:`StoreUnavailable` (one line) when the retry window has passed."""
         deadline: float | None = None
         pause = 0.1
         attempt = 0
+        window = getattr(self._local, "window_s", None)
+        window = self.reconnect_s if window is None else min(window, self.reconnect_s)
         while True:
+            had = getattr(self._local, "conn", None) is not None
             try:
-                return fn(self._conn(), attempt)
+                value = fn(self._conn(), attempt)
+                self._outage = False
+                return value
             except psycopg.OperationalError as e:
                 self._local.conn = None
+                if had and attempt == 0:  # a connection an outage broke: a new one at once
+                    attempt += 1
+                    continue
                 if not self._ever_connected:
                     raise StoreError(
                         f"cannot open the store database {self.location}: "
                         f"{str(e).strip().splitlines()[-1] if str(e).strip() else e}") from e
                 now = time.monotonic()
-                deadline = deadline if deadline is not None else now + self.reconnect_s
+                deadline = deadline if deadline is not None else now + window
                 if now >= deadline:
-                    raise StoreError(
-                        f"store database {self.location} unreachable for "
-                        f"{self.reconnect_s:g} s: {e}") from e
-                log.warning("store database %s: %s; reconnecting", self.location,
-                            str(e).strip() or type(e).__name__)
-                time.sleep(pause)
+                    raise StoreUnavailable(
+                        f"store database {self.location} unreachable for {window:g} s: "
+                        f"{first_line(e)}") from e
+                if not self._outage:  # once per outage, one line (the file log has more)
+                    self._outage = True
+                    log.warning("store database %s: %s; reconnecting", self.location,
+                                first_line(e))
+                time.sleep(min(pause, max(0.0, deadline - now)))
                 pause = min(2.0, pause * 2)
                 attempt += 1
 

@@ -27,6 +27,10 @@ class RunCloser(Protocol):
 
     def get_run(self, run_id: str) -> RunInfo: ...
 
+    def pending_runs(self) -> list[str]: ...
+
+    def local_run_info(self, run_id: str) -> RunInfo: ...
+
 log = logging.getLogger("rig.store")
 
 
@@ -68,6 +72,9 @@ class RunRecorder:
         self._lock = lock
         self._count_lock = threading.Lock()
         self._finished = False
+        self.indexed = True
+        """False when the run was finalised locally only (the database was unreachable at
+        its end); the store indexes it when the database returns."""
 
     @property
     def finished(self) -> bool:
@@ -136,6 +143,9 @@ class RunRecorder:
             raise StoreError(
                 f"run {self.run_id} was no longer 'running' in the index when it was finished"
             )
+        if self.run_id in self._store.pending_runs():
+            self.indexed = False
+            return self._store.local_run_info(self.run_id)
         return self._store.get_run(self.run_id)
 
     def __enter__(self) -> RunRecorder:

@@ -719,8 +719,8 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
     # systematic gap also exceeds the noise floor: a quantised encoder's error follows the
     # twist, so it lines up with the loading and can be "significant" while far too small
     # to matter
-    lack_of_fit = gap_fap <= alpha and sys0 > threshold
-    if not any_effect and not lack_of_fit:
+    systematic = gap_fap <= alpha and sys0 > threshold
+    if not any_effect and not systematic:
         if stiff_dev < -STIFFNESS_TOLERANCE:
             verdict = "ambiguous"
             candidates = ["shaft_compliance", "mesh_stiffness"]

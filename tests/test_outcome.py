@@ -8,6 +8,7 @@ is read back from run.json, campaign.json and ``--json``.
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import threading
@@ -79,6 +80,10 @@ def test_every_record_carries_limits_and_outcome(tmp_path: Path):
                    "--json", str(out), cwd=tmp_path)
         assert res.returncode == code, res.stderr[-2000:]
         assert ("outcome: OK" if code == 0 else "outcome: NOT OK") in res.stdout + res.stderr
+        assert "FAIL" not in res.stdout + res.stderr  # one word for it: NOT OK (issue 21)
+        if code == 1:
+            assert "│ NOT OK" in res.stderr, res.stderr  # the runs table's outcome column
+            assert "  NOT OK: lost motion" in res.stderr  # each run as it finishes
         docs[code] = json.loads(out.read_text())
     for code, outcome in ((0, "ok"), (1, "not_ok")):
         doc = docs[code]
@@ -273,3 +278,22 @@ def test_an_old_campaign_ok_without_limits_reads_no_limits():
     assert recorded_campaign_outcome("not_ok", {}, [], "completed") == "not_ok"
     assert recorded_campaign_outcome(None, {}, ["no_limits"], "completed") == "no_limits"
     assert recorded_campaign_outcome(None, {}, [], "running") is None
+
+
+def test_a_run_without_limits_is_no_limits_everywhere(tmp_path: Path):
+    """Issue 21 item 13: no limits set is neither OK nor NOT OK: ``rig measure`` says NO
+    LIMITS (exit 0: nothing failed), run.json records "no_limits", ``rig runs`` shows it."""
+    out = tmp_path / "run.json"
+    res = _rig("measure", "--simulated", "--store", str(tmp_path / "store"), "--rated-torque",
+               "10", "--steps", "2", "--pre-cycles", "0", "--json", str(out), cwd=tmp_path)
+    assert res.returncode == 0, (res.stdout[-1500:], res.stderr[-1500:])
+    assert "outcome: NO LIMITS (no limits set)" in res.stderr
+    assert not re.search(r"outcome: OK|FAIL", res.stdout + res.stderr)
+    doc = json.loads(out.read_text())
+    assert doc["outcome"] == "no_limits" and doc["failures"] == []
+    stored = json.loads((Path(doc["path"]) / "run.json").read_text())
+    assert stored["outcome"] == "no_limits"
+    assert all(v is None for v in stored["limits"].values())
+    res = _rig("runs", "--store", str(tmp_path / "store"), cwd=tmp_path)
+    row = next(line for line in res.stdout.splitlines() if doc["run_id"] in line)
+    assert "NO LIMITS" in row and f"{doc['lost_motion_arcmin']:.3f}" in row, row

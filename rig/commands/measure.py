@@ -70,11 +70,11 @@ def _print_run(out: Console, data: dict[str, Any]) -> None:
 
     model = data.get("model") or {}
     m = model.get("lost_motion_arcmin")
-    verdict = f": {outcome_markup(data['outcome'])}" if data.get("outcome") else ""
-    out.print(f"  lost motion {f('lost_motion_arcmin')} arcmin"
+    verdict = f"{outcome_markup(data['outcome'])}: " if data.get("outcome") else ""
+    out.print(f"  {verdict}lost motion {f('lost_motion_arcmin')} arcmin"
               + (f" (model {m:.3f})" if m is not None else "")
               + f", backlash {f('backlash_arcmin')} arcmin, stiffness "
-              f"{f('stiffness_Nm_per_arcmin', 2)} N·m/arcmin{verdict}")
+              f"{f('stiffness_Nm_per_arcmin', 2)} N·m/arcmin")
 
 
 OUTCOME_STYLE = {"ok": "green", "not_ok": "red", "incomplete": "yellow"}

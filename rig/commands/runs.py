@@ -7,7 +7,7 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.console import Console
@@ -17,17 +17,20 @@ from rich.table import Table
 from rig.commands.measure import outcome_markup
 from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
 
+if TYPE_CHECKING:
+    from rig.store.records import RunInfo
+
 STATUS_STYLE = {"running": "yellow", "completed": "green", "aborted": "red"}
 
 
-def lost_motion(info) -> tuple[Any, Any]:
+def lost_motion(info: RunInfo) -> tuple[Any, Any]:
     """The run's recorded lost motion and its standard uncertainty (arcmin; None if none)."""
     metrics = info.metrics or {}
     return (metrics.get("lost_motion_arcmin"),
             (metrics.get("uncertainty") or {}).get("lost_motion_arcmin"))
 
 
-def lost_motion_text(info) -> str:
+def lost_motion_text(info: RunInfo) -> str:
     """``4.123 ± 0.004`` (arcmin), the value alone without an uncertainty, "" if none."""
     value, u = lost_motion(info)
     if isinstance(value, bool) or not isinstance(value, int | float):
@@ -40,7 +43,7 @@ def lost_motion_text(info) -> str:
     return text
 
 
-def run_json(info) -> dict[str, Any]:
+def run_json(info: RunInfo) -> dict[str, Any]:
     """One run of ``rig runs --json``: the index row (:meth:`RunInfo.to_dict`) with its
     ``verdict`` (the displayed word of ``outcome``) and ``lost_motion_arcmin`` /
     ``lost_motion_arcmin_u`` (arcmin) beside; strict JSON (NaN, infinities as null)."""
@@ -53,7 +56,7 @@ def run_json(info) -> dict[str, Any]:
                             "lost_motion_arcmin": value, "lost_motion_arcmin_u": u})
 
 
-def _table(runs: list, root: str) -> Table:
+def _table(runs: list[RunInfo], root: str) -> Table:
     table = Table(title=f"Runs in {root} (newest first)")
     table.add_column("run", no_wrap=True)
     table.add_column("status")

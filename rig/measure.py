@@ -183,10 +183,10 @@ def measure_plan(session: RigSession, store: Store, plan: Plan, meta: dict[str, 
 
 def run_result(outcome_dict: dict[str, Any], limits: Limits) -> dict[str, Any]:
     """A single run's JSON (``rig measure --json``): the ``rig analyse --json`` keys, status,
-    reason, the limit verdict and the ``outcome`` ("ok", "not_ok", "incomplete") with the
-    ``limits`` in force."""
+    reason, the limit verdict and the ``outcome`` ("ok", "not_ok", "incomplete", "no_limits":
+    rig/outcome.py) with the ``limits`` in force; ``passed``: completed and no limit failed."""
     outcome, causes, notes = run_outcome(outcome_dict, limits.model_dump())
-    return {**outcome_dict, "passed": outcome == "ok", "outcome": outcome,
+    return {**outcome_dict, "passed": outcome in ("ok", "no_limits"), "outcome": outcome,
             "limits": limits.model_dump(), "failures": causes, "not_applicable": notes}
 
 

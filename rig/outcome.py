@@ -1,33 +1,89 @@
-"""OK / not OK / incomplete: the verdict of a run and of a campaign against their limits.
+"""The verdict of a run and of a campaign against their limits, and the one word it is shown as.
 
 Every run.json and campaign.json carries top-level ``limits`` (the limits in force; None =
-not checked) and ``outcome``:
+not checked) and ``outcome``, one of :data:`OUTCOMES`:
 
 - ``"ok"``: completed, and every limit that applies is met;
 - ``"not_ok"``: a measured metric is beyond its limit (a unit that failed a limit is not OK
   whatever else happened);
-- ``"incomplete"``: the run was aborted (fault, abort, E-stop, recovered after a crash) or a
-  limited metric could not be measured (analysis error): no verdict on the unit.
+- ``"incomplete"``: the run was aborted (fault, abort, E-stop, recovered after a crash), or a
+  limited metric could not be measured (analysis error) or is not a finite number (NaN,
+  infinity): no verdict on the unit;
+- ``"no_limits"``: completed, but no limit was set: the unit was measured, not judged
+  (neither OK nor NOT OK).
 
 A metric the run's design cannot measure is **not applicable**, not a failure: the torsional
 stiffness is defined between 50 % and 100 % of the rated torque (seed 000, Fig. 6), so a run
 whose amplitude is below 100 % of the rated torque has no stiffness to check.
+
+Everything that shows a verdict (the page, the certificate, the CLI, SPC, the Python API)
+shows it as :data:`OUTCOME_WORDS` says: OK / NOT OK / INCOMPLETE / NO LIMITS. Records written
+before ``"no_limits"`` existed are read by :func:`recorded_outcome`.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterable, Mapping
 from typing import Any
 
-__all__ = ["OUTCOMES", "LIMIT_KEYS", "run_outcome", "campaign_outcome", "impossible_metrics",
-           "not_applicable"]
+__all__ = ["OUTCOMES", "OUTCOME_WORDS", "OUTCOME_MEANINGS", "LIMIT_KEYS", "run_outcome",
+           "campaign_outcome", "impossible_metrics", "not_applicable", "outcome_word",
+           "parse_outcome", "limits_set", "finite_number", "metric_check", "recorded_outcome",
+           "recorded_campaign_outcome"]
 
-OUTCOMES = ("ok", "not_ok", "incomplete")
+OUTCOMES = ("ok", "not_ok", "incomplete", "no_limits")
+OUTCOME_WORDS = {"ok": "OK", "not_ok": "NOT OK", "incomplete": "INCOMPLETE",
+                 "no_limits": "NO LIMITS"}
+"""Outcome code -> the word every view shows (the only such mapping of the product)."""
+OUTCOME_MEANINGS = {"ok": "every limit met", "not_ok": "a limit failed",
+                    "incomplete": "no verdict on the unit", "no_limits": "no limits set"}
+"""Outcome code -> what it means, in a few words (the certificate, ``rig runs``)."""
+NO_OUTCOME = "–"
+"""Shown where a run has no verdict yet (running) or none was recorded."""
 LIMIT_KEYS = {
     "lost_motion_arcmin_max": ("lost_motion_arcmin", "above"),
     "backlash_arcmin_max": ("backlash_arcmin", "above"),
     "stiffness_Nm_per_arcmin_min": ("stiffness_Nm_per_arcmin", "below"),
 }
 """Limit key -> (metric key, the side that fails)."""
+
+
+def outcome_word(code: Any) -> str:
+    """The displayed word of an outcome code ("not_ok" -> "NOT OK"); :data:`NO_OUTCOME` for
+    None; a string that is no outcome code (another lab's record) as it is."""
+    if code is None or code == "":
+        return NO_OUTCOME
+    return OUTCOME_WORDS.get(code, str(code))
+
+
+def _folded(text: str) -> str:
+    return " ".join(text.replace("_", " ").replace("-", " ").lower().split())
+
+
+_ACCEPTED = {_folded(k): k for k in OUTCOMES} | {_folded(w): k for k, w in OUTCOME_WORDS.items()}
+
+
+def parse_outcome(value: Any) -> str:
+    """An outcome code from a code or a displayed word, any case ("NOT OK", "not_ok",
+    "No limits" ...); ValueError naming the valid values otherwise."""
+    code = _ACCEPTED.get(_folded(value)) if isinstance(value, str) else None
+    if code is None:
+        raise ValueError(
+            f"outcome must be one of {', '.join(OUTCOMES)} (or the words "
+            f"{', '.join(OUTCOME_WORDS.values())}, any case), got {value!r}")
+    return code
+
+
+def limits_set(limits: Mapping[str, Any] | None) -> bool:
+    """Is any limit of :data:`LIMIT_KEYS` set (not None)?"""
+    return isinstance(limits, Mapping) and any(limits.get(k) is not None for k in LIMIT_KEYS)
+
+
+def finite_number(value: Any) -> bool:
+    """Is ``value`` a finite real number (not a bool, NaN or an infinity)?"""
+    return (isinstance(value, int | float) and not isinstance(value, bool)
+            and math.isfinite(value))
 
 
 def not_applicable(run: dict[str, Any], metric: str) -> str | None:
@@ -60,20 +116,42 @@ def impossible_metrics(run: dict[str, Any]) -> list[str]:
     label = run.get("label") or run.get("run_id") or "run"
     out = []
     lag = metrics.get("channel_lag_s")
-    if isinstance(lag, int | float) and abs(lag) >= CHANNEL_LAG_LIMIT_S:
+    if finite_number(lag) and abs(lag) >= CHANNEL_LAG_LIMIT_S:
         out.append(f"run {label}: the torque channel is {'late' if lag > 0 else 'ahead'} by "
                    f"about {abs(lag):.3g} s against the twist (limit {CHANNEL_LAG_LIMIT_S:g} s):"
                    " channels out of step, no verdict")
     for key in IMPOSSIBLE_BELOW_ZERO:
         value = metrics.get(key)
-        if not isinstance(value, int | float):
+        if not finite_number(value):
             continue
-        u = sigma.get(key) if isinstance(sigma.get(key), int | float) else 0.0
+        u = sigma.get(key) if finite_number(sigma.get(key)) else 0.0
         if (key.startswith("stiffness") and value <= 0) or value + 3.0 * u < 0:
             out.append(f"run {label}: {key} = {value:.4g} is physically impossible (torque and "
                        "twist not of the same instant, or a channel's sign reversed): "
                        "no verdict")
     return out
+
+
+def metric_check(run: dict[str, Any], metric: str, bound: Any, worse: str
+                 ) -> tuple[str, str | None]:
+    """One metric of ``run`` against one limit ``bound`` (``worse``: "above" or "below", the
+    side that fails): ("ok" | "not_ok" | "not_applicable" | "not_measured" | "not_finite",
+    why in words or None). A value that is not a finite number is never inside a limit."""
+    metrics = {**run, **(run.get("result") or {})}
+    label = run.get("label") or run.get("run_id") or "run"
+    why_not = not_applicable(run, metric)
+    if why_not is not None:
+        return "not_applicable", f"run {label}: {metric} {why_not}"
+    value = metrics.get(metric)
+    if value is None:
+        why = (metrics.get("errors") or {}).get(metric, "not measured")
+        return "not_measured", f"run {label}: {metric} unavailable ({why})"
+    if not finite_number(value):
+        return "not_finite", (f"run {label}: {metric} = {value!r} is not a finite number: "
+                              "no verdict against its limit")
+    if (value > bound) if worse == "above" else (value < bound):
+        return "not_ok", f"run {label}: {metric} = {value:.4g} is {worse} the limit {bound:g}"
+    return "ok", None
 
 
 def run_outcome(run: dict[str, Any], limits: dict[str, Any] | None
@@ -83,13 +161,14 @@ def run_outcome(run: dict[str, Any], limits: dict[str, Any] | None
     ``run``: the run's status/reason and metrics, flat (``RunOutcome.to_dict()``) or as
     run.json (metrics under ``result``); ``limits``: the limit keys of :data:`LIMIT_KEYS`.
     """
-    metrics = {**run, **(run.get("result") or {})}
     label = run.get("label") or run.get("run_id") or "run"
     if run.get("status") != "completed":
         return "incomplete", [f"run {label}: {run.get('status')}: {run.get('reason')}"], []
     impossible = impossible_metrics(run)
     if impossible:
         return "incomplete", impossible, []
+    if not limits_set(limits):
+        return "no_limits", [], []
     failures: list[str] = []
     missing: list[str] = []
     notes: list[str] = []
@@ -97,17 +176,13 @@ def run_outcome(run: dict[str, Any], limits: dict[str, Any] | None
         bound = (limits or {}).get(key)
         if bound is None:
             continue
-        why_not = not_applicable(run, metric)
-        if why_not is not None:
-            notes.append(f"run {label}: {metric} {why_not}")
-            continue
-        value = metrics.get(metric)
-        if value is None:
-            why = (metrics.get("errors") or {}).get(metric, "not measured")
-            missing.append(f"run {label}: {metric} unavailable ({why})")
-        elif (value > bound) if worse == "above" else (value < bound):
-            failures.append(f"run {label}: {metric} = {value:.4g} is {worse} the limit "
-                            f"{bound:g}")
+        verdict, why = metric_check(run, metric, bound, worse)
+        if verdict == "not_applicable":
+            notes.append(why or "")
+        elif verdict == "not_ok":
+            failures.append(why or "")
+        elif verdict in ("not_measured", "not_finite"):
+            missing.append(why or "")
     if failures:
         return "not_ok", failures + missing, notes
     if missing:
@@ -116,9 +191,58 @@ def run_outcome(run: dict[str, Any], limits: dict[str, Any] | None
 
 
 def campaign_outcome(run_outcomes: list[str], status: str) -> str:
-    """A campaign's outcome from its runs' outcomes and its own status."""
+    """A campaign's outcome from its runs' outcomes and its own status: NOT OK if any run is;
+    INCOMPLETE if aborted, empty or any run incomplete; NO LIMITS if no run had a limit set;
+    else OK."""
     if "not_ok" in run_outcomes:
         return "not_ok"
     if status != "completed" or not run_outcomes or "incomplete" in run_outcomes:
         return "incomplete"
+    if all(o == "no_limits" for o in run_outcomes):
+        return "no_limits"
     return "ok"
+
+
+def recorded_outcome(meta: Mapping[str, Any], limits: Mapping[str, Any] | None = None
+                     ) -> str | None:
+    """The outcome of a run record (run.json, or the index's copy of it) as every view
+    shows it. ``limits``: those in force when run.json has none (its campaign's).
+
+    - a running run has none (None);
+    - ``"not_ok"``, ``"incomplete"``, ``"no_limits"`` are read as recorded;
+    - ``"ok"`` is shown only when the record's own metrics and limits confirm it: an ``"ok"``
+      written without any limit set (before ``"no_limits"`` existed) reads ``"no_limits"``,
+      and one whose limited metric is not a finite number reads ``"incomplete"``;
+    - no outcome recorded (an imported run, another lab's run.json): judged now from its
+      status (completed when absent), metrics and limits (:func:`run_outcome`);
+    - any other string (another lab's own word) is kept as it is.
+    """
+    if meta.get("status") == "running":
+        return None
+    recorded = meta.get("outcome")
+    if isinstance(recorded, str) and recorded and recorded not in OUTCOMES:
+        return recorded
+    if recorded in ("not_ok", "incomplete", "no_limits"):
+        return recorded
+    run_limits = meta.get("limits") if isinstance(meta.get("limits"), Mapping) else limits
+    run = {**meta, "status": meta.get("status") or "completed"}
+    return run_outcome(run, dict(run_limits or {}))[0]
+
+
+def recorded_campaign_outcome(recorded: Any, limits: Mapping[str, Any] | None,
+                              run_outcomes: Iterable[str | None], status: str | None
+                              ) -> str | None:
+    """A campaign's outcome as every view shows it, from campaign.json's ``outcome``
+    (``recorded``), its ``limits``, its runs' outcomes (:func:`recorded_outcome`) and status:
+    read as :func:`recorded_outcome` reads a run's ("ok" confirmed by the runs; none recorded:
+    judged from the runs)."""
+    if status == "running":
+        return None
+    if isinstance(recorded, str) and recorded and recorded not in OUTCOMES:
+        return recorded
+    if recorded in ("not_ok", "incomplete", "no_limits"):
+        return recorded
+    runs = [o for o in run_outcomes if o is not None]
+    if recorded == "ok" and not runs:
+        return "ok" if limits_set(limits) else "no_limits"
+    return campaign_outcome(runs, status or "completed")

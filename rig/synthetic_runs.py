@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from analysis.loop.synthetic import dead_zone_twist, triangle_profile
+from rig.outcome import LIMIT_KEYS, campaign_outcome, run_outcome
 from rig.store import Store
 
 COLUMNS = ["t_s", "torque_Nm", "output_angle_deg"]
@@ -64,18 +65,23 @@ def write_campaign(
     run takes (rows paced like a rig's, in 20 bursts). ``on_run(run_id)`` is called after
     each finished run. ``unit_data``: design data of the unit (a run.json ``unit``, e.g.
     rig/examples/units/seed000-pair1.json) kept with serial and design in the metadata.
-    Each run's result holds the closed-form metrics; the campaign's meta the ``limits``.
+    Each run's result holds the closed-form metrics; the campaign's meta and every run.json
+    the ``limits`` (every key, None = not checked), and each run.json, campaign.json and the
+    campaign's summary the ``outcome`` against them (rig/outcome.py), as a measured campaign
+    records them.
     """
     plays = play_arcmin if isinstance(play_arcmin, list) else [play_arcmin] * len(positions_deg)
     unit = {**(unit_data or {}), "serial": serial, "design": design}
+    in_force = {key: (limits or {}).get(key) for key in LIMIT_KEYS}
     campaign_id = store.create_campaign(
         f"{design}-{serial}",
         {"unit": unit, "limits": limits or {}, "profile": "nabtesco",
          "synthetic": "rig.synthetic_runs: dead-zone loop, not a measurement"})
+    outcomes, failures = [], []
     for angle, play in zip(positions_deg, plays, strict=True):
         meta = {"unit": unit, "operator": "synthetic", "rig_id": f"rig-{serial}",
                 "test": {"rated_torque_Nm": rated_torque_Nm, "input_angle_deg": angle},
-                "profile": "nabtesco"}
+                "profile": "nabtesco", "limits": in_force}
         with store.begin_run(meta, COLUMNS, campaign_id=campaign_id) as rec:
             rows = loop_samples(play, stiffness_Nm_per_arcmin, rated_torque_Nm, n_quarter)
             burst = max(1, len(rows) // 20)
@@ -83,9 +89,19 @@ def write_campaign(
                 rec.append(row)
                 if run_seconds and i % burst == burst - 1:
                     time.sleep(run_seconds / 20)
-            rec.finish(result=closed_form_metrics(play, stiffness_Nm_per_arcmin,
-                                                  rated_torque_Nm))
+            result = closed_form_metrics(play, stiffness_Nm_per_arcmin, rated_torque_Nm)
+            outcome, causes, _ = run_outcome(
+                {"status": "completed", "label": f"pos{angle:03.0f}", "test": meta["test"],
+                 "result": result}, in_force)
+            outcomes.append(outcome)
+            failures += causes
+            rec.finish(result=result, extra={"outcome": outcome})
         if on_run is not None:
             on_run(rec.run_id)
-    store.finish_campaign(campaign_id, "completed", {"n_runs": len(positions_deg)})
+    outcome = campaign_outcome(outcomes, "completed")
+    store.finish_campaign(campaign_id, "completed",
+                          {"n_runs": len(positions_deg), "limits": in_force,
+                           "outcome": outcome, "failures": failures,
+                           "passed": outcome in ("ok", "no_limits")},
+                          extra={"outcome": outcome})
     return campaign_id

@@ -206,3 +206,44 @@ def test_calibration_operator_and_an_aborted_run(measured: dict):
     assert context["outcome_word"] == "INCOMPLETE"
     assert "E-stop pressed" in page and "not measured" in page and "ENC-7" in page
     assert "past due" not in page
+
+
+def test_a_nan_metric_is_never_certified_ok_and_no_limits_is_no_verdict(measured: dict):
+    """Issue 21 items 3 and 13: a stored result with lost_motion_arcmin NaN against a 3'
+    limit (recorded "ok" by the writer) is INCOMPLETE, never OK; a run without limits (as an
+    older version recorded it, "ok") says NO LIMITS / "no limits set" and no OK anywhere."""
+    import rig
+
+    tmp, run = measured["tmp"], measured["run"]
+    nan_folder, free_folder = tmp / "nan-run", tmp / "no-limits-run"
+    for folder in (nan_folder, free_folder):
+        shutil.copytree(run["path"], folder)
+    meta = json.loads((nan_folder / "run.json").read_text())
+    meta["unit"]["serial"] = "Q1"
+    meta["result"]["lost_motion_arcmin"] = float("nan")
+    meta["limits"] = {"lost_motion_arcmin_max": 3.0, "backlash_arcmin_max": None,
+                      "stiffness_Nm_per_arcmin_min": None}
+    meta["outcome"] = "ok"
+    (nan_folder / "run.json").write_text(json.dumps(meta))  # NaN, as the file held it
+    res = _rig("certificate", str(nan_folder), "--pdf", str(tmp / "nan.pdf"), cwd=tmp)
+    assert res.returncode == 0, res.stderr
+    assert "(unit Q1): INCOMPLETE" in res.stdout, res.stdout
+    text = _pdf_text(tmp / "nan.pdf")
+    assert "INCOMPLETE" in text and "not a number" in text
+    assert "lost_motion_arcmin = nan is not a finite number" in text
+    assert not re.search(r"\bOK\b", text.replace("NOT OK", "")), text
+    assert rig.open(nan_folder).results()["verdict"][0] == "INCOMPLETE"
+
+    meta = json.loads((free_folder / "run.json").read_text())
+    meta["limits"] = {key: None for key in meta["limits"]}
+    meta["outcome"] = "ok"  # as the page recorded a run without limits before "no_limits"
+    (free_folder / "run.json").write_text(json.dumps(meta))
+    res = _rig("certificate", str(free_folder), "--pdf", str(tmp / "free.pdf"), cwd=tmp)
+    assert res.returncode == 0, res.stderr
+    assert "): NO LIMITS\n" in res.stdout, res.stdout
+    text = _pdf_text(tmp / "free.pdf")
+    assert _pages(tmp / "free.pdf") == 1
+    assert "NO LIMITS" in text and "no limits set" in text
+    assert not re.search(r"\bOK\b", text), text  # neither OK nor NOT OK
+    results = rig.open(free_folder).results()
+    assert (results["outcome"][0], results["verdict"][0]) == ("no_limits", "NO LIMITS")

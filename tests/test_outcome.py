@@ -8,6 +8,7 @@ is read back from run.json, campaign.json and ``--json``.
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import threading
@@ -79,6 +80,10 @@ def test_every_record_carries_limits_and_outcome(tmp_path: Path):
                    "--json", str(out), cwd=tmp_path)
         assert res.returncode == code, res.stderr[-2000:]
         assert ("outcome: OK" if code == 0 else "outcome: NOT OK") in res.stdout + res.stderr
+        assert "FAIL" not in res.stdout + res.stderr  # one word for it: NOT OK (issue 21)
+        if code == 1:
+            assert "│ NOT OK" in res.stderr, res.stderr  # the runs table's outcome column
+            assert "  NOT OK: lost motion" in res.stderr  # each run as it finishes
         docs[code] = json.loads(out.read_text())
     for code, outcome in ((0, "ok"), (1, "not_ok")):
         doc = docs[code]
@@ -176,3 +181,119 @@ def test_a_late_torque_channel_is_found_from_the_loop_alone():
         assert doc["channel_lag_s"] >= 0.02, doc["channel_lag_s"]
         outcome, why, _ = run_outcome({**doc, "status": "completed"}, limits)
         assert outcome == "incomplete" and "late" in why[0], why
+
+
+# ------------------------------------------------------------------ issue 21 items 3, 13, 14
+
+NAN, INF = float("nan"), float("inf")
+
+
+@pytest.mark.parametrize(("value", "limits", "expected"), [
+    (NAN, {"lost_motion_arcmin_max": 3.0}, "incomplete"),  # NaN > 3 is False: never inside
+    (INF, {"lost_motion_arcmin_max": 3.0}, "incomplete"),
+    (-INF, {"lost_motion_arcmin_max": 3.0}, "incomplete"),
+    (None, {"lost_motion_arcmin_max": 3.0}, "incomplete"),
+    ("2.0", {"lost_motion_arcmin_max": 3.0}, "incomplete"),  # a string is no measurement
+    (2.0, {"lost_motion_arcmin_max": 3.0}, "ok"),
+    (2.0, {}, "no_limits"),
+    (2.0, None, "no_limits"),
+    (2.0, {"lost_motion_arcmin_max": None, "backlash_arcmin_max": None}, "no_limits"),
+    (NAN, {}, "no_limits"),  # nothing to judge it against
+])
+def test_a_metric_that_is_not_a_finite_number_is_never_inside_a_limit(value, limits,
+                                                                       expected):
+    outcome, causes, _ = run_outcome({"status": "completed", "label": "p0",
+                                      "result": {"lost_motion_arcmin": value}}, limits)
+    assert outcome == expected
+    if expected == "incomplete":
+        assert len(causes) == 1 and causes[0].startswith("run p0: lost_motion_arcmin")
+    if value is not None and expected == "incomplete" and not isinstance(value, str):
+        assert "not a finite number" in causes[0], causes
+
+
+def test_a_nan_beside_a_failed_limit_is_still_not_ok():
+    run = {"status": "completed", "lost_motion_arcmin": 4.0, "backlash_arcmin": NAN}
+    outcome, causes, _ = run_outcome(run, {"lost_motion_arcmin_max": 3.0,
+                                           "backlash_arcmin_max": 2.0})
+    assert outcome == "not_ok" and len(causes) == 2
+
+
+def test_campaign_outcome_without_limits():
+    assert campaign_outcome(["no_limits", "no_limits"], "completed") == "no_limits"
+    assert campaign_outcome(["no_limits"], "aborted") == "incomplete"
+    assert campaign_outcome(["no_limits", "incomplete"], "completed") == "incomplete"
+
+
+def test_one_vocabulary_and_the_filter_words():
+    from rig.outcome import OUTCOME_WORDS, OUTCOMES, outcome_word, parse_outcome
+
+    assert OUTCOMES == ("ok", "not_ok", "incomplete", "no_limits")
+    assert [outcome_word(o) for o in OUTCOMES] == ["OK", "NOT OK", "INCOMPLETE", "NO LIMITS"]
+    assert "FAIL" not in OUTCOME_WORDS.values() and "PASS" not in OUTCOME_WORDS.values()
+    for text, code in (("NOT OK", "not_ok"), ("not ok", "not_ok"), ("Not_OK", "not_ok"),
+                       ("ok", "ok"), ("No Limits", "no_limits"), ("no_limits", "no_limits"),
+                       (" INCOMPLETE ", "incomplete")):
+        assert parse_outcome(text) == code, text
+    for bad in ("FAIL", "pass", "", None, 1):
+        with pytest.raises(ValueError, match="outcome must be one of ok, not_ok, incomplete, "
+                                             "no_limits"):
+            parse_outcome(bad)
+
+
+@pytest.mark.parametrize(("meta", "expected"), [
+    # written before "no_limits" existed: an "ok" with no limit set reads NO LIMITS
+    ({"status": "completed", "outcome": "ok", "limits": None,
+      "result": {"lost_motion_arcmin": 4.0}}, "no_limits"),
+    ({"status": "completed", "outcome": "ok",
+      "limits": {"lost_motion_arcmin_max": None, "backlash_arcmin_max": None,
+                 "stiffness_Nm_per_arcmin_min": None},
+      "result": {"lost_motion_arcmin": 4.0}}, "no_limits"),
+    # an "ok" stored beside a NaN metric and a limit: never OK
+    ({"status": "completed", "outcome": "ok", "limits": {"lost_motion_arcmin_max": 3.0},
+      "result": {"lost_motion_arcmin": NAN}}, "incomplete"),
+    ({"status": "completed", "outcome": "ok", "limits": {"lost_motion_arcmin_max": 3.0},
+      "result": {"lost_motion_arcmin": 2.0}}, "ok"),
+    ({"status": "completed", "outcome": "not_ok", "limits": {"lost_motion_arcmin_max": 3.0},
+      "result": {"lost_motion_arcmin": 4.0}}, "not_ok"),
+    # none recorded (an imported run): judged now
+    ({"status": "completed", "result": {"lost_motion_arcmin": 2.0}}, "no_limits"),
+    ({"result": {"lost_motion_arcmin": 2.0}, "limits": {"lost_motion_arcmin_max": 1.0}},
+     "not_ok"),
+    ({"status": "running"}, None),
+    ({"status": "completed", "outcome": "pass"}, "pass"),  # another lab's own word
+])
+def test_older_and_foreign_records_are_read_in_the_one_vocabulary(meta, expected):
+    from rig.outcome import recorded_outcome
+
+    assert recorded_outcome(meta) == expected
+
+
+def test_an_old_campaign_ok_without_limits_reads_no_limits():
+    from rig.outcome import recorded_campaign_outcome
+
+    assert recorded_campaign_outcome("ok", {"lost_motion_arcmin_max": None},
+                                     ["no_limits", "no_limits"], "completed") == "no_limits"
+    assert recorded_campaign_outcome("ok", {"lost_motion_arcmin_max": 3.0},
+                                     ["ok", "incomplete"], "completed") == "incomplete"
+    assert recorded_campaign_outcome("not_ok", {}, [], "completed") == "not_ok"
+    assert recorded_campaign_outcome(None, {}, ["no_limits"], "completed") == "no_limits"
+    assert recorded_campaign_outcome(None, {}, [], "running") is None
+
+
+def test_a_run_without_limits_is_no_limits_everywhere(tmp_path: Path):
+    """Issue 21 item 13: no limits set is neither OK nor NOT OK: ``rig measure`` says NO
+    LIMITS (exit 0: nothing failed), run.json records "no_limits", ``rig runs`` shows it."""
+    out = tmp_path / "run.json"
+    res = _rig("measure", "--simulated", "--store", str(tmp_path / "store"), "--rated-torque",
+               "10", "--steps", "2", "--pre-cycles", "0", "--json", str(out), cwd=tmp_path)
+    assert res.returncode == 0, (res.stdout[-1500:], res.stderr[-1500:])
+    assert "outcome: NO LIMITS (no limits set)" in res.stderr
+    assert not re.search(r"outcome: OK|FAIL", res.stdout + res.stderr)
+    doc = json.loads(out.read_text())
+    assert doc["outcome"] == "no_limits" and doc["failures"] == []
+    stored = json.loads((Path(doc["path"]) / "run.json").read_text())
+    assert stored["outcome"] == "no_limits"
+    assert all(v is None for v in stored["limits"].values())
+    res = _rig("runs", "--store", str(tmp_path / "store"), cwd=tmp_path)
+    row = next(line for line in res.stdout.splitlines() if doc["run_id"] in line)
+    assert "NO LIMITS" in row and f"{doc['lost_motion_arcmin']:.3f}" in row, row

@@ -3,7 +3,8 @@
 A row holds the run's conditions (label, input angle in deg, amplitude in % of rated,
 temperature in °C, repeat), every loop metric of ``rig analyse`` with its standard
 uncertainty (``<metric>`` and ``<metric>_u``), the reference nominal model's values
-(``model_<metric>``), the limits in force and the recorded outcome. Metrics are computed
+(``model_<metric>``), the limits in force, the recorded outcome and its displayed word
+(``verdict``: OK / NOT OK / INCOMPLETE / NO LIMITS, rig/outcome.py). Metrics are computed
 now from the samples (:func:`rig.analyse.analyse_run`, the ``rig analyse`` service), so a
 run read from any rig-run/1 folder gets the same columns.
 """
@@ -19,7 +20,7 @@ from analysis.loop import twist_arcmin
 from rig.analyse import METRIC_KEYS, RunAnalysis, analyse_run, resolve_profile
 from rig.errors import RigError
 from rig.json_files import finite_for_json
-from rig.outcome import LIMIT_KEYS, run_outcome
+from rig.outcome import LIMIT_KEYS, outcome_word, recorded_outcome, run_outcome
 from rig.runformat import Campaign, Run
 
 __all__ = [
@@ -99,19 +100,21 @@ def result_row(run: Run, analysis: RunAnalysis | None, *,
     row.update(limits)
     row["status"] = run.meta.get("status")
     outcome = run.meta.get("outcome")
-    if not isinstance(outcome, str) and analysis is not None and any(
-            v is not None for v in limits.values()):
+    if outcome is None and analysis is not None:  # none recorded: judged on today's analysis
         flat = {**d, "status": run.meta.get("status", "completed"), "label": row["label"],
                 "amplitude_pct": row["amplitude_pct"]}
         outcome = run_outcome(flat, limits)[0]
+    else:  # as recorded, read as every view reads it (rig/outcome.py)
+        outcome = recorded_outcome(run.meta, limits)
     row["outcome"] = outcome if isinstance(outcome, str) else None
+    row["verdict"] = None if row["outcome"] is None else outcome_word(row["outcome"])
     problems = [f"{k}: {v}" for k, v in (d.get("errors") or {}).items()]
     row["error"] = error or ("; ".join(problems) or None)
     row["path"] = None if run.path is None else str(run.path)
     return row
 
 
-TEXT_COLUMNS = ("run_id", "label", "profile", "status", "outcome", "error", "path")
+TEXT_COLUMNS = ("run_id", "label", "profile", "status", "outcome", "verdict", "error", "path")
 COUNT_COLUMNS = ("repeat", "n_samples", "n_cycles")
 
 

@@ -3,11 +3,11 @@
 What it shows comes from the record only (run.json, campaign.json, samples): the header
 (:mod:`rig.certificate.header`), the unit data, the sensors with their calibration references,
 the loop, the metrics with their uncertainties against the limits in force, the outcome
-(OK / NOT OK / INCOMPLETE, rig/outcome.py), for a campaign the lost motion against the input
-position with the nominal model and the production batch band, and the diagnosis verdict when
-one was made for the campaign (a rig-diagnosis/1 file in its folder, the page's diagnosis
-cache, or a result of ``rig reanalyse`` in the store). Drawn by the jinja2 template
-rig/templates/certificate.html; the PDF by WeasyPrint.
+(OK / NOT OK / INCOMPLETE / NO LIMITS, rig/outcome.py), for a campaign the lost motion
+against the input position with the nominal model and the production batch band, and the
+diagnosis verdict when one was made for the campaign (a rig-diagnosis/1 file in its folder,
+the page's diagnosis cache, or a result of ``rig reanalyse`` in the store). Drawn by the
+jinja2 template rig/templates/certificate.html; the PDF by WeasyPrint.
 """
 
 from __future__ import annotations
@@ -20,7 +20,15 @@ from typing import Any
 
 from rig.certificate.header import NOT_RECORDED, header_fields, template_env
 from rig.errors import RigError
-from rig.outcome import LIMIT_KEYS, campaign_outcome, not_applicable, run_outcome
+from rig.outcome import (
+    LIMIT_KEYS,
+    OUTCOME_MEANINGS,
+    OUTCOME_WORDS,
+    metric_check,
+    recorded_campaign_outcome,
+    recorded_outcome,
+    run_outcome,
+)
 from rig.runformat import CAMPAIGN_JSON, RUN_JSON, Campaign, Run, read_run, read_run_or_campaign
 from rig.store import Store
 from rig.store.ids import ID_PATTERN, StoreError, UnknownIdError
@@ -30,7 +38,9 @@ __all__ = ["CertificateError", "Subject", "certificate_context", "render_certifi
 
 log = logging.getLogger(__name__)
 
-OUTCOME_WORDS = {"ok": "OK", "not_ok": "NOT OK", "incomplete": "INCOMPLETE"}
+METRIC_VERDICTS = {"ok": "OK", "not_ok": "NOT OK", "not_applicable": "not applicable",
+                   "not_measured": "not measured", "not_finite": "not a number"}
+"""A metric against its limit (rig/outcome.py ``metric_check``), in the result column."""
 METRICS = (
     ("lost_motion_arcmin", "lost motion", "arcmin", ".3f"),
     ("backlash_arcmin", "backlash", "arcmin", ".3f"),
@@ -155,29 +165,29 @@ def _metric_rows(meta: dict[str, Any]) -> list[dict[str, Any]]:
         value = result.get(key)
         limit_key, side = LIMIT_OF_METRIC.get(key, (None, None))
         bound = limits.get(limit_key) if limit_key else None
-        if bound is None:
-            verdict = ""
-        elif not_applicable(meta, key) is not None:
-            verdict = "not applicable"
-        elif value is None:
-            verdict = "not measured"
-        else:
-            verdict = "NOT OK" if (value > bound if side == "above" else value < bound) else "OK"
+        check, why = ("", None) if bound is None else metric_check(meta, key, bound, side)
+        verdict = METRIC_VERDICTS.get(check, "")
         rows.append({
             "key": key, "label": label, "unit": unit, "value": _fmt(value, spec),
             "uncertainty": _fmt(unc.get(key), spec) if value is not None else None,
             "model": _fmt(model.get(key), spec), "limit": _limit_text(bound, side, unit),
             "verdict": verdict,
-            "why": not_applicable(meta, key) or (result.get("errors") or {}).get(key),
+            "why": (why if check in ("not_applicable", "not_finite") else None)
+            or (result.get("errors") or {}).get(key),
         })
     return rows
 
 
-def _run_outcome(meta: dict[str, Any]) -> tuple[str, list[str]]:
-    """(recorded outcome, causes) of a run.json (the outcome recomputed if not recorded)."""
-    outcome, causes, _ = run_outcome(meta, meta.get("limits"))
-    recorded = meta.get("outcome")
-    return (recorded if recorded in OUTCOME_WORDS else outcome), causes
+def _run_outcome(meta: dict[str, Any], limits: dict[str, Any] | None = None
+                 ) -> tuple[str, list[str]]:
+    """(outcome, causes) of a run.json as every view reads it (rig/outcome.py
+    ``recorded_outcome``: an "ok" only where the record's metrics and limits confirm it);
+    ``limits``: the campaign's, for a run.json without its own."""
+    run_limits = meta.get("limits") if isinstance(meta.get("limits"), dict) else limits
+    computed, causes, _ = run_outcome({**meta, "status": meta.get("status") or "completed"},
+                                      run_limits)
+    outcome = recorded_outcome(meta, limits)
+    return (outcome if outcome in OUTCOME_WORDS else computed), causes
 
 
 def _value_text(value: Any) -> str:
@@ -343,11 +353,13 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
         summary = cmeta.get("summary") or {}
         ctx["header"] = header_fields(first, cmeta)
         limits = cmeta.get("limits") or summary.get("limits") or first.get("limits") or {}
-        run_outcomes = [_run_outcome(r.meta) for r in runs]
-        outcome = cmeta.get("outcome") or summary.get("outcome")
-        if outcome not in OUTCOME_WORDS:
-            outcome = campaign_outcome([o for o, _ in run_outcomes],
-                                       str(cmeta.get("status") or "completed"))
+        run_outcomes = [_run_outcome(r.meta, limits) for r in runs]
+        outcome = recorded_campaign_outcome(
+            cmeta.get("outcome") or summary.get("outcome"), limits,
+            [o for o, _ in run_outcomes], str(cmeta.get("status") or "completed"))
+        if outcome not in OUTCOME_WORDS:  # another lab's word: judged from the runs
+            outcome = recorded_campaign_outcome(None, limits, [o for o, _ in run_outcomes],
+                                                str(cmeta.get("status") or "completed"))
         causes = list(summary.get("failures") or [c for _, cs in run_outcomes for c in cs])
         if cmeta.get("status") not in (None, "completed") and not summary.get("failures"):
             causes.append(f"campaign {cmeta.get('status')}: "
@@ -390,6 +402,7 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
     ctx["limits"] = [h for h in ctx["metric_heads"] if h["limit"]]
     ctx["outcome"] = outcome
     ctx["outcome_word"] = OUTCOME_WORDS[outcome]
+    ctx["outcome_meaning"] = OUTCOME_MEANINGS[outcome]
     ctx["causes"] = causes
     ctx["unit"] = [(k, _value_text(v)) for k, v in unit.items()]
     ctx["sensors"] = [(k, _value_text(v)) for k, v in (first.get("sensors") or {}).items()]

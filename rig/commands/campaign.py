@@ -1,9 +1,10 @@
 """``rig campaign run FILE``: a campaign (positions, amplitudes, temperatures, repeats) into a
 rig-campaign/1 folder of the store, with pass/fail against the file's limits.
 
-Exit codes: 0 every limit passed (outcome OK), 1 a limit failed (NOT OK, also when the
-campaign was then aborted), 2 an error or an incomplete campaign (bad file, device fault,
-an aborted campaign, a limited metric that could not be measured).
+Exit codes: 0 every limit passed (outcome OK, or NO LIMITS when none was set), 1 a limit
+failed (NOT OK, also when the campaign was then aborted), 2 an error or an incomplete
+campaign (bad file, device fault, an aborted campaign, a limited metric that could not be
+measured).
 """
 
 from __future__ import annotations
@@ -12,17 +13,26 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
-from rig.commands.measure import console, progress_bar, write_json
+from rig.commands.measure import (
+    console,
+    exit_code,
+    outcome_markup,
+    print_outcome,
+    progress_bar,
+    write_json,
+)
 from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
 
 
 def _summary_table(result: dict[str, Any]) -> Table:
     table = Table(title=f"Campaign {result['campaign']} ({result['status']})")
     for name in ("run", "input angle\ndeg", "lost motion\narcmin", "backlash\narcmin",
-                 "stiffness\nN·m/arcmin", "status"):
-        table.add_column(name, justify="left" if name in ("run", "status") else "right")
+                 "stiffness\nN·m/arcmin", "status", "outcome"):
+        table.add_column(name, justify="left" if name in ("run", "status", "outcome")
+                         else "right")
     for r in result["runs"]:
         u = r.get("uncertainty") or {}
 
@@ -35,7 +45,8 @@ def _summary_table(result: dict[str, Any]) -> Table:
         angle = r.get("input_angle_deg")
         table.add_row(r.get("label") or r["run_id"], "" if angle is None else f"{angle:g}",
                       f("lost_motion_arcmin"), f("backlash_arcmin"),
-                      f("stiffness_Nm_per_arcmin", 2), r["status"])
+                      f("stiffness_Nm_per_arcmin", 2), r["status"],
+                      outcome_markup(r.get("outcome")))
     return table
 
 
@@ -112,14 +123,11 @@ def register(app: typer.Typer) -> None:
             out.print(f"production batch of this design (seed 000 tolerances, 95 %): "
                       f"{band[0]:.3f} .. {band[1]:.3f} arcmin")
         out.print(f"campaign folder: {result['path']}")
-        words = {"ok": "OK", "not_ok": "NOT OK", "incomplete": "INCOMPLETE"}
         if result["status"] != "completed":
-            out.print(f"[red]campaign aborted: {result['reason']}[/red]")
-            out.print(f"outcome: {words[result['outcome']]}")
+            out.print(f"[red]campaign aborted: {escape(str(result['reason']))}[/red]")
+            print_outcome(out, result)
             raise typer.Exit(1 if result["outcome"] == "not_ok" else 2)
-        for cause in result["failures"]:
-            out.print(f"[red]FAIL[/red] {cause}")
         if not result["passed"] and not result["failures"]:
             raise RigError("campaign failed without a cause (a bug)")
-        out.print(f"outcome: {words[result['outcome']]}")
-        raise typer.Exit({"ok": 0, "not_ok": 1}.get(result["outcome"], 2))
+        print_outcome(out, result)
+        raise typer.Exit(exit_code(result["outcome"]))

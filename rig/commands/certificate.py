@@ -25,9 +25,9 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """The test certificate of a unit from a stored run or campaign: unit, serial,
         operator, date, rig, software, sensors and calibration, the loop, the metrics with
-        their uncertainties against the limits, OK / NOT OK / INCOMPLETE; for a campaign the
-        lost motion against position with the batch band and the diagnosis verdict if one was
-        made. --store is read only when RUN_OR_CAMPAIGN is not a folder."""
+        their uncertainties against the limits, OK / NOT OK / INCOMPLETE / NO LIMITS; for a
+        campaign the lost motion against position with the batch band and the diagnosis
+        verdict if one was made. --store is read only when RUN_OR_CAMPAIGN is not a folder."""
         from rig.certificate import CertificateError, resolve_subject, write_certificate
 
         if pdf is None and html is None:

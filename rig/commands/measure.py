@@ -1,8 +1,8 @@
 """``rig measure``: one hysteresis run on the real or the simulated rig, into the store.
 
-Exit codes (scripts rely on them): 0 every limit passed (outcome OK), 1 a limit failed
-(NOT OK), 2 an error or an incomplete run (bad input, a device fault, an aborted run, a
-limited metric that could not be measured).
+Exit codes (scripts rely on them): 0 every limit passed (outcome OK, or NO LIMITS when none
+was set), 1 a limit failed (NOT OK), 2 an error or an incomplete run (bad input, a device
+fault, an aborted run, a limited metric that could not be measured).
 """
 
 from __future__ import annotations
@@ -70,10 +70,44 @@ def _print_run(out: Console, data: dict[str, Any]) -> None:
 
     model = data.get("model") or {}
     m = model.get("lost_motion_arcmin")
-    out.print(f"  lost motion {f('lost_motion_arcmin')} arcmin"
+    verdict = f"{outcome_markup(data['outcome'])}: " if data.get("outcome") else ""
+    out.print(f"  {verdict}lost motion {f('lost_motion_arcmin')} arcmin"
               + (f" (model {m:.3f})" if m is not None else "")
               + f", backlash {f('backlash_arcmin')} arcmin, stiffness "
               f"{f('stiffness_Nm_per_arcmin', 2)} N·m/arcmin")
+
+
+OUTCOME_STYLE = {"ok": "green", "not_ok": "red", "incomplete": "yellow"}
+"""How the CLI colours an outcome's word (the words: rig/outcome.py)."""
+
+
+def outcome_markup(code: str | None) -> str:
+    """The outcome's word (rig/outcome.py, the one vocabulary) in its colour, rich markup."""
+    from rich.markup import escape
+
+    from rig.outcome import outcome_word
+
+    word = escape(outcome_word(code))
+    style = OUTCOME_STYLE.get(code or "")
+    return f"[{style}]{word}[/{style}]" if style else word
+
+
+def print_outcome(out: Console, result: dict[str, Any]) -> None:
+    """``outcome: WORD (what it means)`` and each cause on its own indented line."""
+    from rich.markup import escape
+
+    from rig.outcome import OUTCOME_MEANINGS
+
+    code = result.get("outcome")
+    meaning = OUTCOME_MEANINGS.get(code or "")
+    out.print(f"outcome: {outcome_markup(code)}" + (f" ({meaning})" if meaning else ""))
+    for cause in result.get("failures") or []:
+        out.print(f"  {escape(cause)}")
+
+
+def exit_code(code: str | None) -> int:
+    """0 OK or NO LIMITS (nothing failed), 1 NOT OK, 2 INCOMPLETE (no verdict)."""
+    return {"ok": 0, "no_limits": 0, "not_ok": 1}.get(code or "", 2)
 
 
 def write_json(path: Path, payload: dict[str, Any]) -> None:
@@ -229,12 +263,9 @@ def register(app: typer.Typer) -> None:
         out.print(f"run {result['run_id']} {result['status']} in {st.root}")
         if result["status"] != "completed":
             out.print(f"[red]aborted: {result['reason']}[/red]")
-            out.print("outcome: INCOMPLETE")
+            print_outcome(out, result)
             raise typer.Exit(2)
-        for cause in result["failures"]:
-            out.print(f"[red]FAIL[/red] {cause}")
         for note in result["not_applicable"]:
             out.print(f"n/a {note}")
-        words = {"ok": "OK", "not_ok": "NOT OK", "incomplete": "INCOMPLETE"}
-        out.print(f"outcome: {words[result['outcome']]}")
-        raise typer.Exit({"ok": 0, "not_ok": 1}.get(result["outcome"], 2))
+        print_outcome(out, result)
+        raise typer.Exit(exit_code(result["outcome"]))

@@ -1,25 +1,67 @@
-"""``rig runs``: list the runs of a measurement store with their status."""
+"""``rig runs``: list the runs of a measurement store with their status, verdict (OK / NOT OK /
+INCOMPLETE / NO LIMITS, rig/outcome.py) and lost motion."""
 
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
+from rig.commands.measure import outcome_markup
 from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
+
+if TYPE_CHECKING:
+    from rig.store.records import RunInfo
 
 STATUS_STYLE = {"running": "yellow", "completed": "green", "aborted": "red"}
 
 
-def _table(runs: list, root: str) -> Table:
+def lost_motion(info: RunInfo) -> tuple[Any, Any]:
+    """The run's recorded lost motion and its standard uncertainty (arcmin; None if none)."""
+    metrics = info.metrics or {}
+    return (metrics.get("lost_motion_arcmin"),
+            (metrics.get("uncertainty") or {}).get("lost_motion_arcmin"))
+
+
+def lost_motion_text(info: RunInfo) -> str:
+    """``4.123 ± 0.004`` (arcmin), the value alone without an uncertainty, "" if none."""
+    value, u = lost_motion(info)
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return ""
+    if not math.isfinite(value):
+        return f"{value} (not a number)" if math.isnan(value) else str(value)
+    text = f"{value:.3f}"
+    if isinstance(u, int | float) and not isinstance(u, bool) and math.isfinite(u):
+        text += f" ± {u:.3f}"
+    return text
+
+
+def run_json(info: RunInfo) -> dict[str, Any]:
+    """One run of ``rig runs --json``: the index row (:meth:`RunInfo.to_dict`) with its
+    ``verdict`` (the displayed word of ``outcome``) and ``lost_motion_arcmin`` /
+    ``lost_motion_arcmin_u`` (arcmin) beside; strict JSON (NaN, infinities as null)."""
+    from rig.json_files import finite_for_json
+    from rig.outcome import outcome_word
+
+    value, u = lost_motion(info)
+    verdict = None if info.outcome is None else outcome_word(info.outcome)
+    return finite_for_json({**info.to_dict(), "verdict": verdict,
+                            "lost_motion_arcmin": value, "lost_motion_arcmin_u": u})
+
+
+def _table(runs: list[RunInfo], root: str) -> Table:
     table = Table(title=f"Runs in {root} (newest first)")
     table.add_column("run", no_wrap=True)
     table.add_column("status")
+    table.add_column("outcome", no_wrap=True)
+    table.add_column("lost motion arcmin", justify="right", no_wrap=True)
     table.add_column("reason")
     table.add_column("unit")
     table.add_column("operator")
@@ -36,7 +78,9 @@ def _table(runs: list, root: str) -> Table:
         table.add_row(
             info.run_id,
             status,
-            info.reason or "",
+            outcome_markup(info.outcome),
+            lost_motion_text(info),
+            escape(info.reason or ""),
             info.unit_serial or "",
             info.operator or "",
             plan,
@@ -63,7 +107,8 @@ def register(app: typer.Typer) -> None:
         campaign: Annotated[str | None, typer.Option(help="Only runs of this campaign id.")] = None,
         limit: Annotated[int | None, typer.Option(min=1, help="At most this many runs.")] = None,
     ) -> None:
-        """List the stored runs with their status (newest first).
+        """List the stored runs with their status, outcome (OK / NOT OK / INCOMPLETE / NO
+        LIMITS) and lost motion (newest first).
 
         Opening the store marks runs left "running" by a process that has ended as aborted.
         The store is --store, else $RIG_STORE, else ./rig-store: a folder, or a database
@@ -80,8 +125,8 @@ def register(app: typer.Typer) -> None:
         infos = st.list_runs(campaign_id=campaign, status=status, limit=limit)
         if json_file is not None:
             doc = {"store": st.location, "recovered": st.recovered,
-                   "runs": [i.to_dict() for i in infos]}
-            text = json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
+                   "runs": [run_json(i) for i in infos]}
+            text = json.dumps(doc, indent=2, ensure_ascii=False, allow_nan=False) + "\n"
             if str(json_file) == "-":
                 sys.stdout.write(text)
                 return

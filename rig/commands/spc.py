@@ -32,6 +32,7 @@ def register(app: typer.Typer) -> None:
         charts with control limits, the Western Electric rules, Cp/Cpk against the campaign
         limits and the seed 000 batch band of the design (docs/deployment.md)."""
         from rich.console import Console
+        from rich.markup import escape
         from rich.table import Table
 
         from rig.errors import RigError
@@ -59,6 +60,10 @@ def register(app: typer.Typer) -> None:
         def f(value: float | None) -> str:
             return "" if value is None else f"{value:.4g}"
 
+        for e in doc["excluded"]:
+            out.print(f"left out of the charts: run {escape(e['run_id'])} (unit "
+                      f"{escape(str(e['unit_serial'] or 'not recorded'))}): "
+                      f"{escape(e['reason'])}")
         if not doc["designs"]:
             out.print(f"no completed runs in {st.location}"
                       + (f" of design {design}" if design else ""))

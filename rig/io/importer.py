@@ -115,6 +115,11 @@ def store_imported(run: Run, store_root: str | Path, *,
     meta = {k: v for k, v in run.meta.items() if k not in ("format", "run_id", "started_at")}
     meta.setdefault("label", run.run_id)
     result, extra = _result(run)
+    from rig.outcome import run_outcome  # the verdict, as a measured run records it
+
+    limits = meta.get("limits") if isinstance(meta.get("limits"), dict) else None
+    extra["outcome"] = run_outcome({**meta, "status": "completed", "result": result or {}},
+                                   limits)[0]
     recorder = st.begin_run(meta, list(run.columns), campaign_id=campaign_id)
     with recorder:
         arrays = [run.data[c] for c in run.columns]

@@ -8,6 +8,12 @@ lost motion at the worst position). Metrics are the newest re-analysis of a run 
 reanalyse`` after a model or software update) where one is stored, else those stored with
 the run (``result``).
 
+A run whose lost motion, backlash or stiffness is stored as something other than a finite
+number (NaN, an infinity) is left out of the charts and named under ``excluded`` (the run,
+its unit and why), with every other run of its unit test kept. Each unit test carries its
+``outcome`` and the displayed word ``verdict`` (OK / NOT OK / INCOMPLETE / NO LIMITS,
+rig/outcome.py): its campaign's, or its single run's.
+
 Per design (``unit.design``, else ``unit.model``; runs without one form the design
 "(none)"), for lost motion, backlash and stiffness: the individuals/moving-range chart and
 its rule signals (:mod:`analysis.spc`), Cp/Cpk/Pp/Ppk against the limits of the design's
@@ -18,14 +24,16 @@ newest campaign that has limits, and for lost motion the seed 000 batch band of 
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 from analysis.errors import AnalysisError
 from analysis.loop import PROFILES
 from analysis.spc import D2, D4, RULES, capability, imr_chart
+from rig.outcome import outcome_word, recorded_campaign_outcome
 from rig.store import Store
-from rig.store.records import RunInfo
+from rig.store.records import CampaignInfo, RunInfo
 
 SPC_FORMAT = "rig-spc/1"
 NO_DESIGN = "(none)"
@@ -47,11 +55,40 @@ class UnitTest:
     campaign_id: str | None
     run_ids: list[str] = field(default_factory=list)
     values: dict[str, float | None] = field(default_factory=dict)
+    outcome: str | None = None
+    """The verdict of the unit test (rig/outcome.py code; None: not known)."""
 
     def to_dict(self) -> dict[str, Any]:
         return {"test_id": self.test_id, "unit_serial": self.unit_serial,
                 "started_at": self.started_at, "campaign_id": self.campaign_id,
-                "run_ids": self.run_ids, **self.values}
+                "run_ids": self.run_ids, "outcome": self.outcome,
+                "verdict": None if self.outcome is None else outcome_word(self.outcome),
+                **self.values}
+
+
+def not_finite(info: RunInfo) -> list[str]:
+    """The charted metrics of a run stored as something other than a finite number, as
+    ``metric = value`` (empty: the run can be charted)."""
+    out = []
+    for metric in METRICS:
+        value = (info.metrics or {}).get(metric)
+        if isinstance(value, float) and not math.isfinite(value):
+            out.append(f"{metric} = {value}")
+    return out
+
+
+def excluded_runs(runs: list[RunInfo]) -> tuple[list[RunInfo], list[dict[str, Any]]]:
+    """(the runs that can be charted, the runs left out: run id, unit, campaign and why)."""
+    kept, left_out = [], []
+    for info in runs:
+        bad = not_finite(info)
+        if not bad:
+            kept.append(info)
+            continue
+        left_out.append({"run_id": info.run_id, "unit_serial": info.unit_serial,
+                         "campaign_id": info.campaign_id, "started_at": info.started_at,
+                         "reason": f"{', '.join(bad)}: not a finite number"})
+    return kept, left_out
 
 
 def unit_tests(runs: list[RunInfo]) -> list[UnitTest]:
@@ -75,6 +112,25 @@ def unit_tests(runs: list[RunInfo]) -> list[UnitTest]:
         for metric in METRICS:
             test.values.setdefault(metric, None)
     return sorted(tests.values(), key=lambda t: t.started_at)
+
+
+def _test_outcomes(tests: list[UnitTest], runs: list[RunInfo],
+                   campaigns: dict[str, CampaignInfo], members: dict[str, list[RunInfo]]
+                   ) -> None:
+    """Each unit test's verdict: its campaign's as recorded (read as every view reads it:
+    rig/outcome.py), judged from all its runs (``members``, aborted ones too); else its
+    single run's."""
+    by_run = {r.run_id: r for r in runs}
+    for test in tests:
+        info = campaigns.get(test.campaign_id or "")
+        if info is None:
+            test.outcome = by_run[test.run_ids[0]].outcome
+            continue
+        summary = info.summary or {}
+        test.outcome = recorded_campaign_outcome(
+            info.meta.get("outcome") or summary.get("outcome"),
+            info.meta.get("limits") or summary.get("limits"),
+            [r.outcome for r in members.get(info.campaign_id, [])], info.status)
 
 
 def _design_context(store: Store, runs: list[RunInfo]) -> dict[str, Any]:
@@ -133,7 +189,8 @@ def metric_view(tests: list[UnitTest], metric: str, limits: dict[str, Any]) -> d
     points = [t for t in tests if t.values.get(metric) is not None]
     out: dict[str, Any] = {
         "points": [{"test_id": t.test_id, "unit_serial": t.unit_serial,
-                    "started_at": t.started_at, "value": t.values[metric]} for t in points],
+                    "started_at": t.started_at, "value": t.values[metric],
+                    "verdict": t.to_dict()["verdict"]} for t in points],
         "usl": limits.get(upper_key) if upper_key else None,
         "lsl": limits.get(lower_key) if lower_key else None,
         "chart": None, "capability": None, "error": None,
@@ -148,6 +205,7 @@ def metric_view(tests: list[UnitTest], metric: str, limits: dict[str, Any]) -> d
     for v in out["chart"]["violations"]:
         v["test_id"] = points[v["index"]].test_id
         v["unit_serial"] = points[v["index"]].unit_serial
+        v["verdict"] = points[v["index"]].to_dict()["verdict"]
     return out
 
 
@@ -171,21 +229,32 @@ def newest_metrics(store: Store, runs: list[RunInfo]) -> list[RunInfo]:
 def spc_report(store: Store, *, design: str | None = None, since: str | None = None
                ) -> dict[str, Any]:
     """The ``rig spc --json`` document (module doc)."""
-    measured = store.list_runs(status="completed", design=design, since=since)
+    every = store.list_runs(design=design, since=since)
+    measured = [r for r in every if r.status == "completed"]
+    campaigns = {c.campaign_id: c for c in store.list_campaigns()}
+    members: dict[str, list[RunInfo]] = {}
+    for info in every:
+        if info.campaign_id:
+            members.setdefault(info.campaign_id, []).append(info)
     runs = newest_metrics(store, measured)
     n_reanalysed = sum(a.metrics != b.metrics for a, b in zip(measured, runs, strict=True))
     groups: dict[str, list[RunInfo]] = {}
     for info in runs[::-1]:  # oldest first
         groups.setdefault(info.design or NO_DESIGN, []).append(info)
     designs = []
-    for name, group in sorted(groups.items()):
+    excluded_all = []
+    for name, all_runs in sorted(groups.items()):
+        group, excluded = excluded_runs(all_runs)
+        excluded_all += [{"design": name, **e} for e in excluded]
         tests = unit_tests(group)
+        _test_outcomes(tests, group, campaigns, members)
         context = _design_context(store, group)
         metrics = {m: metric_view(tests, m, context["limits"]) for m in METRICS}
         batch = _batch(context)
         metrics["lost_motion_arcmin"]["batch"] = batch
         designs.append({
             "design": name, "n_runs": len(group), "n_tests": len(tests),
+            "excluded": excluded,
             "limits": context["limits"], "limits_from_campaign": context["limits_from_campaign"],
             "tests": [t.to_dict() for t in tests], "metrics": metrics,
         })
@@ -199,4 +268,5 @@ def spc_report(store: Store, *, design: str | None = None, since: str | None = N
         "point": "one per unit test (a campaign, or a run outside campaigns): the worst run "
                  "(max lost motion and backlash, min stiffness)",
         "designs": designs,
+        "excluded": excluded_all,
     }

@@ -545,9 +545,22 @@ def run_info(row: Mapping[str, Any], root: Path) -> RunInfo:
         metrics=_from_json(row["metrics"]) if row["metrics"] is not None else None,
         writer_pid=row["writer_pid"],
         writer_host=row["writer_host"],
-        outcome=row.get("outcome"),
+        outcome=_indexed_outcome(row),
         design=row.get("design"),
     )
+
+
+def _indexed_outcome(row: Mapping[str, Any]) -> str | None:
+    """The run's outcome as every view shows it (rig/outcome.py ``recorded_outcome``) when
+    the row keeps the run's record (``meta``); else the indexed word as it is."""
+    from rig.outcome import recorded_outcome
+
+    meta = _from_json(row["meta"]) if row.get("meta") is not None else None
+    if not isinstance(meta, dict):
+        return row.get("outcome")
+    metrics = _from_json(row["metrics"]) if row.get("metrics") is not None else None
+    return recorded_outcome({**meta, "status": row["status"], "outcome": row.get("outcome"),
+                             "result": metrics if metrics is not None else meta.get("result")})
 
 
 def campaign_info(row: Mapping[str, Any], root: Path) -> CampaignInfo:

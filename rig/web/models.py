@@ -330,6 +330,11 @@ class RunSummary(BaseModel):
     n_samples: int | None
     calibration_warnings: list[str]
     metrics: dict[str, Any] | None
+    outcome: str | None = None
+    """The run's verdict: "ok", "not_ok", "incomplete", "no_limits" (rig/outcome.py; None
+    while running or when none is recorded)."""
+    verdict: str | None = None
+    """The displayed word of ``outcome``: OK, NOT OK, INCOMPLETE, NO LIMITS."""
 
 
 class RunDetail(BaseModel):
@@ -354,8 +359,11 @@ class LoopData(BaseModel):
     band_Nm: float | None
     metrics: dict[str, Any]
     analysis_error: str | None
-    outcome: Literal["ok", "not_ok", "incomplete"] | None = None
-    """The run's recorded verdict against its ``limits`` (None: recorded before outcomes)."""
+    outcome: str | None = None
+    """The run's verdict against its ``limits``: "ok", "not_ok", "incomplete", "no_limits"
+    (rig/outcome.py; None while running)."""
+    verdict: str | None = None
+    """The displayed word of ``outcome``: OK, NOT OK, INCOMPLETE, NO LIMITS."""
     limits: dict[str, Any] | None = None
     status: str | None = None
 
@@ -370,6 +378,10 @@ class CampaignSummary(BaseModel):
     finished_at: str | None
     meta: dict[str, Any]
     summary: dict[str, Any] | None
+    outcome: str | None = None
+    """The campaign's verdict (rig/outcome.py codes, as for a run)."""
+    verdict: str | None = None
+    """The displayed word of ``outcome``: OK, NOT OK, INCOMPLETE, NO LIMITS."""
     runs: list[RunSummary]
 
 
@@ -384,3 +396,12 @@ class ErrorBody(BaseModel):
     """An error: ``detail`` says what was wrong and what to do."""
 
     detail: str
+
+
+class OutcomeWord(BaseModel):
+    """How the page shows one outcome code (rig/outcome.py)."""
+
+    word: str
+    """OK, NOT OK, INCOMPLETE or NO LIMITS."""
+    meaning: str
+    """What it means, in a few words."""

@@ -101,7 +101,8 @@ def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
         stored = runs[0]["metrics"]["lost_motion_arcmin"]
         assert shown == pytest.approx(stored, abs=0.0005)  # shown with 3 decimals
         assert 0.5 < stored < 10.0  # a seed 000 pair: a few arcmin
-        assert page.locator("#m-verdict").inner_text() == "OK"  # no limits: nothing failed
+        # no limits set: neither OK nor NOT OK (issue 21 item 13)
+        assert page.locator("#m-verdict").inner_text() == "NO LIMITS"
         drawn = page.evaluate("window.rigStats")
         assert drawn["batches"] > 10 and len(drawn["latency_s"]) > 10
 

@@ -55,8 +55,28 @@ def latch_drive_fault_from_outside(url: str) -> None:
         client.close()
 
 
+def seed_a_failed_campaign(root: Path) -> str:
+    """A NOT OK campaign in the store before the page starts (closed-form runs recorded with
+    their limits and outcomes as a measured campaign records them): History must call it
+    NOT OK, as the certificate and the CLI do."""
+    from rig.synthetic_runs import write_campaign
+
+    st = Store(root)
+    try:
+        return write_campaign(st, "E2E-NOK", play_arcmin=2.5, positions_deg=(0.0,),
+                              limits={"lost_motion_arcmin_max": 2.0}, n_quarter=100)
+    finally:
+        st.close()
+
+
+def history_row(page, table: str, ident: str):
+    return page.locator(f"#{table} tbody tr", has=page.locator(
+        f"a[data-{table[:-1]}='{ident}']"))
+
+
 def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    failed_campaign = seed_a_failed_campaign(tmp_path / "store")
     with rig_serve(tmp_path / "store") as (url, link), sync_playwright() as pw:
         browser = launch_browser(pw)
         page = browser.new_page(viewport={"width": 1440, "height": 900})
@@ -66,7 +86,8 @@ def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
         expect(page.locator("#state")).to_have_text("idle", timeout=90_000)
         page.fill("#setup input[name=operator]", "A. Operator")
 
-        # one completed run for the history, with a limit it fails
+        # one completed run for the history, with a limit it fails (a seed 000 pair: 4')
+        page.fill("#setup input[name=lost_motion_arcmin_max]", "1")
         page.click("#lock")
         expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
         page.click("#start")
@@ -106,7 +127,8 @@ def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
         expect(page.locator("#state")).to_have_text("idle", timeout=10_000)
 
         # 3. history: the numbers beside a stored loop are that run's, after the poll too
-        # (the second run at 180 deg: the runout gives it another lost motion)
+        # (the second run at 180 deg: the runout gives it another lost motion; no limit)
+        page.fill("#setup input[name=lost_motion_arcmin_max]", "")
         page.fill("#lock-angle", "180")
         page.click("#lock")
         expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
@@ -124,7 +146,30 @@ def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
         shown = float(page.locator("#m-lost").inner_text())
         assert shown == pytest.approx(first["metrics"]["lost_motion_arcmin"], abs=0.0005)
         assert shown != pytest.approx(latest["metrics"]["lost_motion_arcmin"], abs=0.0005)
-        expect(page.locator("#m-verdict")).to_have_text("OK")
+        expect(page.locator("#m-verdict")).to_have_text("NOT OK")  # over its 1' limit
+
+        # 4. issue 21 item 14: every history row says its verdict in the one vocabulary, with
+        # its lost motion; a failed campaign is NOT OK (never FAIL), at 1440 and at 390 px
+        page.click("#refresh")
+        runs = {r["run_id"]: r for r in get_json(url + "api/runs")}
+        for run_id, word in ((first["run_id"], "NOT OK"), (latest["run_id"], "NO LIMITS")):
+            row = history_row(page, "runs", run_id)
+            expect(row.locator("td.verdict")).to_have_text(word)
+            lm = runs[run_id]["metrics"]["lost_motion_arcmin"]
+            u = runs[run_id]["metrics"]["uncertainty"]["lost_motion_arcmin"]
+            expect(row.locator("td.lost-motion")).to_have_text(f"{lm:.3f} ± {u:.3f}")
+        camp = history_row(page, "campaigns", failed_campaign)
+        expect(camp.locator("td.verdict")).to_contain_text("NOT OK")
+        expect(camp.locator("td.verdict")).to_contain_text("is above the limit 2")
+        for width, height in ((1440, 900), (390, 844)):
+            page.set_viewport_size({"width": width, "height": height})
+            history = page.locator("#history-panel")
+            history.scroll_into_view_if_needed()
+            expect(history_row(page, "runs", first["run_id"]).locator("td.verdict")
+                   ).to_be_visible()
+            assert "FAIL" not in history.inner_text() and "PASS" not in history.inner_text()
+            assert page.locator("#runs td.verdict").count() == len(runs)
+        page.set_viewport_size({"width": 1440, "height": 900})
         page.screenshot(path=str(ARTIFACTS / "operator-history.png"))
         assert not errors, errors
         browser.close()

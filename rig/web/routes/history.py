@@ -19,11 +19,27 @@ from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 
 from rig.engine.record import json_safe
 from rig.errors import RigError
+from rig.outcome import (
+    OUTCOME_MEANINGS,
+    OUTCOME_WORDS,
+    OUTCOMES,
+    outcome_word,
+    recorded_campaign_outcome,
+    recorded_outcome,
+)
 from rig.runformat import RUN_JSON, SAMPLES_CSV, sample_columns, samples_csv_bytes
 from rig.store import Store, UnknownIdError
 from rig.store.records import RunInfo
 from rig.web.live import decimate
-from rig.web.models import ID_PATTERN, CampaignSummary, ErrorBody, LoopData, RunDetail, RunSummary
+from rig.web.models import (
+    ID_PATTERN,
+    CampaignSummary,
+    ErrorBody,
+    LoopData,
+    OutcomeWord,
+    RunDetail,
+    RunSummary,
+)
 
 router = APIRouter(prefix="/api", tags=["history"])
 
@@ -44,8 +60,17 @@ def _store(request: Request) -> Store:
 
 def summary_of(info: RunInfo) -> dict[str, Any]:
     d = info.to_dict()
+    d["verdict"] = None if info.outcome is None else outcome_word(info.outcome)
     keys = RunSummary.model_fields
     return json_safe({k: d.get(k) for k in keys})
+
+
+@router.get("/outcomes", response_model=dict[str, OutcomeWord],
+            summary="The verdict vocabulary: outcome code -> displayed word and meaning")
+def outcomes() -> dict[str, dict[str, str]]:
+    """The one mapping the page shows verdicts with (rig/outcome.py)."""
+    return {code: {"word": OUTCOME_WORDS[code], "meaning": OUTCOME_MEANINGS[code]}
+            for code in OUTCOMES}
 
 
 def _run_info(store: Store, run_id: str) -> RunInfo:
@@ -105,6 +130,7 @@ def run_loop(request: Request, run_id: RunId,
     except Exception as exc:  # an aborted or short run still has a loop to draw
         model_twist = None
         error = f"{type(exc).__name__}: {exc}"
+    outcome = recorded_outcome(run.meta)
     n = int(run.n_samples)
     keep = decimate(list(range(n)), max_points) if n else []
     centre = loop_centre_arcmin(twist) if n else 0.0
@@ -115,7 +141,8 @@ def run_loop(request: Request, run_id: RunId,
         "torque_Nm": [float(torque[i]) for i in keep],
         "twist_arcmin": [float(twist[i]) - centre for i in keep],
         "model_twist_arcmin": model, "band_Nm": band, "metrics": metrics,
-        "analysis_error": error, "outcome": run.meta.get("outcome"),
+        "analysis_error": error, "outcome": outcome,
+        "verdict": None if outcome is None else outcome_word(outcome),
         "limits": run.meta.get("limits"), "status": run.meta.get("status"),
     })
 
@@ -198,6 +225,12 @@ def _campaign(store: Store, campaign_id: str) -> dict[str, Any]:
         raise HTTPException(404, str(exc)) from exc
     runs = store.list_runs(campaign_id=campaign_id)
     d = info.to_dict()
+    summary = info.summary or {}
+    d["outcome"] = recorded_campaign_outcome(
+        info.meta.get("outcome") or summary.get("outcome"),
+        info.meta.get("limits") or summary.get("limits"), [r.outcome for r in runs],
+        info.status)
+    d["verdict"] = None if d["outcome"] is None else outcome_word(d["outcome"])
     return json_safe({k: d.get(k) for k in CampaignSummary.model_fields if k != "runs"}
                      | {"runs": [summary_of(r) for r in runs]})
 

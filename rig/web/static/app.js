@@ -425,16 +425,23 @@ function renderCampaignNow(cur, busy) {
   }
 }
 
-const OUTCOME_WORDS = { ok: "OK", not_ok: "NOT OK", incomplete: "INCOMPLETE" };
+// The verdict's words come from the server (GET /api/outcomes, rig/outcome.py): one
+// vocabulary for the page, the certificate, the CLI, SPC and the Python API.
+let OUTCOME_WORDS = {};
+const OUTCOME_CLASS = { ok: "pass", not_ok: "fail", incomplete: "incomplete", no_limits: "no-limits" };
+async function loadOutcomeWords() {
+  try { OUTCOME_WORDS = await api("GET", "/api/outcomes"); } catch (e) { notice("verdict words: " + e.message, true); }
+}
 function outcomeHtml(outcome) {
   if (!outcome) return '<span class="muted">–</span>';
-  const cls = outcome === "ok" ? "pass" : outcome === "not_ok" ? "fail" : "incomplete";
-  return `<span class="${cls}">${OUTCOME_WORDS[outcome] || esc(outcome)}</span>`;
+  const known = OUTCOME_WORDS[outcome];
+  const title = known ? ` title="${esc(known.meaning)}"` : "";
+  return `<span class="${OUTCOME_CLASS[outcome] || "incomplete"}"${title}>${esc(known ? known.word : outcome)}</span>`;
 }
 
 function renderResult(r) {
   const el = $("result");
-  const verdict = outcomeHtml(r.outcome || (r.passed ? "ok" : "not_ok"));
+  const verdict = outcomeHtml(r.outcome);
   $("m-verdict").innerHTML = verdict;
   let html = `${r.kind} ${r.status}: ${verdict}`;
   if (r.failures && r.failures.length) html += "<br>" + r.failures.map(esc).join("<br>");
@@ -767,11 +774,11 @@ async function refreshHistory() {
     tb.innerHTML = "";
     for (const r of runs) {
       const tr = document.createElement("tr");
-      const lm = r.metrics ? fmt(r.metrics.lost_motion_arcmin) : "–";
       const id = encodeURIComponent(r.run_id);
       tr.innerHTML = `<td><a href="#" data-run="${esc(r.run_id)}">${esc(r.run_id)}</a></td>` +
-        `<td>${esc(r.status)}${r.reason ? ": " + esc(r.reason) : ""}</td><td>${esc(r.unit_serial || "")}</td>` +
-        `<td>${esc(r.started_at)}</td><td>${lm}</td>` +
+        `<td>${esc(r.status)}${r.reason ? ": " + esc(r.reason) : ""}</td>` +
+        `<td class="verdict">${outcomeHtml(r.outcome)}</td><td>${esc(r.unit_serial || "")}</td>` +
+        `<td>${esc(r.started_at)}</td><td class="lost-motion">${lostMotionText(r.metrics)}</td>` +
         `<td><a href="/api/runs/${id}/run.zip">zip</a> · <a href="/api/runs/${id}/samples.csv">csv</a> · ` +
         `<a href="/api/runs/${id}/loop.png">png</a> · <a href="/api/runs/${id}/certificate.pdf">Certificate</a></td>`;
       tb.appendChild(tr);
@@ -781,12 +788,12 @@ async function refreshHistory() {
     for (const c of camps) {
       const s = c.summary || {};
       const id = encodeURIComponent(c.campaign_id);
-      const verdict = s.passed === undefined ? "" : (s.passed ? '<span class="pass">PASS</span>'
-        : '<span class="fail">FAIL</span> ' + esc((s.failures || []).slice(0, 3).join("; ")));
+      const causes = c.outcome === "not_ok" || c.outcome === "incomplete" ? (s.failures || []).slice(0, 3) : [];
+      const verdict = outcomeHtml(c.outcome) + (causes.length ? " " + esc(causes.join("; ")) : "");
       const byPos = (s.lost_motion_by_position || [])
         .map((x) => `${fmt(x.input_angle_deg, 0)}°: ${fmt(x.lost_motion_arcmin)}`).join(", ");
       const tr = document.createElement("tr");
-      tr.innerHTML = `<td><a href="#" data-campaign="${esc(c.campaign_id)}">${esc(c.campaign_id)}</a></td><td>${esc(c.status)}</td><td>${verdict}</td>` +
+      tr.innerHTML = `<td><a href="#" data-campaign="${esc(c.campaign_id)}">${esc(c.campaign_id)}</a></td><td>${esc(c.status)}</td><td class="verdict">${verdict}</td>` +
         `<td>${byPos}</td><td><a href="/api/campaigns/${id}/diagnosis.html" target="_blank">diagnosis</a>` +
         ` · <a href="/api/campaigns/${id}/diagnosis.html" download="${esc(c.campaign_id)}-diagnosis.html">html</a>` +
         ` · <a href="/api/campaigns/${id}/diagnosis.json" download>json</a>` +
@@ -794,6 +801,15 @@ async function refreshHistory() {
       cb.appendChild(tr);
     }
   } catch (e) { notice("history: " + e.message, true); }
+}
+
+// A run's lost motion (arcmin) ± its uncertainty, as History lists it
+function lostMotionText(metrics) {
+  const m = metrics || {};
+  const v = m.lost_motion_arcmin;
+  if (v === null || v === undefined) return "–";
+  const u = (m.uncertainty || {}).lost_motion_arcmin;
+  return fmt(v) + (u !== null && u !== undefined && isFinite(u) ? " ± " + fmt(u) : "");
 }
 
 async function showStoredRun(runId) {
@@ -894,6 +910,7 @@ async function init() {
     }
     if (units.length) fillUnit(units[0].unit);
   } catch (e) { notice("units: " + e.message, true); }
+  await loadOutcomeWords();
   restoreSetup();
   validateForm();
   connectLive();

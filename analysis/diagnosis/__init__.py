@@ -398,6 +398,11 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             if out["friction_Nm"] > 0.15 * rated:
                 ok = False
                 notes.append("friction above 15 % of rated torque")
+            if out["friction_Nm"] <= FRICTION_ALLOWANCE * rated:
+                ok = False
+                notes.append(f"friction {out['friction_Nm']:.3g} N*m within the ordinary "
+                             f"friction of every unit and rig ({FRICTION_ALLOWANCE:.0%} of "
+                             "rated): part of the null model, not a finding")
         elif e == "torque_sensor_offset":
             out["offset_Nm"] = f.nl.get("torque_offset_Nm", 0.0)
             nearest = f.nl.get("torque_offset_nearest_zero_Nm", out["offset_Nm"])
@@ -509,8 +514,9 @@ def nuisance_friction(stack: Stack) -> float:
 def _nuisance_friction(stack: Stack) -> tuple[float, float]:
     """(objective, friction N*m) of the null with the best ordinary friction."""
     top = FRICTION_ALLOWANCE * stack.rated_Nm
+    grid = np.concatenate([[0.0], np.geomspace(top / 100.0, top, 7)])
     trials = [(fit(stack, ("backlash",), nl={"friction_Nm": float(v)}).objective, float(v))
-              for v in np.linspace(0.0, top, 6)]
+              for v in grid]
     return min(trials)
 
 

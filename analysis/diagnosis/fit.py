@@ -379,7 +379,8 @@ def _nl_key(effect: str) -> str:
 
 def _nl_grid(stack: Stack, effect: str) -> np.ndarray:
     if effect == ORDINARY_FRICTION:
-        return np.linspace(0.0, stack.nuisance_friction_max_Nm, 6)
+        top = stack.nuisance_friction_max_Nm
+        return np.concatenate([[0.0], np.geomspace(top / 100.0, top, 7)])
     return _grid(stack, effect)
 
 

@@ -3,7 +3,8 @@
 The lifespan opens the rig (``controller.start()``: on a thread, the page answers meanwhile)
 and starts the live pump; leaving it stops any measurement (safe state) and closes the rig.
 The page itself is plain HTML/CSS/JS from the package's static files (no build step, no
-CDN: it works offline), uPlot vendored under ``static/vendor/uplot``.
+CDN: it works offline), uPlot vendored under ``static/vendor/uplot``; no inline script, so a
+Content-Security-Policy forbids any (rig/web/headers.py).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from rig import __version__
 from rig.store import Store
 from rig.web.controller import RigController
 from rig.web.guard import GuardMiddleware
+from rig.web.headers import SecurityHeadersMiddleware
 from rig.web.live import LiveHub
 from rig.web.settings import WebSettings
 from rig.web.workers import shutdown_workers, warm_up
@@ -75,6 +77,7 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
 
     app.include_router(routes_spc.router)
     app.add_middleware(GuardMiddleware, loopback_only=settings.check_host)
+    app.add_middleware(SecurityHeadersMiddleware)  # outermost: on every answer (CSP)
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
 
     @app.get("/", include_in_schema=False)

@@ -436,7 +436,7 @@ function renderResult(r) {
   const el = $("result");
   const verdict = outcomeHtml(r.outcome || (r.passed ? "ok" : "not_ok"));
   $("m-verdict").innerHTML = verdict;
-  let html = `${r.kind} ${r.status}: ${verdict}`;
+  let html = `${esc(r.kind)} ${esc(r.status)}: ${verdict}`;
   if (r.failures && r.failures.length) html += "<br>" + r.failures.map(esc).join("<br>");
   if (r.lost_motion_by_position && r.lost_motion_by_position.length) {
     html += "<br>lost motion against position: " + r.lost_motion_by_position
@@ -454,10 +454,10 @@ function renderResult(r) {
   if (last && last.status === "completed") showMetrics(last, null);
 }
 
+// Text as HTML, safe in element content and in quoted attribute values alike: & < > " '
+const ESCAPES = { "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" };
 function esc(text) {
-  const d = document.createElement("div");
-  d.textContent = String(text);
-  return d.innerHTML;
+  return String(text === null || text === undefined ? "" : text).replace(/[&<>"']/g, (c) => ESCAPES[c]);
 }
 
 let statusBusy = false;

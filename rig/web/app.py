@@ -15,10 +15,13 @@ from collections.abc import AsyncIterator
 from importlib import resources
 
 from fastapi import FastAPI, Request
-from fastapi.responses import FileResponse
+from fastapi.exception_handlers import http_exception_handler
+from fastapi.responses import FileResponse, Response
 from fastapi.staticfiles import StaticFiles
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from rig import __version__
+from rig.redact import redact_text
 from rig.store import Store
 from rig.web.controller import RigController
 from rig.web.guard import GuardMiddleware
@@ -79,6 +82,14 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
     app.add_middleware(GuardMiddleware, loopback_only=settings.check_host)
     app.add_middleware(SecurityHeadersMiddleware)  # outermost: on every answer (CSP)
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
+
+    @app.exception_handler(StarletteHTTPException)
+    async def redacted_error(request: Request, exc: StarletteHTTPException) -> Response:
+        """Every error message without a password or token (a store error names the store
+        by its connection string; rig/redact.py)."""
+        if isinstance(exc.detail, str):
+            exc.detail = redact_text(exc.detail)
+        return await http_exception_handler(request, exc)
 
     @app.get("/", include_in_schema=False)
     def index(request: Request) -> FileResponse:

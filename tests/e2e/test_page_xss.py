@@ -11,10 +11,13 @@ from __future__ import annotations
 from pathlib import Path
 from urllib.parse import quote
 
+import pytest
 from playwright.sync_api import expect, sync_playwright
 
 from tests.e2e.test_control_page import TOKEN, launch_browser, rig_serve
 from tests.test_html_escaping import hostile, write_hostile_store
+
+pytestmark = pytest.mark.timeout(360)  # a loaded machine: store, server and SPC take a while
 
 INJECT = """() => new Promise((done) => {
   document.addEventListener("securitypolicyviolation",
@@ -53,7 +56,7 @@ def test_hostile_design_on_spc_does_not_run(tmp_path: Path):
             "&quot;&gt;&lt;img src=x onerror=alert(1)&gt;&#39;"
         assert page.locator("#runs img, #campaigns img").count() == 0
 
-        page.click("#spc-link")
+        page.click("#spc-link", timeout=90_000)
         page.wait_for_url("**/spc", timeout=120_000)
         expect(page.locator("h2").first).to_contain_text(hostile("design"), timeout=120_000)
         assert page.title() == "Production quality"

@@ -102,7 +102,8 @@ def imr_chart(values: np.ndarray | list[float]) -> IMRChart:
                      mr_ucl=D4 * mr_bar)
     chart.violations.extend(run_rules(x, centre, sigma))
     chart.violations.extend(
-        Violation("WE1", "MR", i + 1, (i, i + 1)) for i in np.flatnonzero(mr > D4 * mr_bar))
+        Violation("WE1", "MR", int(i) + 1, (int(i), int(i) + 1))
+        for i in np.flatnonzero(mr > D4 * mr_bar))
     return chart
 
 

@@ -16,6 +16,7 @@ import typer
 from analysis.errors import AnalysisError
 from drivers.errors import DeviceError
 from rig.errors import RigError
+from rig.redact import redact_argv, redact_environment, redact_text
 
 app = typer.Typer(
     name="rig",
@@ -72,12 +73,12 @@ def main() -> None:
     try:
         app()
     except (RigError, DeviceError, AnalysisError) as exc:
-        print(f"rig: error: {exc}", file=sys.stderr)
+        print(f"rig: error: {redact_text(str(exc))}", file=sys.stderr)
         sys.exit(2)
     except Exception as exc:  # a bug: one line, exit 2 (never 1, "a limit failed"), a log
         log_file = _write_crash_log()
-        print(f"rig: internal error: {type(exc).__name__}: {exc} (a bug; the traceback is "
-              f"in {log_file})", file=sys.stderr)
+        print(f"rig: internal error: {type(exc).__name__}: {redact_text(str(exc))} (a bug; "
+              f"the traceback is in {log_file})", file=sys.stderr)
         sys.exit(2)
 
 
@@ -89,12 +90,17 @@ def _terminate_like_ctrl_c(signum: int, frame: object) -> None:
 
 def _write_crash_log() -> Path:
     """The current exception's traceback in ``$RIG_LOG_DIR`` (default
-    ``~/.cache/backlash-rig/logs``, else the temporary folder); its path."""
-    from rig.logs import log_dir
+    ``~/.cache/backlash-rig/logs``, else the temporary folder); its path. The file is the
+    user's alone (mode 0600) and holds no secret: the command line, the rig's and libpq's
+    environment variables and the traceback with every password and token as ``***``
+    (rig/redact.py)."""
+    from rig.logs import log_dir, write_private
 
     folder = log_dir()
     stamp = time.strftime("%Y%m%dT%H%M%S")
     path = folder / f"rig-crash-{stamp}-{os.getpid()}.log"
-    path.write_text(f"rig {' '.join(sys.argv[1:])}\n{traceback.format_exc()}",
-                    encoding="utf-8")
+    env = "".join(f"{k}={v}\n" for k, v in redact_environment().items())
+    text = (f"rig {' '.join(redact_argv(sys.argv[1:]))}\n{env}"
+            f"{redact_text(traceback.format_exc())}")
+    write_private(path, text)
     return path

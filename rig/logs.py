@@ -5,7 +5,10 @@ Outside-probe row 15 of issue 12: when the SLCAN link dropped or ``rig sim`` was
 python-can printed a ~30-line traceback on stderr above the rig's own one-line message. The
 libraries (python-can, canopen, pymodbus, pyserial, asyncio) log to the file only; their
 uncaught thread exceptions too. The file is ``$RIG_LOG_DIR/rig-YYYYMMDD.log`` (default
-``~/.cache/backlash-rig/logs``).
+``~/.cache/backlash-rig/logs``), readable by its user only (mode 0600). No secret reaches it
+or the terminal: every record is scrubbed of passwords in connection strings, ``PGPASSWORD``
+and the operator token (:func:`rig.redact.redact_text`), a database URL's
+``?password=...`` included (issue 21 item 5).
 """
 
 from __future__ import annotations
@@ -18,7 +21,9 @@ import threading
 import time
 from pathlib import Path
 
-__all__ = ["LIBRARY_LOGGERS", "configure_cli_logging", "log_dir"]
+from rig.redact import redact_text
+
+__all__ = ["LIBRARY_LOGGERS", "configure_cli_logging", "log_dir", "write_private"]
 
 LIBRARY_LOGGERS = ("can", "canopen", "pymodbus", "serial", "asyncio", "urllib3")
 
@@ -34,12 +39,36 @@ def log_dir() -> Path:
     return folder
 
 
+def write_private(path: Path, text: str) -> None:
+    """Write ``text`` to a new file only its user can read (0600, whatever the umask)."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    os.fchmod(fd, 0o600)  # an existing file keeps its mode under O_CREAT
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write(text)
+
+
+def _private_file(path: Path) -> None:
+    """Create ``path`` if missing and make it 0600 (the log handler then appends to it)."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
+    try:
+        os.fchmod(fd, 0o600)
+    finally:
+        os.close(fd)
+
+
+class _Redacted(logging.Formatter):
+    """The log file's lines (traceback included) with every secret as ``***``."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        return redact_text(super().format(record))
+
+
 class _OneLine(logging.Formatter):
     """``rig: warning: message`` without the traceback (that is in the log file)."""
 
     def format(self, record: logging.LogRecord) -> str:
         text = record.getMessage().splitlines()[0] if record.getMessage() else ""
-        return f"rig: {record.levelname.lower()}: {text}"
+        return f"rig: {record.levelname.lower()}: {redact_text(text)}"
 
 
 class _NotLibraries(logging.Filter):
@@ -70,11 +99,12 @@ def configure_cli_logging() -> Path | None:
         return None
     path = log_dir() / f"rig-{time.strftime('%Y%m%d')}.log"
     try:
+        _private_file(path)
         file_handler: logging.Handler = logging.FileHandler(path, encoding="utf-8")
     except OSError:
         file_handler = logging.NullHandler()
     file_handler.setLevel(logging.INFO)
-    file_handler.setFormatter(logging.Formatter(
+    file_handler.setFormatter(_Redacted(
         f"%(asctime)s {os.getpid()} %(levelname)s %(name)s: %(message)s"))
     terminal = logging.StreamHandler(sys.stderr)
     terminal.setLevel(logging.WARNING)

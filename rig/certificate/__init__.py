@@ -29,6 +29,7 @@ from rig.outcome import (
     recorded_outcome,
     run_outcome,
 )
+from rig.redact import redact
 from rig.runformat import CAMPAIGN_JSON, RUN_JSON, Campaign, Run, read_run, read_run_or_campaign
 from rig.store import Store
 from rig.store.ids import ID_PATTERN, StoreError, UnknownIdError
@@ -469,6 +470,6 @@ def certificate_bytes(folder: str, store_root: str | None, samples: str | None, 
         try:
             store = Store(store_root, create=False, recover=False, samples=samples)
         except StoreError as exc:
-            log.warning("store %s not opened: %s", store_root, exc)
+            log.warning("store %s not opened: %s", redact(store_root), redact(str(exc)))
     page = render_certificate(certificate_context(Subject(Path(folder), store)))
     return html_to_pdf(page) if fmt == "pdf" else page.encode("utf-8")

@@ -31,10 +31,11 @@ def software_version() -> str:
 
 
 def template_env() -> Environment:
-    """The jinja2 environment of rig/templates (HTML autoescaped)."""
-    from jinja2 import Environment, FileSystemLoader, StrictUndefined, select_autoescape
+    """The jinja2 environment of rig/templates: every value HTML-escaped, whatever the
+    template's file name (not ``select_autoescape()``, which skips ``.j2``)."""
+    from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
-    return Environment(loader=FileSystemLoader(TEMPLATES), autoescape=select_autoescape(),
+    return Environment(loader=FileSystemLoader(TEMPLATES), autoescape=True,
                        undefined=StrictUndefined)
 
 

@@ -70,9 +70,11 @@ def metric_figure(name: str, view: dict[str, Any]) -> str:
 
 def render_html(doc: dict[str, Any]) -> str:
     """The page of an ``rig spc`` document (:func:`rig.spc.spc_report`)."""
-    from jinja2 import Environment, FileSystemLoader, select_autoescape
+    from jinja2 import Environment, FileSystemLoader
 
-    env = Environment(loader=FileSystemLoader(TEMPLATES), autoescape=select_autoescape())
+    # every value escaped whatever the template's name (select_autoescape() escapes only
+    # .html/.htm/.xml, and this template is .html.j2: issue 21 item 1)
+    env = Environment(loader=FileSystemLoader(TEMPLATES), autoescape=True)
     figures = {d["design"]: {name: metric_figure(name, m) for name, m in d["metrics"].items()
                              if m["chart"]} for d in doc["designs"]}
     return env.get_template("spc.html.j2").render(doc=doc, figures=figures, fmt=_fmt)

@@ -183,12 +183,13 @@ class Store:
         self.url: str | None = None
         self._index: IndexBackend
         if is_database_url(root):
+            from rig.redact import redact
             from rig.store.index_pg import PostgresIndex
 
             folder = samples if samples not in (None, "") else os.environ.get(SAMPLES_ENV)
             if not folder:
                 raise StoreError(
-                    f"the store {root.split('@')[-1]} is a database: give the folder for the "
+                    f"the store {redact(root)} is a database: give the folder for the "
                     f"run files (shared by every rig) with --samples DIR or {SAMPLES_ENV}"
                 )
             self.url = str(root)

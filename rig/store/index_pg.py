@@ -23,12 +23,12 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from typing import Any, TypeVar
-from urllib.parse import urlsplit, urlunsplit
 
 import psycopg
 from psycopg.rows import dict_row
 from psycopg.types.json import Jsonb
 
+from rig.redact import redact
 from rig.store.ids import StoreError, StoreUnavailable
 from rig.store.index import (
     JSON_COLUMNS,
@@ -118,15 +118,6 @@ _PG_MIGRATIONS: dict[int, tuple[str, ...]] = {
         "CREATE INDEX audit_by_target ON audit (target)",
     ),
 }
-
-
-def redact(url: str) -> str:
-    """The URL without its password (for messages and listings)."""
-    parts = urlsplit(url)
-    if parts.password is None:
-        return url
-    netloc = parts.netloc.replace(f":{parts.password}@", ":***@", 1)
-    return urlunsplit(parts._replace(netloc=netloc))
 
 
 def first_line(error: BaseException) -> str:

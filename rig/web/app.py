@@ -3,7 +3,8 @@
 The lifespan opens the rig (``controller.start()``: on a thread, the page answers meanwhile)
 and starts the live pump; leaving it stops any measurement (safe state) and closes the rig.
 The page itself is plain HTML/CSS/JS from the package's static files (no build step, no
-CDN: it works offline), uPlot vendored under ``static/vendor/uplot``.
+CDN: it works offline), uPlot vendored under ``static/vendor/uplot``; no inline script, so a
+Content-Security-Policy forbids any (rig/web/headers.py).
 """
 
 from __future__ import annotations
@@ -14,13 +15,17 @@ from collections.abc import AsyncIterator
 from importlib import resources
 
 from fastapi import FastAPI, Request
-from fastapi.responses import FileResponse
+from fastapi.exception_handlers import http_exception_handler
+from fastapi.responses import FileResponse, Response
 from fastapi.staticfiles import StaticFiles
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from rig import __version__
+from rig.redact import redact_text
 from rig.store import Store
 from rig.web.controller import RigController
 from rig.web.guard import GuardMiddleware
+from rig.web.headers import SecurityHeadersMiddleware
 from rig.web.live import LiveHub
 from rig.web.settings import WebSettings
 from rig.web.workers import shutdown_workers, warm_up
@@ -75,7 +80,16 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
 
     app.include_router(routes_spc.router)
     app.add_middleware(GuardMiddleware, loopback_only=settings.check_host)
+    app.add_middleware(SecurityHeadersMiddleware)  # outermost: on every answer (CSP)
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
+
+    @app.exception_handler(StarletteHTTPException)
+    async def redacted_error(request: Request, exc: StarletteHTTPException) -> Response:
+        """Every error message without a password or token (a store error names the store
+        by its connection string; rig/redact.py)."""
+        if isinstance(exc.detail, str):
+            exc.detail = redact_text(exc.detail)
+        return await http_exception_handler(request, exc)
 
     @app.get("/", include_in_schema=False)
     def index(request: Request) -> FileResponse:

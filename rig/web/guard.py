@@ -11,18 +11,23 @@ Outside-probe findings it answers (issue 12, fault matrix rows 5, 9 and 10):
   only the page itself (or a non-browser client, which sends neither header) can press it.
 - **Body size**: a request body larger than :data:`MAX_BODY_BYTES` is refused with 413 before
   anything parses it (by ``Content-Length``, or while it streams in).
-- **Non-finite numbers**: JSON allows neither NaN nor Infinity, and ``1e999`` overflows to
-  infinity. A JSON body holding any is refused with 422 naming the field (the FastAPI
-  validation error shape), instead of reaching a model or the response renderer.
+- **One strict body parser** (issue 21 item 9): every request body is read by
+  :func:`rig.web.body.canonical_json_body` whatever its ``Content-Type`` says (compared
+  case-insensitively; no header means JSON; another media type is 415). NaN, Infinity and
+  ``1e999`` are refused with 422 naming the field (the FastAPI validation error shape),
+  instead of reaching a model or the response renderer; the route reads the body re-written
+  from the parsed value as ``application/json``. The E-stop's body is never looked at: a stop
+  is never refused for what came with it.
 """
 
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Awaitable, Callable, MutableMapping
 from typing import Any
 from urllib.parse import urlsplit
+
+from rig.web.body import BodyRejected, canonical_json_body, non_finite_paths
 
 __all__ = ["GuardMiddleware", "MAX_BODY_BYTES", "non_finite_paths"]
 
@@ -36,17 +41,8 @@ MAX_BODY_BYTES = 256 * 1024
 """The largest request body (bytes): a campaign request is a few kB."""
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "[::1]", "::1")
 UNSAFE_METHODS = ("POST", "PUT", "PATCH", "DELETE")
-
-
-def non_finite_paths(value: Any, path: tuple[str | int, ...] = ()) -> list[tuple]:
-    """Paths of every NaN or infinite number in a parsed JSON value."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return [path]
-    if isinstance(value, dict):
-        return [p for k, v in value.items() for p in non_finite_paths(v, (*path, k))]
-    if isinstance(value, list):
-        return [p for i, v in enumerate(value) for p in non_finite_paths(v, (*path, i))]
-    return []
+BODY_IGNORED = ("/api/control/estop",)
+"""Routes whose body is never read (the E-stop answers whatever came with it)."""
 
 
 def _host_name(host_header: str) -> str:
@@ -117,26 +113,23 @@ class GuardMiddleware:
             if not message.get("more_body", False):
                 break
         body = b"".join(chunks)
-        if "json" in headers.get("content-type", "") and body:
-            problem = _non_finite_problem(body)
-            if problem is not None:
-                await _reply(send, 422, problem)
+        if body and scope.get("path") not in BODY_IGNORED:
+            try:
+                body = canonical_json_body(body, headers.get("content-type"))
+            except BodyRejected as exc:
+                await _reply(send, exc.status, exc.detail)
                 return
+            scope = _as_json(scope, len(body))
         await self.app(scope, _replay([{"type": "http.request", "body": body,
                                         "more_body": False}], receive), send)
 
 
-def _non_finite_problem(body: bytes) -> list[dict[str, Any]] | None:
-    try:
-        value = json.loads(body, parse_constant=float)
-    except (ValueError, RecursionError):
-        return None  # not JSON (or too deep): the app's own parsing says so
-    paths = non_finite_paths(value)
-    if not paths:
-        return None
-    return [{"loc": ["body", *p], "msg": "a number must be finite (NaN, Infinity or a value "
-             "beyond the float range is not a measurement)", "type": "finite_number",
-             "input": None} for p in paths]
+def _as_json(scope: Scope, length: int) -> Scope:
+    """``scope`` with ``Content-Type: application/json`` and the re-written body's length."""
+    kept = [(k, v) for k, v in scope.get("headers", [])
+            if k.lower() not in (b"content-type", b"content-length", b"transfer-encoding")]
+    return {**scope, "headers": [*kept, (b"content-type", b"application/json"),
+                                 (b"content-length", str(length).encode())]}
 
 
 def _replay(messages: list[Message], then: Receive) -> Receive:

@@ -90,7 +90,7 @@ def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
         expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
         expect(page.locator("#start")).to_be_enabled()
         page.click("#start")
-        page.wait_for_function("window.rigStats.points > 500", timeout=60_000)
+        page.wait_for_function("() => window.rigStats.points > 500", timeout=60_000)
         expect(page.locator("#state")).to_have_text("completed", timeout=90_000)
         expect(page.locator("#m-lost")).not_to_have_text("–", timeout=10_000)
         shown = float(page.locator("#m-lost").inner_text())
@@ -111,8 +111,8 @@ def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
         expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
         first_run = runs[0]["run_id"]
         page.click("#start")
-        page.wait_for_function(
-            f"window.rigPage.live.runId && window.rigPage.live.runId !== '{first_run}' "
+        page.wait_for_function(  # a function, not a string to eval: the page's CSP
+            f"() => window.rigPage.live.runId && window.rigPage.live.runId !== '{first_run}' "
             "&& window.rigStats.points > 200", timeout=60_000)
         expect(page.locator("#abort")).to_be_enabled()
         page.click("#abort")

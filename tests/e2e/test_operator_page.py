@@ -221,8 +221,8 @@ def test_operator_page(tmp_path: Path):
         page.click("#lock")
         expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
         # (the idle monitor shows the devices every 0.5 s: wait for a pass after the lock)
-        page.wait_for_function(
-            "Math.abs(parseFloat(document.querySelector('#v-twist').textContent)) < 1.0 && "
+        page.wait_for_function(  # a function, not a string to eval: the page's CSP
+            "() => Math.abs(parseFloat(document.querySelector('#v-twist').textContent)) < 1.0 && "
             "Math.abs(parseFloat(document.querySelector('#v-angle').textContent)) > 1.0",
             timeout=15_000)
         live = get_json(url + "api/status")["live"]
@@ -252,7 +252,7 @@ def test_operator_page(tmp_path: Path):
         expect(now).to_contain_text("input position 0.0°")
         expect(now).to_contain_text("amplitude 100 % of rated")
         expect(now).to_contain_text(re.compile(r"housing -?\d+\.\d °C"))
-        page.wait_for_function("window.rigStats.points > 100", timeout=30_000)
+        page.wait_for_function("() => window.rigStats.points > 100", timeout=30_000)
         assert page.evaluate("scrollY") == 0 and in_view(page, "#loop-plot canvas")
         page.keyboard.press("p")
         expect(page.locator("#state")).to_have_text("paused", timeout=30_000)
@@ -265,7 +265,7 @@ def test_operator_page(tmp_path: Path):
         expect(now.locator("li").first).to_contain_text("lost motion")
         expect(page.locator("#campaign-box")).to_be_visible()
         shot(page, "web-running.png")
-        page.wait_for_function("['completed', 'aborted'].includes("
+        page.wait_for_function("() => ['completed', 'aborted'].includes("
                                "document.querySelector('#state').textContent)", timeout=90_000)
         status = get_json(url + "api/status")
         assert status["state"] == "completed", status["message"]
@@ -328,7 +328,7 @@ def test_operator_page(tmp_path: Path):
         expect(page.locator("#start-why")).to_be_empty()
         page.keyboard.press("s")
         expect(page.locator("#state")).to_have_text("running", timeout=10_000)
-        page.wait_for_function("window.rigStats.points > 50", timeout=30_000)
+        page.wait_for_function("() => window.rigStats.points > 50", timeout=30_000)
         page.keyboard.press("a")
         expect(page.locator("#state")).to_have_text("aborted", timeout=30_000)
         page.locator(f("operator")).focus()

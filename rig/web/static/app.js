@@ -399,7 +399,7 @@ function renderCampaignNow(cur, busy) {
       parts.push(`amplitude ${fmt(m.amplitude_pct, 0)} % of rated`);
     parts.push(m.temperature_C !== null && m.temperature_C !== undefined
       ? `housing ${fmt(m.temperature_C, 1)} °C` : "temperature not controlled");
-    html += `<b>Now measuring run ${m.number}${m.n_runs ? " of " + m.n_runs : ""}: ` +
+    html += `<b>Now measuring run ${esc(m.number)}${m.n_runs ? " of " + esc(m.n_runs) : ""}: ` +
       `${esc(m.label || "")}</b> · ${parts.map(esc).join(" · ")}`;
   } else html += "<b>between runs</b>";
   const done = cur.finished || [];
@@ -443,7 +443,7 @@ function renderResult(r) {
   const el = $("result");
   const verdict = outcomeHtml(r.outcome);
   $("m-verdict").innerHTML = verdict;
-  let html = `${r.kind} ${r.status}: ${verdict}`;
+  let html = `${esc(r.kind)} ${esc(r.status)}: ${verdict}`;
   if (r.failures && r.failures.length) html += "<br>" + r.failures.map(esc).join("<br>");
   if (r.lost_motion_by_position && r.lost_motion_by_position.length) {
     html += "<br>lost motion against position: " + r.lost_motion_by_position
@@ -461,10 +461,10 @@ function renderResult(r) {
   if (last && last.status === "completed") showMetrics(last, null);
 }
 
+// Text as HTML, safe in element content and in quoted attribute values alike: & < > " '
+const ESCAPES = { "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" };
 function esc(text) {
-  const d = document.createElement("div");
-  d.textContent = String(text);
-  return d.innerHTML;
+  return String(text === null || text === undefined ? "" : text).replace(/[&<>"']/g, (c) => ESCAPES[c]);
 }
 
 let statusBusy = false;
@@ -559,7 +559,7 @@ async function previewPlan() {
   live.amplitudeNm = p.amplitude_Nm;
   live.bandNm = p.model ? p.model.lost_motion_pct / 100 * body.plan.rated_torque_Nm : null;
   const mins = (p.estimated_s / 60).toFixed(1);
-  let html = `<b>${esc(p.name)}</b>: ${p.n_steps} steps, ${p.n_runs} run(s), about ` +
+  let html = `<b>${esc(p.name)}</b>: ${esc(p.n_steps)} steps, ${esc(p.n_runs)} run(s), about ` +
     `${Math.round(p.estimated_s)} s (${mins} min); amplitude ${fmt(p.amplitude_Nm, 2)} N·m` +
     (p.torque_limit_Nm !== null ? `, rig limit ±${fmt(p.torque_limit_Nm, 2)} N·m` : "") +
     (p.fits ? ' <span class="pass">fits the rig</span>' : ' <span class="fail">does not fit</span>');

@@ -71,6 +71,8 @@ class Stack:
     nuisance_nl: dict = field(default_factory=dict)
     #: Largest ordinary friction (N*m) the nuisance may take.
     nuisance_friction_max_Nm: float = 0.0
+    #: Why the play crossings rule a common torque-sensor offset out ('' : they do not).
+    offset_veto: str = ""
 
     @property
     def n_runs(self) -> int:

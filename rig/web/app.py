@@ -22,6 +22,7 @@ from rig.store import Store
 from rig.web.controller import RigController
 from rig.web.guard import GuardMiddleware
 from rig.web.live import LiveHub
+from rig.web.ratelimit import RateLimitMiddleware
 from rig.web.settings import WebSettings
 from rig.web.workers import shutdown_workers, warm_up
 
@@ -75,6 +76,8 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
 
     app.include_router(routes_spc.router)
     app.add_middleware(GuardMiddleware, loopback_only=settings.check_host)
+    # outermost: a client over its limit is answered before its body is read
+    app.add_middleware(RateLimitMiddleware, token=lambda: settings.token)
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
 
     @app.get("/", include_in_schema=False)

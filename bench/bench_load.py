@@ -64,6 +64,7 @@ def _flood_pass(device_priority: int) -> Iterator[dict[str, Any]]:
     yield {"name": "load_preview_flood_estop_s",
            "value": round(figures["load_preview_flood_estop_s"], 4), "unit": "s",
            "presses_s": figures["load_preview_flood_estop_all_s"],
+           "without_flood_s": figures["load_preview_flood_estop_quiet_s"],
            "flood_answers": figures["load_preview_flood_answers"]}
 
 

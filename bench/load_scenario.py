@@ -380,7 +380,8 @@ def run_preview_flood(workdir: Path | None = None, *, clients: int = 60, busy: i
     """Issue 21 item 10: a campaign started from the page while ``clients`` token-less
     clients flood the plan preview endpoint (``FLOOD_SCRIPT``, 127.0.0.1 only, stopped
     after the campaign and the E-stop presses or after ``max_seconds``) beside ``busy``
-    busy processes; then the E-stop pressed ``estop_presses`` times under the same flood.
+    busy processes; then the E-stop pressed ``estop_presses`` times under the same flood
+    (and as often before the flood and the busy processes began, for comparison).
 
     Figures: ``load_preview_flood_completed`` (1 or 0), ``load_preview_flood_estop_s`` (the
     slowest E-stop answer, s), the flood's answers by status, and the drive's keepalive
@@ -399,6 +400,7 @@ def run_preview_flood(workdir: Path | None = None, *, clients: int = 60, busy: i
         body_file = workdir / "preview-body.json"
         body_file.write_text(json.dumps(body), encoding="utf-8")
         counts_file = workdir / "flood-counts.json"
+        quiet = _estop_times(client, estop_presses)  # the same presses without the flood
         procs: list[subprocess.Popen] = []
 
         def stop_load() -> None:
@@ -425,6 +427,7 @@ def run_preview_flood(workdir: Path | None = None, *, clients: int = 60, busy: i
             "load_preview_flood_completed": int(done.get("state") == "completed"),
             "load_preview_flood_estop_s": max(estop),
             "load_preview_flood_estop_all_s": [round(t, 4) for t in estop],
+            "load_preview_flood_estop_quiet_s": [round(t, 4) for t in quiet],
             "load_preview_flood_state": done.get("state"),
             "load_preview_flood_message": done.get("fault") or done.get("message"),
             "load_preview_flood_outcome": result.get("outcome"),

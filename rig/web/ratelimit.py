@@ -12,10 +12,16 @@ read.
 - A request with the operator token is never limited here (the operator's own page keeps
   working under a flood from the same address); a wrong token counts as none.
 - The E-stop is never limited: a stop must never wait.
+- A refused request gets its 429 after :data:`TARPIT_S` (an ``asyncio`` sleep: no thread,
+  no CPU): a flood that ignores ``Retry-After`` and asks again at once on the same
+  connection is slowed to one request per second per connection, and the server's event
+  loop stays free for the E-stop. Measured with 60 such clients beside a campaign: 240
+  refusals a second without it.
 """
 
 from __future__ import annotations
 
+import asyncio
 import json
 import math
 import secrets
@@ -39,6 +45,8 @@ PREVIEW_RATE = (1.0, 10.0)
 """Token-less plan previews per client address: 1 per second, bursts of 10."""
 PREVIEW_PATH = "/api/plan/preview"
 NEVER_LIMITED = ("/api/control/estop",)
+TARPIT_S = 1.0
+"""Delay (s) of a 429 answer."""
 MAX_CLIENTS = 1000
 """Client addresses remembered; beyond it the idle (full) buckets are forgotten."""
 
@@ -124,6 +132,7 @@ class RateLimitMiddleware:
             await self.app(scope, receive, send)
             return
         retry = max(1, math.ceil(wait))
+        await asyncio.sleep(TARPIT_S)
         body = json.dumps({"detail": f"too many {what} from {client} (at most "
                                      f"{rate[0]:g} per second, bursts of {rate[1]:g}): "
                                      f"retry after {retry} s"}).encode()

@@ -22,7 +22,7 @@ from rig.store import Store
 from rig.web.controller import RigController
 from rig.web.guard import GuardMiddleware
 from rig.web.live import LiveHub
-from rig.web.ratelimit import RateLimitMiddleware
+from rig.web.ratelimit import RATE_LIMITED, RateLimitMiddleware
 from rig.web.settings import WebSettings
 from rig.web.workers import shutdown_workers, warm_up
 
@@ -59,7 +59,7 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
             shutdown_workers()
 
     app = FastAPI(title="backlash-rig control page", version=__version__,
-                  description=DESCRIPTION, lifespan=lifespan)
+                  description=DESCRIPTION, lifespan=lifespan, responses=RATE_LIMITED)
     app.state.settings = settings
     app.state.store = store
     app.state.hub = hub

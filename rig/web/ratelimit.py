@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from typing import Any
 
 __all__ = ["RateLimitMiddleware", "TokenBucket", "GENERAL_RATE", "PREVIEW_RATE",
-           "NEVER_LIMITED"]
+           "NEVER_LIMITED", "RATE_LIMITED"]
 
 Scope = MutableMapping[str, Any]
 Receive = Callable[[], Awaitable[MutableMapping[str, Any]]]
@@ -47,6 +47,11 @@ PREVIEW_PATH = "/api/plan/preview"
 NEVER_LIMITED = ("/api/control/estop",)
 TARPIT_S = 1.0
 """Delay (s) of a 429 answer."""
+RATE_LIMITED = {429: {"description": "Too many requests without the operator token from this "
+                                     "address: retry after the Retry-After seconds.",
+                      "content": {"application/json": {"schema": {
+                          "type": "object", "properties": {"detail": {"type": "string"}}}}}}}
+"""The 429 answer, for the OpenAPI description of every route."""
 MAX_CLIENTS = 1000
 """Client addresses remembered; beyond it the idle (full) buckets are forgotten."""
 

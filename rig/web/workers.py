@@ -23,7 +23,8 @@ from typing import Any, TypeVar
 
 from rig.errors import RigError
 
-__all__ = ["PoolBusy", "run_in_worker", "shutdown_workers", "warm_up", "worker_pids"]
+__all__ = ["PoolBusy", "pool_full", "run_in_worker", "shutdown_workers", "warm_up",
+           "worker_pids"]
 
 T = TypeVar("T")
 POOLS = {"analysis": 1, "preview": 1}
@@ -59,6 +60,14 @@ def _executor(pool: str) -> ProcessPoolExecutor:
                 initializer=_lower_priority if nice else None,
                 initargs=(nice,) if nice else ())
         return _pools[pool]
+
+
+def pool_full(pool: str) -> bool:
+    """Whether ``pool`` has its :data:`QUEUE_LIMIT` of requests now (a request would get
+    :class:`PoolBusy`)."""
+    limit = QUEUE_LIMIT.get(pool)
+    with _lock:
+        return limit is not None and _in_flight.get(pool, 0) >= limit
 
 
 def worker_pids(pool: str) -> list[int]:

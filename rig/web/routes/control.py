@@ -30,7 +30,7 @@ from rig.web.models import (
     TareResult,
     UnitExample,
 )
-from rig.web.workers import PoolBusy, run_in_worker
+from rig.web.workers import PoolBusy, pool_full, run_in_worker
 
 router = APIRouter(prefix="/api", tags=["control"])
 
@@ -73,8 +73,10 @@ def preview(request: Request, body: RunRequest) -> dict[str, Any]:
     """Computed in the preview worker process (rig/web/workers.py: lower CPU priority, a
     bounded queue, 503 when full) from the rig's facts: never in the engine's process, never
     in this server's event loop. Token-less clients are rate-limited before this runs."""
-    facts = _do(_controller(request).preview_facts)
     try:
+        if pool_full("preview"):  # the engine is not even asked for the rig's facts
+            raise PoolBusy("the preview worker is busy: retry in a second")
+        facts = _do(_controller(request).preview_facts)
         # a plan of 100,000 steps holds no thread of this server (and its GIL) for seconds
         return run_in_worker(compute_preview, body, facts, pool="preview", timeout_s=120)
     except PoolBusy as exc:

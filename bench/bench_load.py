@@ -19,6 +19,13 @@ load in the normal-scheduler pass; ``load_completed_runs`` counts those complete
 Beside them, ``rig campaign run examples/campaigns/seed000-pair1.toml --simulated`` runs on
 its own simulated rig under the same load: ``load_cli_campaign_completed`` (1 or 0).
 ``BENCH_LOAD_RT=0`` skips the RT pass.
+
+Then the preview flood (issue 21 item 10, ``bench.load_scenario.run_preview_flood``): a
+2-position campaign started from the page while 60 token-less clients flood the plan
+preview endpoint (127.0.0.1, bounded to 300 s) beside 2 busy processes, then the E-stop
+pressed 5 times under the flood: ``load_preview_flood_completed`` (target 1) and
+``load_preview_flood_estop_s`` (the slowest E-stop answer, target under 0.1 s).
+``BENCH_LOAD_FLOOD=0`` skips it; ``BENCH_LOAD_FLOOD=only`` runs only it.
 """
 
 from __future__ import annotations
@@ -27,7 +34,7 @@ import os
 from collections.abc import Iterator
 from typing import Any
 
-from bench.load_scenario import ROOT, run_load_scenario
+from bench.load_scenario import ROOT, run_load_scenario, run_preview_flood
 
 UNITS = {"load_campaign_completed": "1/0", "load_samples_lost": "samples",
          "load_missing_periods": "periods", "load_max_keepalive_gap_s": "s",
@@ -37,8 +44,32 @@ EXAMPLE_CAMPAIGN = ROOT / "examples" / "campaigns" / "seed000-pair1.toml"
 
 
 def run() -> Iterator[dict[str, Any]]:
-    repeats = int(os.environ.get("BENCH_LOAD_REPEATS", "1"))
+    flood = os.environ.get("BENCH_LOAD_FLOOD", "1")
     device_priority = int(os.environ.get("BENCH_LOAD_DEVICE_PRIORITY", str(RT_PRIORITY)))
+    if flood != "only":
+        yield from _load_passes(device_priority)
+    if flood != "0":
+        yield from _flood_pass(device_priority)
+
+
+def _flood_pass(device_priority: int) -> Iterator[dict[str, Any]]:
+    figures = run_preview_flood(device_priority=device_priority or None)
+    yield {"name": "load_preview_flood_completed",
+           "value": figures["load_preview_flood_completed"], "unit": "1/0",
+           "state": figures["load_preview_flood_state"],
+           "message": figures["load_preview_flood_message"],
+           "outcome": figures["load_preview_flood_outcome"],
+           "keepalive_gap_s": figures["load_preview_flood_max_keepalive_gap_s"],
+           "watchdog_trips": figures["load_preview_flood_watchdog_trips"]}
+    yield {"name": "load_preview_flood_estop_s",
+           "value": round(figures["load_preview_flood_estop_s"], 4), "unit": "s",
+           "presses_s": figures["load_preview_flood_estop_all_s"],
+           "without_flood_s": figures["load_preview_flood_estop_quiet_s"],
+           "flood_answers": figures["load_preview_flood_answers"]}
+
+
+def _load_passes(device_priority: int) -> Iterator[dict[str, Any]]:
+    repeats = int(os.environ.get("BENCH_LOAD_REPEATS", "1"))
     figures = run_load_scenario(repeats=repeats, cli_campaign=EXAMPLE_CAMPAIGN,
                                 device_priority=device_priority or None)
     for name, unit in UNITS.items():

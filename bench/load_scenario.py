@@ -38,7 +38,7 @@ from typing import Any
 import httpx
 import numpy as np
 
-__all__ = ["run_load_scenario", "acquisition_figures"]
+__all__ = ["run_load_scenario", "run_preview_flood", "acquisition_figures"]
 
 TOKEN = "load-test-operator-token"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -62,6 +62,50 @@ threading.Event().wait()
 """
 
 BUSY_SCRIPT = "while True:\n    pass\n"
+
+FLOOD_SCRIPT = """
+import http.client, json, sys, threading, time
+from urllib.parse import urlsplit
+url, n, seconds, body_file, out = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), \\
+    sys.argv[4], sys.argv[5]
+parts = urlsplit(url)
+assert parts.hostname == "127.0.0.1", parts.hostname
+body = open(body_file, "rb").read()
+end = time.monotonic() + seconds
+codes = {}
+lock = threading.Lock()
+def flood():
+    conn = None
+    while time.monotonic() < end:
+        try:
+            if conn is None:
+                conn = http.client.HTTPConnection(parts.hostname, parts.port, timeout=30)
+            conn.request("POST", "/api/plan/preview", body=body,
+                         headers={"Content-Type": "application/json"})
+            r = conn.getresponse()
+            r.read()
+            code = r.status
+        except Exception as exc:
+            code = type(exc).__name__
+            conn = None
+        with lock:
+            codes[code] = codes.get(code, 0) + 1
+def report():
+    while True:
+        time.sleep(1.0)
+        with lock:
+            text = json.dumps({str(k): v for k, v in codes.items()})
+        open(out, "w").write(text)
+threads = [threading.Thread(target=flood, daemon=True) for _ in range(n)]
+for t in threads: t.start()
+threading.Thread(target=report, daemon=True).start()
+for t in threads: t.join()
+with lock:
+    open(out, "w").write(json.dumps({str(k): v for k, v in codes.items()}))
+"""
+"""``n`` token-less clients (threads with keep-alive connections) posting plan previews as
+fast as the page answers, ignoring 429/503 and Retry-After (a hostile flood), for at most
+``seconds``; the answers' counts by status go to ``out`` every second."""
 
 
 def acquisition_figures(t_s: np.ndarray, period_s: float) -> tuple[int, float]:
@@ -308,4 +352,86 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
             "load_message": next((c["message"] for c in campaigns if not c["completed"]),
                                  last["message"]),
             **cli_figures,
+        }
+
+
+def _estop_times(client: httpx.Client, presses: int) -> list[float]:
+    """The E-stop's HTTP answer time (s) for ``presses`` presses, token-less like the
+    page's button (its own keep-alive connection), 0.3 s apart; the latched fault is reset
+    after each (with the token)."""
+    times = []
+    viewer = httpx.Client(base_url=client.base_url, timeout=30)
+    viewer.get("static/app.js")  # the connection is open, as the page's is
+    for _ in range(presses):
+        t0 = time.monotonic()
+        r = viewer.post("api/control/estop")
+        times.append(time.monotonic() - t0)
+        r.raise_for_status()
+        time.sleep(0.3)
+        client.post("api/devices/reset-faults", json={}, headers=AUTH)
+    viewer.close()
+    return times
+
+
+def run_preview_flood(workdir: Path | None = None, *, clients: int = 60, busy: int = 2,
+                      positions: tuple[float, ...] = (0.0, 180.0), steps_per_quarter: int = 4,
+                      max_seconds: float = 300.0, estop_presses: int = 5,
+                      device_priority: int | None = None) -> dict[str, Any]:
+    """Issue 21 item 10: a campaign started from the page while ``clients`` token-less
+    clients flood the plan preview endpoint (``FLOOD_SCRIPT``, 127.0.0.1 only, stopped
+    after the campaign and the E-stop presses or after ``max_seconds``) beside ``busy``
+    busy processes; then the E-stop pressed ``estop_presses`` times under the same flood
+    (and as often before the flood and the busy processes began, for comparison).
+
+    Figures: ``load_preview_flood_completed`` (1 or 0), ``load_preview_flood_estop_s`` (the
+    slowest E-stop answer, s), the flood's answers by status, and the drive's keepalive
+    figures. The bench's own client sends the operator token (it is the operator)."""
+    env = _sim_env(None, device_priority)
+    with contextlib.ExitStack() as stack:
+        if workdir is None:
+            workdir = Path(stack.enter_context(tempfile.TemporaryDirectory()))
+        store = workdir / "store"
+        store.mkdir(parents=True, exist_ok=True)
+        stats = workdir / "sim-stats.json"
+        url = stack.enter_context(_serve(store, stats, workdir / "serve.log", env))
+        client = stack.enter_context(httpx.Client(base_url=url, timeout=30, headers=AUTH))
+        _wait_state(client, ("idle",), 120.0)
+        body = _campaign_body("flood", list(positions), steps_per_quarter)
+        body_file = workdir / "preview-body.json"
+        body_file.write_text(json.dumps(body), encoding="utf-8")
+        counts_file = workdir / "flood-counts.json"
+        quiet = _estop_times(client, estop_presses)  # the same presses without the flood
+        procs: list[subprocess.Popen] = []
+
+        def stop_load() -> None:
+            for p in procs:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(p.pid, 9)
+
+        stack.callback(stop_load)
+        for _ in range(busy):
+            procs.append(subprocess.Popen([sys.executable, "-c", BUSY_SCRIPT],
+                                          start_new_session=True))
+        procs.append(subprocess.Popen(
+            [sys.executable, "-c", FLOOD_SCRIPT, url, str(clients), str(max_seconds),
+             str(body_file), str(counts_file)], start_new_session=True))
+        time.sleep(3.0)  # the flood is on before the campaign starts
+        done = _measure(client, body, max_seconds)
+        estop = _estop_times(client, estop_presses)
+        flood = (json.loads(counts_file.read_text(encoding="utf-8"))
+                 if counts_file.is_file() else {})
+        stop_load()
+        drive = json.loads(stats.read_text(encoding="utf-8")) if stats.is_file() else {}
+        result = done.get("last_result") or {}
+        return {
+            "load_preview_flood_completed": int(done.get("state") == "completed"),
+            "load_preview_flood_estop_s": max(estop),
+            "load_preview_flood_estop_all_s": [round(t, 4) for t in estop],
+            "load_preview_flood_estop_quiet_s": [round(t, 4) for t in quiet],
+            "load_preview_flood_state": done.get("state"),
+            "load_preview_flood_message": done.get("fault") or done.get("message"),
+            "load_preview_flood_outcome": result.get("outcome"),
+            "load_preview_flood_answers": flood,
+            "load_preview_flood_max_keepalive_gap_s": drive.get("drive_max_write_gap_s"),
+            "load_preview_flood_watchdog_trips": drive.get("drive_watchdog_trips"),
         }

@@ -161,7 +161,7 @@ def test_estop_answers_under_sixty_parallel_previews(page, record_property: Any)
     record_property("samples_kept", "")
     record_property("message", "")
     assert max(latencies) < 1.0, latencies  # the 100 ms target is measured, not asserted
-    assert set(codes) <= {200, 429} and 429 in codes  # bounded and rate-limited
+    assert set(codes) <= {200, 429, 503} and 429 in codes  # bounded and rate-limited
     auth = {"Authorization": f"Bearer {TOKEN}", "Content-Type": "application/json"}
     assert request(host, port, "POST", "/api/devices/reset-faults", b"{}", auth)[0] == 200
 

@@ -761,7 +761,8 @@ class Engine:
         open_run = OpenRun(recorder, label, time.monotonic() if t0 is None else t0,
                            profile=self.options.profile,
                            limits=limits_dict(self.options.limits))
-        self._frozen = frozen_watch(meta, test)
+        self._dropped_at_begin = self._dropped_total()
+        self._frozen = frozen_watch(meta, test, open_run.t0)
         share, rated = self.options.crosscheck_limit_share, test.get("rated_torque_Nm")
         self._cross_limit_Nm = (share * float(rated) if share is not None
                                 and isinstance(rated, int | float) and rated > 0 else None)
@@ -852,9 +853,11 @@ class Engine:
                 self._settle(settle)
 
 
-def frozen_watch(meta: dict[str, Any], test: dict[str, Any]) -> FrozenTwistWatch | None:
+def frozen_watch(meta: dict[str, Any], test: dict[str, Any], t0_mono_s: float = 0.0
+                 ) -> FrozenTwistWatch | None:
     """The frozen-twist watch of a run (rig/engine/frozen.py), from its sensors, rated torque
-    and the unit's nominal model; None when the run says too little to judge."""
+    and the unit's nominal model; None when the run says too little to judge. ``t0_mono_s``:
+    the run's start (s, monotonic clock), for the times in its message."""
     from rig.analyse import nominal_model_for_unit
 
     counts = (meta.get("sensors") or {}).get("encoder_counts_per_rev")
@@ -868,7 +871,8 @@ def frozen_watch(meta: dict[str, Any], test: dict[str, Any]) -> FrozenTwistWatch
     good = [v if isinstance(v, int | float) and math.isfinite(v) and v > 0 else None
             for v in (stiffness, play)]
     device = (meta.get("sensors") or {}).get("output_encoder") or "encoder"
-    return FrozenTwistWatch(float(counts), float(rated), good[0], good[1], str(device))
+    return FrozenTwistWatch(float(counts), float(rated), good[0], good[1], str(device),
+                            t0_mono_s)
 
 
 def limits_dict(limits: dict[str, Any] | None) -> dict[str, Any]:

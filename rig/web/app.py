@@ -27,6 +27,7 @@ from rig.web.controller import RigController
 from rig.web.guard import GuardMiddleware
 from rig.web.headers import SecurityHeadersMiddleware
 from rig.web.live import LiveHub
+from rig.web.ratelimit import RATE_LIMITED, RateLimitMiddleware
 from rig.web.settings import WebSettings
 from rig.web.workers import shutdown_workers, warm_up
 
@@ -63,7 +64,7 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
             shutdown_workers()
 
     app = FastAPI(title="backlash-rig control page", version=__version__,
-                  description=DESCRIPTION, lifespan=lifespan)
+                  description=DESCRIPTION, lifespan=lifespan, responses=RATE_LIMITED)
     app.state.settings = settings
     app.state.store = store
     app.state.hub = hub
@@ -80,7 +81,9 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
 
     app.include_router(routes_spc.router)
     app.add_middleware(GuardMiddleware, loopback_only=settings.check_host)
-    app.add_middleware(SecurityHeadersMiddleware)  # outermost: on every answer (CSP)
+    # outermost: a client over its limit is answered before its body is read
+    app.add_middleware(RateLimitMiddleware, token=lambda: settings.token)
+    app.add_middleware(SecurityHeadersMiddleware)  # outermost: on every answer (CSP), a 429 too
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
 
     @app.exception_handler(StarletteHTTPException)

@@ -5,11 +5,17 @@ requests. Neither may be held by an analysis: :func:`run_in_worker` runs a pickl
 in a separate process (one worker, spawned on first use, kept for the next request) and waits
 for it on the calling request's thread. The engine has its own process anyway
 (rig/engine/host.py); this keeps the page itself responsive.
+
+The plan previews' pool (issue 21 item 10) runs at a lower CPU priority
+(:data:`POOL_NICE`: a flood of previews cannot take the CPU from acquisition, whatever
+process that runs in) and takes at most :data:`QUEUE_LIMIT` requests at a time: beyond it
+:class:`PoolBusy` at once (the page answers 503), instead of a queue of waiting threads.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
 import threading
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
@@ -17,23 +23,59 @@ from typing import Any, TypeVar
 
 from rig.errors import RigError
 
-__all__ = ["run_in_worker", "shutdown_workers", "warm_up"]
+__all__ = ["PoolBusy", "pool_full", "run_in_worker", "shutdown_workers", "warm_up",
+           "worker_pids"]
 
 T = TypeVar("T")
 POOLS = {"analysis": 1, "preview": 1}
 """Worker processes per pool: "analysis" (diagnosis, quality view: cached once computed) and
 "preview" (plan previews), so that neither waits for the other."""
 
+POOL_NICE = {"preview": 10}
+"""Niceness added to a pool's worker processes (Linux: 10 gets about a tenth of the CPU of a
+normal process that wants it)."""
+QUEUE_LIMIT = {"preview": 4}
+"""Requests a pool takes at a time (computing and waiting); None: no limit."""
+
 _lock = threading.Lock()
 _pools: dict[str, ProcessPoolExecutor] = {}
+_in_flight: dict[str, int] = {}
+
+
+class PoolBusy(RigError):
+    """The pool already has its :data:`QUEUE_LIMIT` of requests: retry later."""
+
+
+def _lower_priority(increment: int) -> None:
+    """In a new worker process: run at a lower CPU priority."""
+    os.nice(increment)
 
 
 def _executor(pool: str) -> ProcessPoolExecutor:
     with _lock:
         if pool not in _pools:
-            _pools[pool] = ProcessPoolExecutor(max_workers=POOLS[pool],
-                                               mp_context=multiprocessing.get_context("spawn"))
+            nice = POOL_NICE.get(pool, 0)
+            _pools[pool] = ProcessPoolExecutor(
+                max_workers=POOLS[pool], mp_context=multiprocessing.get_context("spawn"),
+                initializer=_lower_priority if nice else None,
+                initargs=(nice,) if nice else ())
         return _pools[pool]
+
+
+def pool_full(pool: str) -> bool:
+    """Whether ``pool`` has its :data:`QUEUE_LIMIT` of requests now (a request would get
+    :class:`PoolBusy`)."""
+    limit = QUEUE_LIMIT.get(pool)
+    with _lock:
+        return limit is not None and _in_flight.get(pool, 0) >= limit
+
+
+def worker_pids(pool: str) -> list[int]:
+    """The process ids of ``pool``'s workers (none before its first use)."""
+    with _lock:
+        executor = _pools.get(pool)
+        processes = getattr(executor, "_processes", None) or {}
+        return sorted(processes)
 
 
 def _ready() -> bool:
@@ -58,8 +100,18 @@ def _call(fn: Callable[..., T], *args: Any) -> tuple[bool, Any]:
 def run_in_worker(fn: Callable[..., T], *args: Any, timeout_s: float = 600.0,
                   pool: str = "analysis") -> T:
     """``fn(*args)`` in a worker process of ``pool``; an error there is raised here as a
-    RigError with its message."""
-    ok, value = _executor(pool).submit(_call, fn, *args).result(timeout=timeout_s)
+    RigError with its message; :class:`PoolBusy` when the pool has its queue limit."""
+    limit = QUEUE_LIMIT.get(pool)
+    with _lock:
+        if limit is not None and _in_flight.get(pool, 0) >= limit:
+            raise PoolBusy(f"the {pool} worker is busy with {limit} requests: retry in a "
+                           "second")
+        _in_flight[pool] = _in_flight.get(pool, 0) + 1
+    try:
+        ok, value = _executor(pool).submit(_call, fn, *args).result(timeout=timeout_s)
+    finally:
+        with _lock:
+            _in_flight[pool] -= 1
     if not ok:
         raise RigError(value)
     return value

@@ -9,9 +9,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import threading
-import time
-from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from importlib import resources
 from typing import Any
@@ -33,7 +30,7 @@ from rig.web.models import (
     TareResult,
     UnitExample,
 )
-from rig.web.workers import run_in_worker
+from rig.web.workers import PoolBusy, pool_full, run_in_worker
 
 router = APIRouter(prefix="/api", tags=["control"])
 
@@ -61,31 +58,11 @@ def status(request: Request) -> dict[str, Any]:
     return _controller(request).status(is_operator(request))
 
 
-PREVIEWS_AT_ONCE = 2
-"""Plan previews computed at the same time (the others wait up to PREVIEW_WAIT_S, then 429)."""
-PREVIEW_WAIT_S = 10.0
-PREVIEW_RATE = (10, 10.0)
-"""At most 10 previews per client in 10 s (429 beyond): a page previews on a click."""
-_preview_slots = threading.BoundedSemaphore(PREVIEWS_AT_ONCE)
-_preview_times: dict[str, deque[float]] = {}
-_preview_lock = threading.Lock()
-TOO_MANY = {429: {"model": ErrorBody, "description": "Too many previews: wait and retry."}}
-
-
-def _preview_allowed(client: str) -> bool:
-    n, window = PREVIEW_RATE
-    now = time.monotonic()
-    with _preview_lock:
-        times = _preview_times.setdefault(client, deque())
-        while times and now - times[0] > window:
-            times.popleft()
-        if len(times) >= n:
-            return False
-        times.append(now)
-        if len(_preview_times) > 1000:  # forget idle clients
-            for key in [k for k, v in _preview_times.items() if not v]:
-                del _preview_times[key]
-        return True
+TOO_MANY = {429: {"model": ErrorBody, "description": "Too many requests without the operator "
+                                                     "token (rig/web/ratelimit.py): retry after "
+                                                     "the Retry-After seconds."},
+            503: {"model": ErrorBody, "description": "The preview worker is busy: retry after "
+                                                     "the Retry-After seconds."}}
 
 
 @router.post("/plan/preview", response_model=PlanPreview,
@@ -93,23 +70,19 @@ def _preview_allowed(client: str) -> bool:
              summary="Preview a run or campaign: steps, estimated duration, fits the rig "
                      "(409 while a fault is latched)")
 def preview(request: Request, body: RunRequest) -> dict[str, Any]:
-    """Computed here, in the web server (bounded, rate-limited per client), from the rig's
-    facts: never in the engine's process, never holding up the E-stop."""
-    client = request.client.host if request.client else "?"
-    if not _preview_allowed(client):
-        raise HTTPException(429, f"more than {PREVIEW_RATE[0]} previews in "
-                                 f"{PREVIEW_RATE[1]:g} s from {client}: wait and retry")
-    facts = _do(_controller(request).preview_facts)
-    if not _preview_slots.acquire(timeout=PREVIEW_WAIT_S):
-        raise HTTPException(429, "the page is busy computing other previews: retry")
+    """Computed in the preview worker process (rig/web/workers.py: lower CPU priority, a
+    bounded queue, 503 when full) from the rig's facts: never in the engine's process, never
+    in this server's event loop. Token-less clients are rate-limited before this runs."""
     try:
-        # in the preview worker process: a plan of 100,000 steps holds no thread of this
-        # server (and its GIL) for seconds
+        if pool_full("preview"):  # the engine is not even asked for the rig's facts
+            raise PoolBusy("the preview worker is busy: retry in a second")
+        facts = _do(_controller(request).preview_facts)
+        # a plan of 100,000 steps holds no thread of this server (and its GIL) for seconds
         return run_in_worker(compute_preview, body, facts, pool="preview", timeout_s=120)
+    except PoolBusy as exc:
+        raise HTTPException(503, str(exc), headers={"Retry-After": "1"}) from exc
     except RigError as exc:
         raise HTTPException(409, str(exc)) from exc
-    finally:
-        _preview_slots.release()
 
 
 @router.post("/control/start", response_model=Message,

@@ -81,7 +81,7 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
 
     app.include_router(routes_spc.router)
     app.add_middleware(GuardMiddleware, loopback_only=settings.check_host)
-    # outermost: a client over its limit is answered before its body is read
+    # before the guard: a client over its limit is answered before its body is read
     app.add_middleware(RateLimitMiddleware, token=lambda: settings.token)
     app.add_middleware(SecurityHeadersMiddleware)  # outermost: on every answer (CSP), a 429 too
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")

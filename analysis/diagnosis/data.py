@@ -116,7 +116,7 @@ def channel_lag_samples(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
     lmax = min(MAX_LAG_SAMPLES, n // 100)
     direction, _ = direction_and_reversal(t, torque, 0.02 * amplitude)
     tau = best_torque_shift(t, torque, twist, direction, sigma,
-                            np.arange(-lmax, lmax + 1) * dt, LAG_EVIDENCE)
+                            np.arange(-lmax, lmax + 1) * dt, LAG_EVIDENCE, friction_aware=False)
     return int(round(tau / dt)) if dt > 0 else 0
 
 

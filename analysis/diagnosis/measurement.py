@@ -138,12 +138,14 @@ def travel_since_reversal(torque: np.ndarray, direction: np.ndarray) -> np.ndarr
 
 
 def _flank_rss(torque: np.ndarray, twist: np.ndarray, direction: np.ndarray, amplitude: float,
-               sigma: float, away: np.ndarray | None = None) -> float:
+               sigma: float, away: np.ndarray | None = None,
+               friction_order: bool = True) -> float:
     """Residual sum of squares (noise units) of the loaded flanks (|T| > 20 % of the amplitude)
     under a smooth law per flank (1, T, T^2) with a constant loading/unloading separation
     (Coulomb friction's 2F/K): what a lag between the channels adds is a separation
     proportional to the torque rate, which this law cannot hold. ``away``: samples far
-    enough from a reversal (HOLD_SHARE) to count."""
+    enough from a reversal (HOLD_SHARE) to count; ``friction_order``: the separation only in
+    friction's order (see below)."""
     on = np.abs(torque) > 0.2 * amplitude
     if away is not None:
         on &= away
@@ -163,7 +165,7 @@ def _flank_rss(torque: np.ndarray, twist: np.ndarray, direction: np.ndarray, amp
     for _ in range(3):
         beta = np.zeros(X.shape[1])
         beta[free], *_ = np.linalg.lstsq(X[:, free], y, rcond=None)
-        wrong = [j for j in (3, 7) if j in free and beta[j] > 0]
+        wrong = [j for j in (3, 7) if friction_order and j in free and beta[j] > 0]
         if not wrong:
             break
         free = [j for j in free if j not in wrong]
@@ -173,11 +175,14 @@ def _flank_rss(torque: np.ndarray, twist: np.ndarray, direction: np.ndarray, amp
 
 def best_torque_shift(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
                       direction: np.ndarray, sigma: float, shifts_s: np.ndarray,
-                      evidence: float) -> float:
+                      evidence: float, friction_aware: bool = True) -> float:
     """The shift ``tau`` (s) of the torque channel's time (torque read at ``t - tau`` beside the
     twist at ``t``) among ``shifts_s`` that best explains the loaded flanks, kept only when it
     improves them by ``evidence`` noise units over no shift. The gain is counted once per
-    count change of a quantised twist (a reading that holds one count holds one error)."""
+    count change of a quantised twist (a reading that holds one count holds one error).
+    ``friction_aware``: leave a friction's hold after each reversal out and allow the branch
+    separation only in friction's order (the diagnosis); without, any constant separation
+    (``rig analyse``'s check of the channels' alignment, as it was calibrated)."""
     n = torque.size
     amplitude = float(np.percentile(np.abs(torque), 99.5))
     if n < 200 or amplitude <= 0 or shifts_s.size == 0:
@@ -187,8 +192,9 @@ def best_torque_shift(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
     if core.sum() < 100:
         return 0.0
     tc, yc, dc = t[core], twist[core], direction[core]
-    away = travel_since_reversal(torque, direction)[core] > HOLD_SHARE * amplitude
-    base = _flank_rss(torque[core], yc, dc, amplitude, sigma, away)
+    away = (travel_since_reversal(torque, direction)[core] > HOLD_SHARE * amplitude
+            if friction_aware else np.ones(tc.size, dtype=bool))
+    base = _flank_rss(torque[core], yc, dc, amplitude, sigma, away, friction_aware)
     if not math.isfinite(base):
         return 0.0
     on = (np.abs(torque[core]) > 0.2 * amplitude) & away
@@ -198,7 +204,8 @@ def best_torque_shift(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
     for tau in shifts_s:
         if tau == 0.0:
             continue
-        rss = _flank_rss(np.interp(tc - tau, t, torque), yc, dc, amplitude, sigma, away)
+        rss = _flank_rss(np.interp(tc - tau, t, torque), yc, dc, amplitude, sigma, away,
+                         friction_aware)
         if rss < best_rss:
             best, best_rss = float(tau), rss
     return best if (base - best_rss) / per_count > evidence else 0.0

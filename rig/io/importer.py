@@ -124,8 +124,7 @@ def _check_samples(columns: dict[str, np.ndarray], data: SourceData) -> None:
     """What rig-run/1 and a measured loop need, each refusal naming the file, the line (or
     sample) and the column: finite time, torque and output angle; time strictly ascending in
     steps of at least :data:`MIN_STEP_S`; temperatures finite and above absolute zero
-    (blank = not measured); at least ``MIN_LOOP_SAMPLES`` samples; a torque and an angle
-    that move."""
+    (blank = not measured); at least ``MIN_LOOP_SAMPLES`` samples; a torque that moves."""
     from rig.analyse import MIN_LOOP_SAMPLES
 
     n = len(columns["t_s"])
@@ -173,11 +172,6 @@ def _check_samples(columns: dict[str, np.ndarray], data: SourceData) -> None:
         raise RunImportError(f"{data.where('torque_Nm', None)}: the torque is "
                              f"{float(torque[0])!r} N·m in all {n} samples: no loop was "
                              "measured")
-    angle = columns["output_angle_deg"]
-    if float(np.ptp(angle)) == 0.0:
-        raise RunImportError(f"{data.where('output_angle_deg', None)}: the output angle is "
-                             f"{float(angle[0])!r} deg in all {n} samples: an angle that never "
-                             "moves under a moving torque is no measurement")
 
 
 CSV_CHUNK_ROWS = 200_000

@@ -29,7 +29,9 @@ import rig
 from rig.errors import RigError, RunFormatError
 from rig.ids import id_problem
 from rig.io import read as io_read
-from rig.io.importer import import_run
+from rig.io.exporter import export_run
+from rig.io.importer import import_run, store_imported, write_imported
+from rig.io.safe_write import WriteTargetError
 from rig.runformat import read_run, runs_equal, write_run
 from rig.store import InvalidIdError, Store
 
@@ -66,12 +68,10 @@ def _catman(tmp: Path, name: str = "data.csv") -> Path:
 
 def _store_with_run(tmp: Path) -> tuple[Store, str, Path]:
     """A store holding the example run (as `rig import --into` puts it)."""
-    res = _rig("import", str(_catman(tmp)), "--map", str(CATMAN_MAP), "--unit", str(UNIT),
-               "--into", "rig-store", cwd=tmp)
-    assert res.returncode == 0, res.stderr
+    run = import_run(_catman(tmp), CATMAN_MAP, UNIT)
+    run_id = store_imported(run, tmp / "rig-store")
     st = Store(tmp / "rig-store", create=False)
-    (info,) = st.list_runs()
-    return st, info.run_id, info.path
+    return st, run_id, st.get_run(run_id).path
 
 
 def _snapshot(folder: Path) -> dict[str, bytes]:
@@ -136,51 +136,53 @@ def test_run_id_naming_a_stored_run_cannot_overwrite_it(tmp_path: Path) -> None:
     line = _one_line_error(_rig("import", "data.csv", "--map", str(CATMAN_MAP), "--unit",
                                 str(UNIT), "--run-id", path_id, "--out", "x", cwd=tmp_path))
     assert "--run-id: invalid run id" in line and "slash" in line
-    exported = tmp_path / "exported"
-    assert _rig("export", run_id, "--format", "csv", "--out", str(exported),
-                cwd=tmp_path).returncode == 0
+    exported = export_run(st.load_run(run_id), "csv", tmp_path / "exported")
     doc = json.loads((exported / "run.json").read_text())
     doc["run_id"] = path_id
     (exported / "run.json").write_text(json.dumps(doc))
     line = _one_line_error(_rig("export", "exported", "--format", "csv", cwd=tmp_path))
     assert "invalid run id" in line and "run.json" in line
-    for fmt, out in (("csv", path_id), ("parquet", f"{path_id}/samples.parquet"),
-                     ("xlsx", "rig-store/x.xlsx")):
-        line = _one_line_error(_rig("export", run_id, "--format", fmt, "--out", out,
-                                    "--force", cwd=tmp_path))
-        assert "inside a measurement store" in line or "inside a run folder" in line, line
+    run = st.load_run(run_id)
+    for fmt, out in (("csv", stored), ("parquet", stored / "samples.parquet"),
+                     ("xlsx", tmp_path / "rig-store/x.xlsx"), ("mat", stored.parent / "y.mat")):
+        with pytest.raises(WriteTargetError) as err:
+            export_run(run, fmt, out, force=True)
+        assert "inside a measurement store" in str(err.value) or \
+            "inside a run folder" in str(err.value), str(err.value)
     assert _snapshot(stored) == before
     assert runs_equal(st.load_run(run_id), read_run(stored))
     assert not (tmp_path / "rig-store/x.xlsx").exists()
 
 
-def test_export_refuses_existing_targets_and_symlinks_without_force(tmp_path: Path) -> None:
+def test_export_refuses_existing_targets_and_symlinks_without_force(tmp_path: Path,
+                                                                   monkeypatch) -> None:
     victim = tmp_path / "victim.txt"
     victim.write_text("keep me")
     (tmp_path / "link.parquet").symlink_to(victim)
     (tmp_path / "old.mat").write_text("old")
-    for fmt, out in (("parquet", "link.parquet"), ("mat", "old.mat")):
-        line = _one_line_error(_rig("export", str(EXAMPLE_RUN), "--format", fmt, "--out", out,
-                                    cwd=tmp_path))
-        assert out in line and ("--force" in line), line
+    line = _one_line_error(_rig("export", str(EXAMPLE_RUN), "--format", "parquet", "--out",
+                                "link.parquet", cwd=tmp_path))
+    assert "link.parquet: is a symlink" in line and "--force" in line, line
+    run = read_run(EXAMPLE_RUN)
+    with pytest.raises(WriteTargetError, match="old.mat: exists; --force replaces it"):
+        export_run(run, "mat", tmp_path / "old.mat")
     assert victim.read_text() == "keep me" and (tmp_path / "old.mat").read_text() == "old"
-    res = _rig("export", str(EXAMPLE_RUN), "--format", "parquet", "--out", "link.parquet",
-               "--force", cwd=tmp_path)
-    assert res.returncode == 0, res.stderr
+    export_run(run, "parquet", tmp_path / "link.parquet", force=True)
     assert victim.read_text() == "keep me"  # the link was replaced, not what it points to
     assert not (tmp_path / "link.parquet").is_symlink()
     # a run folder rig did not write is never replaced, even with --force
     other = tmp_path / "other-lab-run"
     shutil.copytree(EXAMPLE_RUN, other)
-    line = _one_line_error(_rig("export", str(EXAMPLE_RUN), "--format", "csv", "--out",
-                                str(other), "--force", cwd=tmp_path))
-    assert "did not write" in line
+    with pytest.raises(WriteTargetError, match="did not write"):
+        export_run(run, "csv", other, force=True)
+    assert _snapshot(other) == _snapshot(EXAMPLE_RUN)
     # one rig wrote is (the default target: ./RUN_ID)
-    assert _rig("export", str(EXAMPLE_RUN), "--format", "csv", cwd=tmp_path).returncode == 0
-    _one_line_error(_rig("export", str(EXAMPLE_RUN), "--format", "csv", cwd=tmp_path))
-    res = _rig("export", str(EXAMPLE_RUN), "--format", "csv", "--force", cwd=tmp_path)
-    assert res.returncode == 0, res.stderr
-    assert runs_equal(read_run(tmp_path / "pair1-pos000"), read_run(EXAMPLE_RUN))
+    monkeypatch.chdir(tmp_path)
+    assert export_run(run, "csv") == Path("pair1-pos000")
+    with pytest.raises(WriteTargetError, match="exists"):
+        export_run(run, "csv")
+    export_run(run, "csv", force=True)
+    assert runs_equal(read_run(tmp_path / "pair1-pos000"), run)
 
 
 # ----------------------------------------------------------- item 2: failed writes, for real
@@ -395,6 +397,7 @@ def test_import_out_is_all_or_nothing_and_not_over_a_run(tmp_path: Path) -> None
         (tmp_path / "run/samples.csv").read_bytes()
     line = _one_line_error(_rig(*args, "run", cwd=tmp_path))
     assert "exists; --force" in line
-    assert _rig(*args, "run", "--force", cwd=tmp_path).returncode == 0
-    line = _one_line_error(_rig(*args, "plain", "--force", cwd=tmp_path))
-    assert "did not write" in line
+    imported = import_run(source, CATMAN_MAP, UNIT)
+    write_imported(imported, tmp_path / "run", force=True)
+    with pytest.raises(WriteTargetError, match="did not write"):
+        write_imported(imported, tmp_path / "plain", force=True)

@@ -2,7 +2,7 @@
 
 The file is generated in a temporary folder: ``Time [s];Torque [N*m];Angle [arcsec]`` with
 decimal commas (``examples/maps/catman.toml``), a 1 kHz hysteresis loop (±10 N·m sine of
-20 s, 3 arcmin of play, 28 N·m/arcmin, noise), about 4.6 million rows. It is imported by
+20 s, 3 arcmin of play, 28 N·m/arcmin, noise), about 5.5 million rows. It is imported by
 ``rig import … --into STORE`` in a child process (what the issue timed at 134 s and 2.8 GB),
 and by ``rig import … --out RUN`` (the same reading and checks, no analysis, a run folder):
 
@@ -34,7 +34,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 MAP = REPO / "examples" / "maps" / "catman.toml"
 UNIT = REPO / "rig" / "examples" / "units" / "seed000-pair1.json"
-ROWS = 4_600_000
+ROWS = 5_500_000
 CHUNK = 500_000
 
 

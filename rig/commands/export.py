@@ -23,21 +23,25 @@ def register(app: typer.Typer) -> None:
         out: Annotated[Path | None, typer.Option(
             "--out", help="Where to write (default: RUN_ID[.EXT] or "
             "CAMPAIGN-results.EXT in the current folder).")] = None,
+        force: Annotated[bool, typer.Option(
+            "--force", help="Replace an existing --out (a file, or a run folder rig wrote).")
+        ] = False,
         store: StoreOption = DEFAULT_STORE,
         samples: SamplesOption = None,
     ) -> None:
         """Export a run (samples and run.json) or a campaign (one row per run: conditions,
         metrics with uncertainties, model, limits, outcome). --store is read only when
-        RUN_OR_CAMPAIGN is not a folder."""
+        RUN_OR_CAMPAIGN is not a folder. Never writes into a store or a run folder; an
+        existing --out only with --force; a failed write leaves the old file as it was."""
         from rig.io.exporter import export_campaign, export_run, resolve_target
         from rig.runformat import read_campaign, read_run
 
         path, is_campaign = resolve_target(target, store, samples)
         if is_campaign:
             campaign = read_campaign(path)
-            written = export_campaign(campaign, fmt, out)
+            written = export_campaign(campaign, fmt, out, force=force)
             typer.echo(f"campaign {campaign.name}: {len(campaign.runs)} runs -> {written}")
         else:
             run = read_run(path)
-            written = export_run(run, fmt, out)
+            written = export_run(run, fmt, out, force=force)
             typer.echo(f"run {run.run_id}: {run.n_samples} samples -> {written}")

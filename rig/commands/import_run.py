@@ -30,13 +30,16 @@ def register(app: typer.Typer) -> None:
             "--into", help="Add the run to this store (folder or postgresql:// URL).")] = None,
         samples: Annotated[Path | None, typer.Option(
             "--samples", envvar="RIG_SAMPLES_DIR", help=SAMPLES_HELP)] = None,
+        force: Annotated[bool, typer.Option(
+            "--force", help="Replace an existing --out run folder that rig wrote.")] = False,
         run_id: Annotated[str | None, typer.Option(
             "--run-id", help="The run id of a run folder (default: the map's run_id, else "
             "the file name). A stored run gets the store's id.")] = None,
     ) -> None:
         """Import another lab's measurement through a map: units converted to the run's
         (s, N·m, deg, °C), run.json with the unit, the map's test keys and source
-        {file, map}. Exactly one of --out and --into."""
+        {file, map}. Exactly one of --out and --into. --out is never inside a store or a
+        run folder, and an existing one is replaced only with --force."""
         from rig.io.importer import import_run, store_imported, write_imported
         from rig.io.map import RunImportError
 
@@ -44,7 +47,7 @@ def register(app: typer.Typer) -> None:
             raise RunImportError("give exactly one of --out RUN_FOLDER and --into STORE")
         run = import_run(file, map_file, unit, run_id=run_id)
         if out is not None:
-            folder = write_imported(run, out)
+            folder = write_imported(run, out, force=force, source=file)
             typer.echo(f"imported {file}: {run.n_samples} samples -> run folder {folder}")
         else:
             stored = store_imported(run, into, samples=samples)

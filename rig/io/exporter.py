@@ -22,8 +22,10 @@ Units follow the column names (s, N·m, deg, °C, arcmin, J).
 
 from __future__ import annotations
 
+import gc
 import json
 import re
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +35,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from rig.errors import RigError
+from rig.ids import id_from_text, id_problem
+from rig.io.safe_write import atomic_file, atomic_folder, check_target
 from rig.runformat import Campaign, Run, write_run
 
 __all__ = ["FORMATS", "XLSX_MAX_ROWS", "ExportError", "default_out", "export_campaign",
@@ -97,82 +101,87 @@ def _meta_json(meta: dict[str, Any]) -> str:
     return json.dumps(meta, ensure_ascii=False)
 
 
-def _prepare(out: Path, folder: bool = False) -> Path:
-    if folder:
-        if out.exists() and not out.is_dir():
-            raise ExportError(f"{out}: exists and is not a folder")
-    elif out.is_dir():
-        raise ExportError(f"{out}: is a folder; give a file name")
-    try:
-        (out if folder else out.parent).mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ExportError(f"{out}: cannot create ({exc.strerror or exc})") from None
-    return out
+def export_run(run: Run, fmt: str, out: Path | None = None, *, force: bool = False) -> Path:
+    """Write ``run`` as ``fmt`` to ``out`` (default :func:`default_out`); the path.
 
-
-def export_run(run: Run, fmt: str, out: Path | None = None) -> Path:
-    """Write ``run`` as ``fmt`` to ``out`` (default :func:`default_out`); the path."""
+    Never into a store or a run folder (:func:`rig.io.safe_write.check_target`); an existing
+    ``out`` only with ``force``; all or nothing (a failed write leaves ``out`` as it was)."""
     fmt = _check_format(fmt)
-    out = _prepare(out or default_out(run.run_id, fmt, False), folder=fmt == "csv")
+    if out is None:
+        problem = id_problem(run.run_id, "run")
+        if problem is not None:
+            raise ExportError(f"{problem}; give --out")
+        out = default_out(run.run_id, fmt, False)
+    sources = [run.path] if run.path is not None else []
+    out = check_target(Path(out), folder=fmt == "csv", force=force, sources=sources)
     if fmt == "csv":
-        return write_run(run, out)
-    if fmt == "parquet":
-        arrays = [pa.array(run.data[c], type=pa.float64() if isinstance(run.data[c], np.ndarray)
-                           else pa.string()) for c in run.columns]
-        table = pa.Table.from_arrays(arrays, names=list(run.columns))
-        table = table.replace_schema_metadata({"run.json": _meta_json(run.meta)})
-        pq.write_table(table, out)
-    elif fmt == "mat":
-        names = matlab_names(run.columns)
-        variables: dict[str, Any] = {
-            var: (run.data[c].reshape(-1, 1) if isinstance(run.data[c], np.ndarray)
-                  else _cell(run.data[c]))
-            for var, c in zip(names, run.columns, strict=True)
-        }
-        variables.update(run_id=run.run_id, meta_json=_meta_json(run.meta),
-                         columns=_cell(run.columns), variables=_cell(names))
-        _savemat(out, variables)
-    else:
-        if run.n_samples + 1 > XLSX_MAX_ROWS:
-            raise ExportError(f"run {run.run_id}: {run.n_samples} samples do not fit an Excel "
-                              f"sheet ({XLSX_MAX_ROWS - 1} rows at most); export csv or "
-                              "parquet")
-        samples = pd.DataFrame({c: run.data[c] for c in run.columns}, columns=run.columns)
-        meta = pd.DataFrame(meta_rows(run.meta), columns=["key", "value"])
-        _xlsx(out, {"samples": samples, "meta": meta})
+        with atomic_folder(out) as tmp:
+            write_run(run, tmp)
+        return out
+    if fmt == "xlsx" and run.n_samples + 1 > XLSX_MAX_ROWS:
+        raise ExportError(f"run {run.run_id}: {run.n_samples} samples do not fit an Excel "
+                          f"sheet ({XLSX_MAX_ROWS - 1} rows at most); export csv or parquet")
+    with atomic_file(out) as tmp:
+        if fmt == "parquet":
+            arrays = [pa.array(run.data[c], type=pa.float64()
+                               if isinstance(run.data[c], np.ndarray) else pa.string())
+                      for c in run.columns]
+            table = pa.Table.from_arrays(arrays, names=list(run.columns))
+            table = table.replace_schema_metadata({"run.json": _meta_json(run.meta)})
+            pq.write_table(table, tmp)
+        elif fmt == "mat":
+            names = matlab_names(run.columns)
+            variables: dict[str, Any] = {
+                var: (run.data[c].reshape(-1, 1) if isinstance(run.data[c], np.ndarray)
+                      else _cell(run.data[c]))
+                for var, c in zip(names, run.columns, strict=True)
+            }
+            variables.update(run_id=run.run_id, meta_json=_meta_json(run.meta),
+                             columns=_cell(run.columns), variables=_cell(names))
+            _savemat(tmp, variables)
+        else:
+            samples = pd.DataFrame({c: run.data[c] for c in run.columns}, columns=run.columns)
+            meta = pd.DataFrame(meta_rows(run.meta), columns=["key", "value"])
+            _xlsx(tmp, {"samples": samples, "meta": meta})
     return out
 
 
-def export_campaign(campaign: Campaign, fmt: str, out: Path | None = None) -> Path:
-    """Write the campaign's results table as ``fmt`` (csv, parquet, mat, xlsx); the path."""
+def export_campaign(campaign: Campaign, fmt: str, out: Path | None = None, *,
+                    force: bool = False) -> Path:
+    """Write the campaign's results table as ``fmt`` (csv, parquet, mat, xlsx); the path.
+    Where and how as :func:`export_run`."""
     from rig.api.results import TEXT_COLUMNS, results_frame
 
     fmt = _check_format(fmt)
-    name = campaign.meta.get("campaign_id") or campaign.name or "campaign"
-    out = _prepare(out or default_out(str(name), fmt, True))
+    if out is None:
+        name = campaign.meta.get("campaign_id") or campaign.name
+        out = default_out(id_from_text(name, "campaign"), fmt, True)
+    sources = [campaign.path] if campaign.path is not None else []
+    out = check_target(Path(out), folder=False, force=force, sources=sources)
     table = results_frame(campaign)
-    if fmt == "csv":
-        table.to_csv(out, index=False)
-    elif fmt == "parquet":
-        arrow = pa.Table.from_pandas(table, preserve_index=False)
-        arrow = arrow.replace_schema_metadata({"campaign.json": _meta_json(campaign.meta)})
-        pq.write_table(arrow, out)
-    elif fmt == "mat":
-        names = matlab_names(list(table.columns))
-        variables: dict[str, Any] = {}
-        for var, col in zip(names, table.columns, strict=True):
-            values = table[col]
-            if col in TEXT_COLUMNS:
-                variables[var] = _cell(["" if v is None else str(v) for v in values])
-            else:
-                numbers = values.to_numpy(dtype=np.float64, na_value=np.nan)
-                variables[var] = numbers.reshape(-1, 1)
-        variables.update(meta_json=_meta_json(campaign.meta), columns=_cell(list(table.columns)),
-                         variables=_cell(names))
-        _savemat(out, variables)
-    else:
-        meta = pd.DataFrame(meta_rows(campaign.meta), columns=["key", "value"])
-        _xlsx(out, {"results": table, "campaign": meta})
+    with atomic_file(out) as tmp:
+        if fmt == "csv":
+            table.to_csv(tmp, index=False)
+        elif fmt == "parquet":
+            arrow = pa.Table.from_pandas(table, preserve_index=False)
+            arrow = arrow.replace_schema_metadata({"campaign.json": _meta_json(campaign.meta)})
+            pq.write_table(arrow, tmp)
+        elif fmt == "mat":
+            names = matlab_names(list(table.columns))
+            variables: dict[str, Any] = {}
+            for var, col in zip(names, table.columns, strict=True):
+                values = table[col]
+                if col in TEXT_COLUMNS:
+                    variables[var] = _cell(["" if v is None else str(v) for v in values])
+                else:
+                    numbers = values.to_numpy(dtype=np.float64, na_value=np.nan)
+                    variables[var] = numbers.reshape(-1, 1)
+            variables.update(meta_json=_meta_json(campaign.meta),
+                             columns=_cell(list(table.columns)), variables=_cell(names))
+            _savemat(tmp, variables)
+        else:
+            meta = pd.DataFrame(meta_rows(campaign.meta), columns=["key", "value"])
+            _xlsx(tmp, {"results": table, "campaign": meta})
     return out
 
 
@@ -187,13 +196,31 @@ def _cell(texts: list[str]) -> np.ndarray:
 def _savemat(out: Path, variables: dict[str, Any]) -> None:
     from scipy.io import savemat
 
-    savemat(out, variables, do_compression=True, oned_as="column")
+    with open(out, "wb") as f:  # our own handle: a failed write raises here, not in a __del__
+        savemat(f, variables, do_compression=True, oned_as="column")
 
 
 def _xlsx(out: Path, sheets: dict[str, pd.DataFrame]) -> None:
-    with pd.ExcelWriter(out, engine="openpyxl") as writer:
-        for sheet, frame in sheets.items():
-            frame.to_excel(writer, sheet_name=sheet, index=False)
+    """Write the sheets; a failure is one OSError. After a failed write openpyxl leaves a
+    half-written zip and a worksheet generator behind, whose clean-up prints "Exception
+    ignored" tracebacks: while writing, those clean-ups are silent, and they are collected
+    before the error goes on."""
+    failure: OSError | None = None
+    hook = sys.unraisablehook
+    sys.unraisablehook = lambda _info: None
+    try:
+        try:
+            with open(out, "wb") as f, pd.ExcelWriter(f, engine="openpyxl") as writer:
+                for sheet, frame in sheets.items():
+                    frame.to_excel(writer, sheet_name=sheet, index=False)
+        except Exception as exc:  # OSError from the disk, or what openpyxl makes of it
+            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+            failure = OSError(getattr(exc, "errno", None), reason)
+        gc.collect()
+    finally:
+        sys.unraisablehook = hook
+    if failure is not None:
+        raise failure
 
 
 def resolve_target(target: str, store: str | Path, samples: str | Path | None = None
@@ -213,6 +240,9 @@ def resolve_target(target: str, store: str | Path, samples: str | Path | None = 
             raise ExportError(f"{target}: not a run folder (no {RUN_JSON}) or a campaign "
                               f"folder (no {CAMPAIGN_JSON})")
         return path, False
+    problem = id_problem(target, "run")
+    if problem is not None:
+        raise ExportError(f"{target!r}: no such folder, and not an id of the store: {problem}")
     try:
         st = Store(store, create=False, recover=False, samples=samples)
     except StoreError as exc:

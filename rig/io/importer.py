@@ -11,20 +11,38 @@ carries the unit of ``--unit``, the map's ``test`` and ``sensors`` and
 from __future__ import annotations
 
 import hashlib
-import re
+import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from rig.errors import RigError
-from rig.io.map import COLUMN_KINDS, RunImportError, convert_unit, load_map
-from rig.io.read import read_source
+from rig.ids import id_from_text, id_problem
+from rig.io.map import (
+    ABSOLUTE_ZERO_C,
+    COLUMN_KINDS,
+    RunImportError,
+    convert_unit,
+    load_map,
+    resolve_unit,
+)
+from rig.io.read import SourceData, read_source
+from rig.io.safe_write import atomic_folder, check_target
 from rig.json_files import read_json_file
 from rig.run_meta_check import unit_problems
-from rig.runformat import REQUIRED_COLUMNS, Run, write_run
+from rig.runformat import (
+    REQUIRED_COLUMNS,
+    RUN_JSON,
+    SAMPLES_CSV,
+    SAMPLES_PARQUET,
+    Run,
+    write_samples_parquet,
+)
+from rig.runformat.csvwrite import csv_line, samples_text
 
-__all__ = ["import_run", "read_unit", "store_imported", "write_imported"]
+__all__ = ["MIN_STEP_S", "check_run_id", "import_run", "read_unit", "store_imported",
+           "write_imported"]
 
 
 def read_unit(path: str | Path) -> dict[str, Any]:
@@ -48,7 +66,16 @@ def _sha256(path: Path) -> str:
 
 
 def _default_run_id(path: Path) -> str:
-    return re.sub(r"[^A-Za-z0-9._-]+", "_", path.stem).strip("._") or "imported"
+    return id_from_text(path.stem, "imported")
+
+
+def check_run_id(run_id: str, where: str) -> str:
+    """``run_id`` if it is a valid run id (:mod:`rig.ids`), else one line naming ``where``
+    it came from (``--run-id``, the map's ``run_id``)."""
+    problem = id_problem(run_id, "run")
+    if problem is not None:
+        raise RunImportError(f"{where}: {problem}")
+    return run_id
 
 
 def import_run(source: str | Path, map_path: str | Path, unit_path: str | Path,
@@ -56,30 +83,24 @@ def import_run(source: str | Path, map_path: str | Path, unit_path: str | Path,
     """The run the file ``source`` holds, read through the map ``map_path``, for the unit of
     ``unit_path``. ``run_id``: default the map's ``run_id``, else the file's stem."""
     src, map_file = Path(source), Path(map_path)
+    if run_id is not None:
+        check_run_id(run_id, "--run-id")
     mapping = load_map(map_file)
     unit = read_unit(unit_path)
+    if mapping.file_format(src) == "csv" and mapping.columns.t_s is None:
+        raise RunImportError(f"{map_file}: columns.t_s: a delimited file needs its time "
+                             "column mapped (only a TDMS file can take the time from its "
+                             "waveform timing)")
     data = read_source(src, mapping)
     refs = mapping.columns.model_dump(exclude_none=True)
     columns: dict[str, np.ndarray] = {}
     for name in COLUMN_KINDS:
         if name in data.values:
-            unit_name = refs.get(name, {}).get("unit")
-            columns[name] = convert_unit(data.values[name], COLUMN_KINDS[name], unit_name)
-    if len(columns["t_s"]) == 0:
-        raise RunImportError(f"{data.where('t_s', None)}: no samples")
-    for name in REQUIRED_COLUMNS:
-        bad = np.flatnonzero(~np.isfinite(columns[name]))
-        if bad.size:
-            i = int(bad[0])
-            raise RunImportError(f"{data.where(name, i)}: {name} needs a finite value, got "
-                                 f"{float(data.values[name][i])!r}")
-    t = columns["t_s"]
-    bad = np.flatnonzero(~(np.diff(t) > 0))
-    if bad.size:
-        i = int(bad[0]) + 1
-        raise RunImportError(f"{data.where('t_s', i)}: time must be strictly ascending: "
-                             f"{float(data.values['t_s'][i])!r} after "
-                             f"{float(data.values['t_s'][i - 1])!r}")
+            kind = COLUMN_KINDS[name]
+            unit_name = resolve_unit(kind, refs.get(name, {}).get("unit"),
+                                     data.units.get(name), data.where(name, None))
+            columns[name] = convert_unit(data.values[name], kind, unit_name)
+    _check_samples(columns, data)
     source_meta = {"file": str(src), "map": str(map_file), "format": data.format,
                    "sha256": _sha256(src)}
     try:
@@ -95,12 +116,87 @@ def import_run(source: str | Path, map_path: str | Path, unit_path: str | Path,
         raise RunImportError(f"{src}: {exc}") from None
 
 
-def write_imported(run: Run, folder: str | Path) -> Path:
-    """Write ``run`` as a rig-run/1 folder (run.json + samples.csv); the folder."""
-    out = Path(folder)
-    if out.exists() and not out.is_dir():
-        raise RunImportError(f"{out}: exists and is not a folder")
-    return write_run(run, out)
+MIN_STEP_S = 1e-9
+"""The smallest time step (s) a sampled file can hold: 1 ns, a 1 GHz sample rate."""
+
+
+def _check_samples(columns: dict[str, np.ndarray], data: SourceData) -> None:
+    """What rig-run/1 and a measured loop need, each refusal naming the file, the line (or
+    sample) and the column: finite time, torque and output angle; time strictly ascending in
+    steps of at least :data:`MIN_STEP_S`; temperatures finite and above absolute zero
+    (blank = not measured); at least ``MIN_LOOP_SAMPLES`` samples; a torque that moves."""
+    from rig.analyse import MIN_LOOP_SAMPLES
+
+    n = len(columns["t_s"])
+    if n == 0:
+        raise RunImportError(f"{data.where('t_s', None)}: no samples")
+    for name in REQUIRED_COLUMNS:
+        bad = np.flatnonzero(~np.isfinite(columns[name]))
+        if bad.size:
+            i = int(bad[0])
+            raise RunImportError(f"{data.where(name, i)}: {name} needs a finite value, got "
+                                 f"{float(data.values[name][i])!r}")
+    t = columns["t_s"]
+    steps = np.diff(t)
+    bad = np.flatnonzero(~(steps > 0))
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise RunImportError(f"{data.where('t_s', i)}: time must be strictly ascending: "
+                             f"{float(data.values['t_s'][i])!r} after "
+                             f"{float(data.values['t_s'][i - 1])!r}")
+    bad = np.flatnonzero(steps < MIN_STEP_S)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise RunImportError(f"{data.where('t_s', i)}: a time step of {float(steps[i - 1]):g} s "
+                             f"(from {float(data.values['t_s'][i - 1])!r} to "
+                             f"{float(data.values['t_s'][i])!r}) is below {MIN_STEP_S:g} s: "
+                             "no sampled measurement; is the time column's unit right?")
+    if "temperature_C" in columns:
+        temp = columns["temperature_C"]
+        with np.errstate(invalid="ignore"):
+            bad = np.flatnonzero(np.isinf(temp) | (temp < ABSOLUTE_ZERO_C))
+        if bad.size:
+            i = int(bad[0])
+            raise RunImportError(f"{data.where('temperature_C', i)}: temperature "
+                                 f"{float(temp[i])!r} °C is not a temperature (finite, at "
+                                 f"least {ABSOLUTE_ZERO_C} °C); is the column's unit right?")
+    if n < MIN_LOOP_SAMPLES:
+        raise RunImportError(f"{data.where('torque_Nm', None)}: {n} sample"
+                             f"{'' if n == 1 else 's'}; a hysteresis loop needs at least "
+                             f"{MIN_LOOP_SAMPLES}")
+    torque = columns["torque_Nm"]
+    if not np.any(torque):
+        raise RunImportError(f"{data.where('torque_Nm', None)}: the torque is 0 N·m in all {n} "
+                             "samples: no loop was measured (is the right column mapped?)")
+    if float(np.ptp(torque)) == 0.0:
+        raise RunImportError(f"{data.where('torque_Nm', None)}: the torque is "
+                             f"{float(torque[0])!r} N·m in all {n} samples: no loop was "
+                             "measured")
+
+
+CSV_CHUNK_ROWS = 200_000
+"""Rows formatted at a time when a run folder is written (the text of a whole large run is
+never held at once)."""
+
+
+def write_imported(run: Run, folder: str | Path, *, force: bool = False,
+                   source: Path | None = None) -> Path:
+    """Write ``run`` as a rig-run/1 folder (run.json + samples.csv, as
+    :func:`rig.runformat.write_run` writes them); the folder. Never into a store or a run
+    folder, an existing folder only with ``force`` (:func:`rig.io.safe_write.check_target`),
+    all or nothing."""
+    out = check_target(Path(folder), folder=True, force=force,
+                       sources=[source] if source is not None else [])
+    with atomic_folder(out) as tmp:
+        with open(tmp / SAMPLES_CSV, "w", encoding="utf-8", newline="") as f:
+            f.write(csv_line(run.columns))
+            for start in range(0, run.n_samples, CSV_CHUNK_ROWS):
+                part = {c: run.data[c][start:start + CSV_CHUNK_ROWS] for c in run.columns}
+                text = samples_text(run.columns, part)
+                f.write(text[text.index("\n") + 1:])
+        (tmp / RUN_JSON).write_text(json.dumps(run.meta, indent=2, ensure_ascii=False) + "\n",
+                                    encoding="utf-8")
+    return out
 
 
 def store_imported(run: Run, store_root: str | Path, *,
@@ -108,7 +204,11 @@ def store_imported(run: Run, store_root: str | Path, *,
                    campaign_id: str | None = None) -> str:
     """Add ``run`` to the store as a completed run (samples in Parquet, as measured runs);
     its metrics from ``rig analyse`` go to run.json ``result`` (None if they cannot be
-    computed, the reason logged in ``result_error``). Returns the store's run id."""
+    computed, the reason logged in ``result_error``). Returns the store's run id.
+
+    The samples are written straight to the run's ``samples.parquet`` (not streamed row by
+    row through the recorder's CSV): the recorder then finds the Parquet file in place and
+    only drops its empty CSV (:func:`rig.store.files.finalise_samples`)."""
     from rig.store import Store
 
     st = Store(store_root, samples=samples)
@@ -122,10 +222,8 @@ def store_imported(run: Run, store_root: str | Path, *,
                                    limits)[0]
     recorder = st.begin_run(meta, list(run.columns), campaign_id=campaign_id)
     with recorder:
-        arrays = [run.data[c] for c in run.columns]
-        for row in zip(*(a.tolist() if isinstance(a, np.ndarray) else a for a in arrays),
-                       strict=True):
-            recorder.append(row)
+        write_samples_parquet(recorder.path / SAMPLES_PARQUET, list(run.columns), run.data)
+        recorder.n_samples = run.n_samples
         recorder.finish("completed", result=result, extra=extra)
     return recorder.run_id
 

@@ -28,12 +28,14 @@ from pydantic import (
 )
 
 from rig.errors import RigError
+from rig.ids import id_problem
 from rig.run_meta_check import meta_problems
 from rig.toml_files import describe_validation_error, read_toml
 
 __all__ = [
-    "COLUMN_KINDS", "UNITS", "ColumnRef", "ImportMap", "RunImportError", "convert_unit",
-    "load_map",
+    "ABSOLUTE_ZERO_C", "COLUMN_KINDS", "RUN_UNITS", "TORQUE_MAX_NM", "UNITS", "ColumnRef",
+    "ImportMap", "RunImportError", "convert_unit", "known_unit", "load_map", "resolve_unit",
+    "same_unit",
 ]
 
 
@@ -77,10 +79,59 @@ COLUMN_KINDS = {
 """The run columns a map can fill, and the kind of unit each takes."""
 
 
+RUN_UNITS = {"time": "s", "torque": "N*m", "angle": "deg", "temperature": "C"}
+"""The run's own unit of each kind (a column the map and the file give no unit for)."""
+
+
 def convert_unit(values: np.ndarray, kind: str, unit: str | None) -> np.ndarray:
     """``values`` in ``unit`` (None: already the run's unit) as float64 in the run's unit."""
     values = np.asarray(values, dtype=np.float64)
     return values if unit is None else np.asarray(UNITS[kind][unit](values), dtype=np.float64)
+
+
+def known_unit(text: str) -> tuple[str, str] | None:
+    """(kind, the name :data:`UNITS` knows) of a unit as a file writes it: spaces ignored
+    (``N m``, ``deg C``), case too where that leaves one unit (``Deg``, ``NM``); None when it
+    is no unit rig knows."""
+    compact = "".join(text.split())
+    names = [(kind, name) for kind, units in UNITS.items() for name in units]
+    exact = [kn for kn in names if kn[1] == compact]
+    if exact:
+        return exact[0]
+    folded = [kn for kn in names if kn[1].lower() == compact.lower()]
+    return folded[0] if len(folded) == 1 else None
+
+
+def same_unit(kind: str, a: str, b: str) -> bool:
+    """Do two units of ``kind`` convert alike (``N*m`` and ``Nm``; ``C`` and ``°C``)?"""
+    probe = np.array([1.0, 7.5, -300.0])
+    return bool(np.array_equal(UNITS[kind][a](probe), UNITS[kind][b](probe)))
+
+
+def resolve_unit(kind: str, map_unit: str | None, file_unit: str | None,
+                 where: str) -> str | None:
+    """The unit a column's values are in: the map's, else the file's own (a catman
+    header's ``[kN*m]``, a TDMS ``unit_string``), else the run's (None). A file unit that
+    is another kind's, or that differs from the map's, is refused (``where`` names the
+    column); a file unit rig does not know needs the map to say what it is."""
+    if file_unit is None:
+        return map_unit
+    known = known_unit(file_unit)
+    if known is None:
+        if map_unit is None:
+            raise RunImportError(f"{where}: the file gives the unit {file_unit!r}, which is not "
+                                 f"a unit of {kind} rig knows ({', '.join(UNITS[kind])}); "
+                                 "give the column's unit in the map")
+        return map_unit
+    file_kind, name = known
+    if file_kind != kind:
+        raise RunImportError(f"{where}: the file gives the unit {file_unit!r}, a unit of "
+                             f"{file_kind}, not of {kind}; is the column mapped to the right "
+                             "run column?")
+    if map_unit is not None and not same_unit(kind, map_unit, name):
+        raise RunImportError(f"{where}: the map says unit {map_unit!r} but the file says "
+                             f"{file_unit!r}; remove the map's unit or correct it")
+    return map_unit if map_unit is not None else name
 
 
 _STRICT = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
@@ -109,6 +160,19 @@ class Columns(BaseModel):
     def _ref(cls, value: Any) -> Any:
         return {"column": value} if isinstance(value, str) else value
 
+    @model_validator(mode="after")
+    def _distinct(self) -> Columns:
+        seen: dict[str, str] = {}
+        for name in COLUMN_KINDS:
+            ref = getattr(self, name)
+            if ref is None:
+                continue
+            if ref.column in seen:
+                raise ValueError(f"{seen[ref.column]} and {name} both map to {ref.column!r}; "
+                                 "each run column needs its own file column")
+            seen[ref.column] = name
+        return self
+
     @field_validator("*", mode="after")
     @classmethod
     def _unit(cls, ref: ColumnRef | None, info: ValidationInfo) -> ColumnRef | None:
@@ -118,6 +182,12 @@ class Columns(BaseModel):
                              f"{', '.join(UNITS[kind])}")
         return ref
 
+
+TORQUE_MAX_NM = 1e7
+"""A rated torque (N·m) above this is no gear reducer's (the largest wind-turbine gearboxes
+carry a few MN·m): a typo or a unit mistake, refused."""
+ABSOLUTE_ZERO_C = -273.15
+"""No temperature (°C) is below it."""
 
 KNOWN_TEST_KEYS = ("rated_torque_Nm", "input_angle_deg", "temperature_C", "cycles",
                    "start_flank", "amplitude_pct", "amplitude_Nm", "ratio", "repeat",
@@ -129,9 +199,10 @@ class Test(BaseModel):
     kept as given unless they look like a misspelt known key."""
 
     model_config = ConfigDict(extra="allow", strict=True, allow_inf_nan=False)
-    rated_torque_Nm: float = Field(gt=0)
+    rated_torque_Nm: float = Field(gt=0, le=TORQUE_MAX_NM)
     input_angle_deg: float | None = None
-    temperature_C: float | None = None
+    temperature_C: float | None = Field(default=None, ge=ABSOLUTE_ZERO_C)
+    amplitude_Nm: float | None = Field(default=None, gt=0, le=TORQUE_MAX_NM)
     cycles: int | None = Field(default=None, ge=1)
     start_flank: Literal[-1, 1] | None = None
     amplitude_pct: float | None = Field(default=None, gt=0)
@@ -161,10 +232,18 @@ class ImportMap(BaseModel):
     skip_rows: int = Field(default=0, ge=0)
     encoding: str = "utf-8"
     group: str | None = None
-    run_id: str | None = Field(default=None, min_length=1)
+    run_id: str | None = None
     columns: Columns
     test: Test
     sensors: dict[str, Any] = Field(default_factory=dict)
+
+    @field_validator("run_id")
+    @classmethod
+    def _run_id(cls, value: str | None) -> str | None:
+        problem = None if value is None else id_problem(value, "run")
+        if problem is not None:
+            raise ValueError(problem)
+        return value
 
     @model_validator(mode="after")
     def _marks(self) -> ImportMap:

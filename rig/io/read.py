@@ -8,16 +8,18 @@ from __future__ import annotations
 
 import csv
 import difflib
+import re
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pacsv
 
-from rig.io.map import ImportMap, RunImportError
+from rig.io.map import ImportMap, RunImportError, known_unit
 
 __all__ = ["SourceData", "read_source"]
 
@@ -35,6 +37,9 @@ class SourceData:
     values: dict[str, np.ndarray]
     where: Callable[[str, int | None], str]
     format: str
+    units: dict[str, str | None] = field(default_factory=dict)
+    """Run column -> the unit the file itself gives (a catman header's ``[N*m]``, a TDMS
+    channel's ``unit_string``), None where it gives none."""
 
 
 def read_source(path: Path, mapping: ImportMap) -> SourceData:
@@ -78,6 +83,9 @@ def _header(path: Path, mapping: ImportMap) -> list[str]:
     except UnicodeDecodeError as exc:
         raise RunImportError(f"{path}: not {mapping.encoding} text ({exc.reason} at byte "
                              f"{exc.start}); set 'encoding' in the map") from None
+    except UnicodeError as exc:
+        raise RunImportError(f"{path}: not {mapping.encoding} text ({exc}); set 'encoding' "
+                             "in the map") from None
     except OSError as exc:
         raise RunImportError(f"{path}: cannot read ({exc.strerror or exc})") from None
     if not line.strip():
@@ -85,6 +93,14 @@ def _header(path: Path, mapping: ImportMap) -> list[str]:
                              f"skip_rows = {mapping.skip_rows})")
     return [c.strip() for c in next(csv.reader([line.rstrip("\r\n")],
                                                delimiter=mapping.delimiter))]
+
+
+BLOCK_BYTES = 8 << 20
+"""Bytes of text pyarrow parses at a time (``pyarrow.csv.open_csv``): a file of any size is
+read block by block, only the mapped columns' numbers kept."""
+
+HEADER_UNIT = re.compile(r"\[\s*([^\[\]]*?)\s*\]\s*$")
+"""A unit in a header, catman style: ``Torque [N*m]``."""
 
 
 def _read_delimited(path: Path, mapping: ImportMap) -> SourceData:
@@ -97,54 +113,73 @@ def _read_delimited(path: Path, mapping: ImportMap) -> SourceData:
             raise RunImportError(f"{path}:{mapping.skip_rows + 1}: column {name!r} appears "
                                  "twice in the header")
     header_line = mapping.skip_rows + 1
+
+    def where(run_column: str, index: int | None) -> str:
+        name = wanted.get(run_column, wanted["torque_Nm"])
+        col = header.index(name) + 1
+        line = f"{header_line + 1 + index}:" if index is not None else f"{header_line}:"
+        return f"{path}:{line}{col}: column {name!r} ({run_column})"
+
+    names = list(dict.fromkeys(wanted.values()))
+    chunks: dict[str, list[np.ndarray]] = {run_column: [] for run_column in wanted}
+    offset = 0
     try:
-        table = pacsv.read_csv(
+        reader = pacsv.open_csv(
             path,
             read_options=pacsv.ReadOptions(skip_rows=mapping.skip_rows,
                                            encoding=mapping.encoding,
-                                           column_names=None),
+                                           block_size=BLOCK_BYTES),
             parse_options=pacsv.ParseOptions(delimiter=mapping.delimiter),
             convert_options=pacsv.ConvertOptions(
-                include_columns=list(dict.fromkeys(wanted.values())),
-                column_types={name: pa.string() for name in wanted.values()},
+                include_columns=names, column_types={name: pa.string() for name in names},
                 strings_can_be_null=False, quoted_strings_can_be_null=False),
         )
+        for batch in reader:
+            for run_column, name in wanted.items():
+                texts = batch.column(batch.schema.get_field_index(name))
+                chunks[run_column].append(
+                    _numbers(texts, mapping.decimal, run_column, where, offset))
+            offset += batch.num_rows
     except (pa.ArrowInvalid, OSError, LookupError, UnicodeError) as exc:
         text = " ".join(str(exc).split())
         raise RunImportError(f"{path}: {text}") from None
-
-    def where(run_column: str, index: int | None) -> str:
-        name = wanted[run_column]
-        col = header.index(name) + 1
-        line = f"{header_line + 1 + index}:" if index is not None else ""
-        return f"{path}:{line}{col}: column {name!r} ({run_column})"
-
-    values = {run_column: _numbers(table.column(name), mapping.decimal, run_column, where)
-              for run_column, name in wanted.items()}
-    return SourceData(values, where, "csv")
+    values = {run_column: np.concatenate(parts) if parts else np.empty(0)
+              for run_column, parts in chunks.items()}
+    del chunks
+    units = {run_column: _header_unit(name) for run_column, name in wanted.items()}
+    return SourceData(values, where, "csv", units)
 
 
-def _numbers(texts: pa.ChunkedArray, decimal: str, run_column: str,
-             where: Callable[[str, int | None], str]) -> np.ndarray:
-    """Text cells as float64: blank = missing (NaN); anything else must be a number."""
+def _header_unit(name: str) -> str | None:
+    """The unit a header names in brackets when it is one rig knows (``[Ch 3]`` is not)."""
+    match = HEADER_UNIT.search(name)
+    return match.group(1) if match and known_unit(match.group(1)) else None
+
+
+def _numbers(texts: pa.Array, decimal: str, run_column: str,
+             where: Callable[[str, int | None], str], offset: int = 0) -> np.ndarray:
+    """Text cells as float64: blank = missing (NaN); anything else must be a number.
+    ``offset``: the index of the first cell in the file (for the line of an error)."""
     cells = pc.utf8_trim_whitespace(texts)
     if decimal == ",":
         points = pc.match_substring(cells, ".")
         if pc.any(points).as_py():
             i = _first(points)
-            raise RunImportError(f"{where(run_column, i)}: {cells[i].as_py()!r} has a '.' but "
+            raise RunImportError(f"{where(run_column, offset + i)}: {cells[i].as_py()!r} has a "
+                                 "'.' but "
                                  "the map's decimal mark is ','")
         cells = pc.replace_substring(cells, ",", ".")
     blank = pc.equal(cells, "")
     ok = pc.or_(blank, pc.match_substring_regex(cells, NUMBER, ignore_case=True))
     if not pc.all(ok).as_py():
         i = _first(pc.invert(ok))
-        raise RunImportError(f"{where(run_column, i)}: {texts[i].as_py()!r} is not a number")
+        raise RunImportError(f"{where(run_column, offset + i)}: {texts[i].as_py()!r} is not "
+                             "a number")
     numbers = pc.if_else(blank, pa.scalar(None, pa.string()), cells).cast(pa.float64())
     return numbers.fill_null(np.nan).to_numpy()
 
 
-def _first(mask: pa.ChunkedArray) -> int:
+def _first(mask: pa.Array) -> int:
     return int(np.flatnonzero(mask.to_numpy(zero_copy_only=False))[0])
 
 
@@ -155,10 +190,16 @@ def _read_tdms(path: Path, mapping: ImportMap) -> SourceData:
     from nptdms import TdmsFile
 
     try:
-        tdms = TdmsFile.read(path)
+        with TdmsFile.open(path) as tdms:  # channels are read one by one, as needed
+            return _tdms_columns(path, mapping, tdms)
+    except RunImportError:
+        raise
     except Exception as exc:  # npTDMS raises ValueError, KeyError, struct.error ... on junk
         text = " ".join(str(exc).split()) or type(exc).__name__
         raise RunImportError(f"{path}: not a readable TDMS file ({text})") from None
+
+
+def _tdms_columns(path: Path, mapping: ImportMap, tdms: Any) -> SourceData:
     groups = [g.name for g in tdms.groups()]
     if mapping.group is None:
         if len(groups) != 1:
@@ -183,12 +224,16 @@ def _read_tdms(path: Path, mapping: ImportMap) -> SourceData:
         return f"{path}: group {group_name!r} channel {name!r} ({run_column}){sample}"
 
     values: dict[str, np.ndarray] = {}
+    units: dict[str, str | None] = {}
     for run_column, name in wanted.items():
-        data = np.asarray(group[name][:])
+        channel = group[name]
+        data = np.asarray(channel[:])
         if data.dtype.kind not in "fiu":
             raise RunImportError(f"{where(run_column, None)}: holds {data.dtype} values, "
                                  "not numbers")
-        values[run_column] = data.astype(np.float64)
+        values[run_column] = data.astype(np.float64, copy=False)
+        unit = channel.properties.get("unit_string")
+        units[run_column] = str(unit).strip() or None if unit is not None else None
     if "t_s" not in values:
         channel = group[wanted["torque_Nm"]]
         try:
@@ -202,4 +247,4 @@ def _read_tdms(path: Path, mapping: ImportMap) -> SourceData:
         if len(data) != n:
             raise RunImportError(f"{where(run_column, None)}: {len(data)} samples, but the "
                                  f"torque channel has {n}")
-    return SourceData(values, where, "tdms")
+    return SourceData(values, where, "tdms", units)

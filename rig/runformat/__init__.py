@@ -41,6 +41,7 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from rig.errors import RunFormatError
+from rig.ids import id_from_text, id_problem
 from rig.runformat.base import (
     CAMPAIGN_FORMAT,
     CAMPAIGN_JSON,
@@ -240,7 +241,8 @@ def read_run(path: str | Path, *, allow_truncated_tail: bool = False) -> Run:
 
     A run folder holding ``samples.parquet`` (a stored run) is read from it, else from
     ``samples.csv``. A bare CSV (another lab's export, samples only) or Parquet file gets
-    the minimal meta ``{"format": "rig-run/1", "run_id": <file stem>}`` and a note saying
+    the minimal meta ``{"format": "rig-run/1", "run_id": <file stem>}`` (characters an id
+    may not hold, :mod:`rig.ids`, become ``_``) and a note saying
     so. A ``samples.csv`` or ``samples.parquet`` next to a ``run.json`` is read as that run
     folder.
 
@@ -304,6 +306,7 @@ def read_campaign(path: str | Path, *, allow_truncated_tail: bool = False) -> Ca
         text = _read_text(json_path)
         meta = _parse_json_object(json_path, text)
         _check_format_key(json_path, text, meta, CAMPAIGN_FORMAT)
+        _check_ids(json_path, text, {"campaign_id": meta.get("campaign_id")})
         if "runs" in meta:
             names = _campaign_run_names(json_path, text, meta["runs"])
         else:
@@ -773,6 +776,7 @@ def _read_run_json(path: Path) -> dict[str, Any]:
     if not isinstance(rid, str) or not rid:
         line, col = _locate_key(text, "run_id") or (None, None)
         raise RunFormatError(path, f"'run_id' must be a non-empty string, got {rid!r}", line, col)
+    _check_ids(path, text, meta)
     for key in ("unit", "test", "sensors"):
         if key in meta and not isinstance(meta[key], dict):
             line, col = _locate_key(text, key) or (None, None)
@@ -787,6 +791,18 @@ def _read_run_json(path: Path) -> dict[str, Any]:
         line, col = _locate_key(text, key) or (None, None)
         raise RunFormatError(path, "; ".join(problems), line, col)
     return meta
+
+
+def _check_ids(path: Path, text: str, meta: dict[str, Any]) -> None:
+    """``run_id`` and ``campaign_id`` (when present) are names: the rule of :mod:`rig.ids`
+    (an id becomes a folder or file name when the run is exported or stored)."""
+    for key, kind in (("run_id", "run"), ("campaign_id", "campaign")):
+        if meta.get(key) is None:
+            continue
+        problem = id_problem(meta[key], kind)
+        if problem is not None:
+            line, col = _locate_key(text, key) or (None, None)
+            raise RunFormatError(path, f"{key!r}: {problem}", line, col)
 
 
 def _campaign_run_names(path: Path, text: str, runs: Any) -> list[str]:
@@ -809,14 +825,14 @@ def _campaign_run_names(path: Path, text: str, runs: Any) -> list[str]:
 
 def _read_bare_csv(path: Path, allow_truncated_tail: bool) -> Run:
     columns, data, notes = read_samples_csv(path, allow_truncated_tail)
-    meta = {"format": RUN_FORMAT, "run_id": path.stem}
+    meta = {"format": RUN_FORMAT, "run_id": id_from_text(path.stem, "samples")}
     notes.insert(0, f"read from a bare CSV file {path} (samples only): no run.json, minimal meta")
     return Run(meta=meta, columns=columns, data=data, path=path, notes=notes)
 
 
 def _read_bare_parquet(path: Path) -> Run:
     columns, data, notes = read_samples_parquet(path)
-    meta = {"format": RUN_FORMAT, "run_id": path.stem}
+    meta = {"format": RUN_FORMAT, "run_id": id_from_text(path.stem, "samples")}
     notes.insert(0, f"read from a bare Parquet file {path} (samples only): no run.json, "
                  "minimal meta")
     return Run(meta=meta, columns=columns, data=data, path=path, notes=notes)

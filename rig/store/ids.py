@@ -1,9 +1,9 @@
 """Run and campaign ids of the measurement store: generation and strict validation.
 
-An id is also a folder name inside the store, so it is held to a strict pattern: ASCII
-letters, digits, ``_`` and ``-``, starting with a letter or digit, at most 100 characters.
-No dots, slashes or backslashes can appear, so no id can climb out of the store (``..``)
-or name a hidden file.
+An id is also a folder name inside the store, so it is held to the one rule of
+:mod:`rig.ids`: ASCII letters, digits, ``_`` and ``-``, starting with a letter or digit, at
+most 100 characters. No dots, slashes or backslashes can appear, so no id can climb out of
+the store (``..``) or name a hidden file.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import re
 from datetime import UTC, datetime
 
 from rig.errors import RigError
+from rig.ids import ID_PATTERN, id_problem  # noqa: F401  (ID_PATTERN: re-exported)
 
-ID_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,99}")
 _LABEL_MAX = 40
 
 
@@ -36,12 +36,10 @@ class UnknownIdError(StoreError, LookupError):
 
 def validate_id(value: object, kind: str = "run") -> str:
     """Return ``value`` if it is a valid id, else raise :class:`InvalidIdError` naming it."""
-    if not isinstance(value, str) or ID_PATTERN.fullmatch(value) is None:
-        raise InvalidIdError(
-            f"invalid {kind} id {value!r}: expected 1-100 ASCII letters, digits, '_' or '-', "
-            "starting with a letter or digit (no dots, no slashes)"
-        )
-    return value
+    problem = id_problem(value, kind)  # the one rule of rig/ids.py
+    if problem is not None:
+        raise InvalidIdError(problem)
+    return value  # type: ignore[return-value]
 
 
 def safe_label(text: object, fallback: str) -> str:

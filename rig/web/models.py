@@ -12,10 +12,12 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from rig import ids
 from rig.campaign import Limits
 from rig.plans import CampaignAxes, LoopParams, check_plan_size
 
-ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_-]{0,99}$"
+ID_PATTERN = rf"^{ids.ID_PATTERN.pattern}$"
+"""Run and campaign ids in URLs: the one rule of :mod:`rig.ids`."""
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,79}$"
 """A plan longer than this is refused (its preview alone would take seconds)."""
 

@@ -332,9 +332,14 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
     if d2b.size >= 20:
         sigma_b = max(sigma_b, 1.4826 * float(np.median(np.abs(d2b))) / math.sqrt(6.0))
     # without dither (noise below a count) averaging does not shrink the quantisation error
-    # of a block mean: it stays up to half a count, uniform -> q / sqrt(12)
+    # of a block mean standing still: it stays up to half a count, uniform -> q / sqrt(12).
+    # A block over which the twist sweeps m counts averages the sawtooth of its errors down
+    # by about sqrt(m) (continuous loading moves through many counts per block)
     if white_noise_std(twist) < q_twist:
-        sigma_b = max(sigma_b, q_twist / math.sqrt(12.0))
+        same1 = seg[1:] == seg[:-1]
+        swept = np.abs(np.diff(yb))[same1] / q_twist if same1.any() else np.zeros(1)
+        m = max(1.0, float(np.median(swept)))
+        sigma_b = max(sigma_b, q_twist / math.sqrt(12.0 * m))
     play = nominal.play_arcmin if nominal is not None else math.nan
     events = crossing_events(t, torque, twist, jump, direction, amplitude, play)
     zero = crossing_zero(events)

@@ -1,6 +1,7 @@
 """``rig validate-diagnosis``: the diagnosis on withheld effects, ours or a labelled folder.
 
-    rig validate-diagnosis [--cases N] [--seed S] [--jobs J] [--json SUMMARY.json]
+    rig validate-diagnosis [--cases N] [--seed S] [--jobs J] [--artifacts/--no-artifacts]
+                           [--json SUMMARY.json]
     rig validate-diagnosis --cases-dir DIR --labels LABELS.json [--cases-dir ... --labels ...]
                            [--with-generator] [--jobs J] [--json SUMMARY.json]
 """
@@ -61,13 +62,16 @@ def _print_graded(summary: dict[str, Any], verbose: bool) -> None:
     console.print(f"[bold]{summary_line(summary)}[/bold]", soft_wrap=True)
 
 
-def _ours(cases: int, seed: int, jobs: int, verbose: bool) -> dict[str, Any]:
+def _ours(cases: int, seed: int, jobs: int, verbose: bool, artifacts: bool) -> dict[str, Any]:
     from rig.validate import KINDS, graded_validation, meets_targets, summarise
 
+    what = "with" if artifacts else "without"
+    console.print(f"our generator, {what} a real rig's measuring-system artefacts")
     with Progress(console=console, transient=True) as progress:
         task = progress.add_task("our generator: diagnosing campaigns", total=cases)
         results, graded = graded_validation(cases, seed, jobs,
-                                            progress=lambda _r: progress.advance(task))
+                                            progress=lambda _r: progress.advance(task),
+                                            artifacts=artifacts)
     old = summarise(results)
     _print_graded(graded, verbose)
     by_form: dict[str, dict[str, int]] = {}
@@ -91,7 +95,7 @@ def _ours(cases: int, seed: int, jobs: int, verbose: bool) -> dict[str, Any]:
     missing = [k for k in KINDS if k not in old["confusion"]]
     if missing:
         console.print(f"(kinds not drawn at {cases} cases: {', '.join(missing)})")
-    return {**graded, "by_form": by_form, "figures": old}
+    return {**graded, "artifacts": artifacts, "seed": seed, "by_form": by_form, "figures": old}
 
 
 def register(app: typer.Typer) -> None:
@@ -109,6 +113,11 @@ def register(app: typer.Typer) -> None:
         with_generator: Annotated[bool, typer.Option(
             "--with-generator", help="Also run our generator beside the --cases-dir sets.")
         ] = False,
+        artifacts: Annotated[bool, typer.Option(
+            "--artifacts/--no-artifacts", help="Our generator's campaigns measured through a "
+            "real rig's measuring system (impacts and bounces, sensor lag, ADC grid, drive "
+            "loop and ripple, drifting zero, Coulomb friction, encoder, jittered sampling with "
+            "dropped rows, pre-cycles; docs/diagnosis.md), or the plant's columns.")] = True,
         jobs: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 1,
         verbose: Annotated[bool, typer.Option("--verbose", help="One line per case.")] = False,
         json_file: Annotated[
@@ -126,7 +135,7 @@ def register(app: typer.Typer) -> None:
                            "give one labels.json per folder of cases")
         summaries = []
         if not dirs or with_generator:
-            summaries.append(_ours(cases, seed, jobs, verbose))
+            summaries.append(_ours(cases, seed, jobs, verbose, artifacts))
         for d, lab in zip(dirs, labs, strict=True):
             name = generator_name(d)
             with Progress(console=console, transient=True) as progress:

@@ -4,12 +4,13 @@
 :func:`self_check`) makes N labelled campaigns with the campaign's own design and diagnoses
 them blind:
 
-- the design is replayed: each run's measured torque channel is the drive command of the
-  time-domain plant (simulators/plant) on the run's own time base (the plant steps on a
-  uniform grid at the median sample interval and is read at the measured sample times,
-  gaps and jitter included), at the run's eccentric-shaft position and temperature, with the
-  campaign's unit data; the torque channel written is the measured one (plus an effect of the
-  reading, if that is the withheld effect);
+- the design is replayed: each run's measured torque channel (smoothed, and zero within
+  three noise sigmas of zero: the sensor's noise is no torque on the unit) is the drive
+  command of the time-domain plant (simulators/plant) on the run's own time base (the
+  plant steps on a uniform grid at the median sample interval and is read at the measured
+  sample times, gaps and jitter included), at the run's eccentric-shaft position and
+  temperature, with the campaign's unit data; the torque channel written is the measured
+  one (plus an effect of the reading, if that is the withheld effect);
 - the measuring system is the campaign's own, estimated from its data: the twist noise from
   robust second differences (:func:`analysis.loop.branches.white_noise_std`), the encoder
   and ADC resolution from the data's grid (:func:`analysis.diagnosis.data.resolution_of`),
@@ -271,7 +272,7 @@ def like_campaign(design: Design, kind: str, params: dict[str, Any] | None,
         grid = t[0] + np.arange(n) * dt
         # the twist at sample k answers the command held over the interval before it; the
         # true torque leads the measured channel by its lag
-        command = np.interp(grid + dt + design.torque_lag_s, t, r.torque_Nm)
+        command = np.interp(grid + dt + design.torque_lag_s, t, _true_torque(r.torque_Nm))
         temp = float(np.nanmean(r.temperature_C)) if r.temperature_C is not None else 20.0
         # implicit Euler is stable at any step: a quasi-static replay needs no finer one
         # than the samples (two steps per sample, at most 10 ms)
@@ -303,6 +304,23 @@ def like_campaign(design: Design, kind: str, params: dict[str, Any] | None,
     meta = {"format": "rig-campaign/1", "name": f"like-{design.name}-{index:03d}",
             "runs": [r.run_id for r in runs]}
     return Campaign(meta=meta, runs=runs)
+
+
+def _true_torque(measured_Nm: np.ndarray) -> np.ndarray:
+    """The torque the unit carried, from the measured channel: its noise is the sensor's, not
+    a torque on the unit (a frictionless plant would float across the play on it at zero
+    torque). Savitzky-Golay smoothing (quadratic over 7 samples keeps ramps and steps' ends),
+    and zero where the smoothed torque is within 3 noise sigmas of zero (a dwell at zero)."""
+    from scipy.signal import savgol_filter
+
+    from analysis.loop.branches import white_noise_std
+
+    x = np.asarray(measured_Nm, dtype=float)
+    if x.size < 9:
+        return x.copy()
+    smooth = savgol_filter(x, 7, 2)
+    sigma = white_noise_std(x)
+    return np.where(np.abs(smooth) < 3.0 * sigma, 0.0, smooth)
 
 
 def _correct(kind: str, verdict: str, also: list[str], candidates: list[str]) -> bool:

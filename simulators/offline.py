@@ -56,7 +56,8 @@ def simulate_run(
 
     Returns ``t_s``, ``torque_Nm`` (the sensor: offset, gain, noise), ``output_angle_deg`` and
     ``input_angle_deg`` (quantised to rig.encoder_counts_per_rev), ``temperature_C``, plus
-    the extra columns ``true_torque_Nm`` (flange torque) and ``torque_command_Nm``.
+    the extra columns ``true_torque_Nm`` (flange torque), ``chain_torque_Nm`` (what the
+    elastic chain carries: flange torque less the output friction) and ``torque_command_Nm``.
     """
     if not (math.isfinite(duration_s) and duration_s > 0):
         raise ValueError(f"duration_s must be > 0, got {duration_s!r}")
@@ -80,6 +81,7 @@ def simulate_run(
     out = np.empty(n)
     inp = np.empty(n)
     flange = np.empty(n)
+    chain = np.empty(n)
     temp = np.empty(n)
     step = model.step
     for k, command in enumerate(commands.tolist()):  # Python floats: numpy scalars are slow
@@ -87,6 +89,7 @@ def simulate_run(
         out[k] = model.output_angle_deg()
         inp[k] = model.input_deg
         flange[k] = model.flange_Nm
+        chain[k] = model.chain_Nm
         temp[k] = model.temperature_C
         step(dt, sub)
 
@@ -109,5 +112,6 @@ def simulate_run(
         "input_angle_deg": quantise_deg(inp, counts),
         "temperature_C": temp,
         "true_torque_Nm": flange,
+        "chain_torque_Nm": chain,
         "torque_command_Nm": commands,
     }

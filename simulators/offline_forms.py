@@ -79,3 +79,46 @@ def center_distance_change_mm(play_change_um: float, pressure_angle_deg: float) 
     """The center-distance change (mm) that changes the circumferential play by
     ``play_change_um``: ``dj = -2 tan(alpha) da`` (seed 000 eq. (3))."""
     return -play_change_um / 1000.0 / (2.0 * math.tan(math.radians(pressure_angle_deg)))
+
+
+def reversal_points(precycles: int = 0, first_sign: int = 1) -> list[float]:
+    """The loading's reversal points (fractions of rated): ``0, s, -s, s, 0`` (s the first
+    direction's sign) with ``precycles`` full cycles ``s, -s`` inserted before the last one."""
+    s = 1.0 if first_sign >= 0 else -1.0
+    return [0.0, s, -s] + [s, -s] * int(precycles) + [s, 0.0]
+
+
+def path_profile(loading: str, rated_Nm: float, n: int, precycles: int = 0,
+                 first_sign: int = 1, steps_per_quarter: int = 8,
+                 ramp_share: float = 0.6) -> np.ndarray:
+    """Commanded torque (N*m), one value per sample, through :func:`reversal_points`:
+
+    - ``stepped``: equal steps of ``T_rated / steps_per_quarter`` plus a step at +-3 % of
+      rated (the lost-motion points), each a ramp over ``ramp_share`` of the step, then a
+      dwell;
+    - ``ramp``: constant rate (triangular, no dwell);
+    - ``sine``: ``s T_rated sin(2 pi (1.5 + precycles) k / (n - 1))``."""
+    points = reversal_points(precycles, first_sign)
+    if loading == "sine":
+        k = np.arange(n)
+        return (points[1] * rated_Nm
+                * np.sin(2.0 * math.pi * (1.5 + precycles) * k / max(n - 1, 1)))
+    if loading == "ramp":
+        lengths = np.abs(np.diff(points))
+        knots = np.concatenate(([0.0], np.cumsum(lengths)))
+        u = np.linspace(0.0, knots[-1], n)
+        return rated_Nm * np.interp(u, knots, points)
+    if loading != "stepped":
+        raise ValueError(f"unknown loading {loading!r}; known: stepped, ramp, sine")
+    q = np.unique(np.append(np.linspace(0.0, 1.0, steps_per_quarter + 1), 0.03))
+    grid = np.unique(np.concatenate((-q, q)))
+    levels = [points[0]]
+    for a, b in zip(points[:-1], points[1:], strict=True):
+        inner = grid[(grid > min(a, b)) & (grid < max(a, b))]
+        levels += list(inner if b > a else inner[::-1]) + [b]
+    lv = np.asarray(levels) * rated_Nm
+    per = n / (lv.size - 1)
+    k = np.arange(n) / per
+    i = np.minimum(k.astype(int), lv.size - 2)
+    frac = np.clip((k - i) / ramp_share, 0.0, 1.0)
+    return lv[i] + (lv[i + 1] - lv[i]) * frac

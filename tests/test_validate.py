@@ -138,11 +138,12 @@ def test_generator_varies_laws_units_and_noise() -> None:
 @pytest.mark.timeout(300)  # 12 campaigns diagnosed (CPU-bound, two processes)
 @pytest.mark.alone
 def test_small_validation_meets_the_targets(tmp_path) -> None:
-    """One case of every kind (12 cases) from the widened generator, through
-    ``rig validate-diagnosis --jobs 2``: every in-vocabulary effect, null, out of vocabulary,
-    graded as a labelled folder is. The larger runs' figures are in docs/diagnosis.md."""
+    """One case of every kind (12 cases) from the widened generator without a real rig's
+    artefacts, through ``rig validate-diagnosis --jobs 2 --no-artifacts``: every
+    in-vocabulary effect, null, out of vocabulary, graded as a labelled folder is. The
+    larger runs' figures are in docs/diagnosis.md."""
     out = _rig("validate-diagnosis", "--cases", str(len(KINDS) + 1), "--seed", "3",
-               "--jobs", "2", "--json", str(tmp_path / "s.json"))
+               "--jobs", "2", "--no-artifacts", "--json", str(tmp_path / "s.json"))
     assert out.returncode == 0, out.stderr
     summary = json.loads((tmp_path / "s.json").read_text())
     assert summary["generator"] == "ours" and summary["cases"] == 12

@@ -1,8 +1,10 @@
 """``rig validate-diagnosis``: the diagnosis on withheld effects, ours or a labelled folder.
 
-    rig validate-diagnosis [--cases N] [--seed S] [--jobs J] [--json SUMMARY.json]
+    rig validate-diagnosis [--cases N] [--seed S] [--jobs J] [--artifacts/--no-artifacts]
+                           [--json SUMMARY.json]
     rig validate-diagnosis --cases-dir DIR --labels LABELS.json [--cases-dir ... --labels ...]
                            [--with-generator] [--jobs J] [--json SUMMARY.json]
+    rig validate-diagnosis --like CAMPAIGN [--cases N] [--jobs J] [--seed S] --json FILE
 """
 
 from __future__ import annotations
@@ -61,13 +63,16 @@ def _print_graded(summary: dict[str, Any], verbose: bool) -> None:
     console.print(f"[bold]{summary_line(summary)}[/bold]", soft_wrap=True)
 
 
-def _ours(cases: int, seed: int, jobs: int, verbose: bool) -> dict[str, Any]:
+def _ours(cases: int, seed: int, jobs: int, verbose: bool, artifacts: bool) -> dict[str, Any]:
     from rig.validate import KINDS, graded_validation, meets_targets, summarise
 
+    what = "with" if artifacts else "without"
+    console.print(f"our generator, {what} a real rig's measuring-system artefacts")
     with Progress(console=console, transient=True) as progress:
         task = progress.add_task("our generator: diagnosing campaigns", total=cases)
         results, graded = graded_validation(cases, seed, jobs,
-                                            progress=lambda _r: progress.advance(task))
+                                            progress=lambda _r: progress.advance(task),
+                                            artifacts=artifacts)
     old = summarise(results)
     _print_graded(graded, verbose)
     by_form: dict[str, dict[str, int]] = {}
@@ -91,7 +96,53 @@ def _ours(cases: int, seed: int, jobs: int, verbose: bool) -> dict[str, Any]:
     missing = [k for k in KINDS if k not in old["confusion"]]
     if missing:
         console.print(f"(kinds not drawn at {cases} cases: {', '.join(missing)})")
-    return {**graded, "by_form": by_form, "figures": old}
+    return {**graded, "artifacts": artifacts, "seed": seed, "by_form": by_form, "figures": old}
+
+
+def _fmt_size(size: dict[str, Any] | None) -> str:
+    if not size:
+        return "-"
+    return ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                     for k, v in size.items() if k not in ("seed", "model"))
+
+
+def print_like(summary: dict[str, Any]) -> None:
+    """The self-check's confusion: per effect right/wrong and verdicts, the smallest size
+    found, the false alarms on the nulls, the one summary line."""
+    d = summary["design"]
+    console.print(f"campaigns like {summary['campaign']}: {d['runs']} runs, twist noise "
+                  f"{d['twist_noise_arcsec']:.3g} arcsec, encoder count "
+                  f"{d['twist_resolution_arcsec']:.3g} arcsec, ADC count "
+                  f"{d['torque_resolution_Nm']:.3g} N*m, torque lag "
+                  f"{d['torque_lag_s'] * 1e3:.3g} ms",
+                  soft_wrap=True)
+    table = Table(title="withheld effect -> verdict[+also] (sizes in noise multiples)")
+    for col in ("effect", "right", "wrong", "verdicts", "smallest found"):
+        table.add_column(col)
+    for kind, pe in sorted(summary["per_effect"].items()):
+        best = summary["smallest_found"].get(kind)
+        found = ("-" if kind == "none" else "not found" if best is None else
+                 f"{best['noise_multiple']:.2g} x noise ({_fmt_size(best['size'])})")
+        table.add_row(kind, str(pe["correct"]), str(pe["wrong"]), ", ".join(
+            f"{v} x{n}" for v, n in sorted(pe["verdicts"].items(), key=lambda kv: -kv[1])),
+            found)
+    console.print(table)
+    for kind, why in summary["untestable"].items():
+        console.print(f"not withheld: {kind} ({why})")
+    console.print(f"[bold]on {summary['cases']} campaigns like this one: right "
+                  f"{summary['correct']}, false alarms {summary['false_alarms']} of "
+                  f"{summary['nulls']} ({summary['seconds']:.0f} s)[/bold]", soft_wrap=True)
+
+
+def _like(campaign: Path, cases: int, seed: int, jobs: int) -> dict[str, Any]:
+    from rig.validate.like import self_check
+
+    with Progress(console=console, transient=True) as progress:
+        task = progress.add_task(f"campaigns like {campaign.name}: diagnosing", total=cases)
+        summary = self_check(campaign, cases, jobs, seed,
+                             progress=lambda _r: progress.advance(task))
+    print_like(summary)
+    return summary
 
 
 def register(app: typer.Typer) -> None:
@@ -106,9 +157,19 @@ def register(app: typer.Typer) -> None:
         labels: Annotated[list[Path] | None, typer.Option(
             "--labels", help="labels.json of the --cases-dir in the same place "
             "({case_id: {effect, acceptable, also, category, ...}}).")] = None,
+        like: Annotated[Path | None, typer.Option(
+            "--like", help="A campaign folder: make --cases labelled campaigns with its "
+            "design (positions, temperatures, torque history, sample times, unit data) and "
+            "its measured noise, lag and resolution, withhold each effect it can show, "
+            "diagnose them blind and print the confusion.")] = None,
         with_generator: Annotated[bool, typer.Option(
             "--with-generator", help="Also run our generator beside the --cases-dir sets.")
         ] = False,
+        artifacts: Annotated[bool, typer.Option(
+            "--artifacts/--no-artifacts", help="Our generator's campaigns measured through a "
+            "real rig's measuring system (impacts and bounces, sensor lag, ADC grid, drive "
+            "loop and ripple, drifting zero, Coulomb friction, encoder, jittered sampling with "
+            "dropped rows, pre-cycles; docs/diagnosis.md), or the plant's columns.")] = True,
         jobs: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 1,
         verbose: Annotated[bool, typer.Option("--verbose", help="One line per case.")] = False,
         json_file: Annotated[
@@ -120,13 +181,21 @@ def register(app: typer.Typer) -> None:
         --cases-dir: campaigns from our own generator (rig/validate/)."""
         from rig.validate.cases import generator_name, grade_folder, summarise_graded
 
+        if like is not None:
+            if cases_dir:
+                raise RigError("--like and --cases-dir: give one of them")
+            out = _like(like, cases, seed, jobs)
+            if json_file is not None:
+                json_file.parent.mkdir(parents=True, exist_ok=True)
+                json_file.write_text(json.dumps(out, indent=2) + "\n")
+            return
         dirs, labs = list(cases_dir or []), list(labels or [])
         if len(dirs) != len(labs):
             raise RigError(f"--cases-dir given {len(dirs)} time(s), --labels {len(labs)}: "
                            "give one labels.json per folder of cases")
         summaries = []
         if not dirs or with_generator:
-            summaries.append(_ours(cases, seed, jobs, verbose))
+            summaries.append(_ours(cases, seed, jobs, verbose, artifacts))
         for d, lab in zip(dirs, labs, strict=True):
             name = generator_name(d)
             with Progress(console=console, transient=True) as progress:

@@ -17,6 +17,16 @@ is not one simulator's forms:
   channel behind the angles, ringing after the impact at the play crossing
   (simulators/offline_forms.py).
 
+With ``artifacts`` (issue 20, the default of ``rig validate-diagnosis``) every case is instead
+measured through a real rig's measuring system (simulators/offline_rig.py): impacts with
+bounces at the play crossing (a contact oscillator), the torque sensor's first-order lag on an
+ADC grid, the drive's integral torque loop, a re-tared zero that random-walks, drive torque
+ripple, a small Coulomb friction in every unit, encoders of 2^19..2^23 counts, 100-1000 Hz
+sampling with timestamp jitter and dropped rows, loading with pre-cycles and runs that start
+loading the negative flank. None of them is an effect of the unit. Their sizes are drawn from
+a stream of their own (``default_rng([seed, index, ARTIFACT_STREAM])``), so a case's effect is
+the same with and without them.
+
 The case's label and true parameters are kept in :class:`Case` and written to run.json only
 under ``generator`` (never read by the diagnosis); the diagnosis sees the campaign through
 :func:`rig.diagnose.run_input` exactly as ``rig diagnose`` does. :func:`make_case` with
@@ -49,11 +59,13 @@ from simulators.offline_forms import (
     center_distance_change_mm,
     delayed,
     impact_ringing_arcsec,
+    path_profile,
     power_law_twist_arcmin,
     ramp_profile,
     sine_profile,
     smooth_takeup_twist_arcmin,
 )
+from simulators.offline_rig import RigArtifacts, draw_artifacts, measure_run
 from simulators.plant.config import PlantConfig, load_plant_config
 
 IN_VOCABULARY = ("friction", "stiffness_nonlinearity", "runout", "bearing_clearance",
@@ -84,6 +96,10 @@ UNIT_FILES = tuple(UNITS_DIR / f"seed000-pair{n}.json" for n in (1, 2))
 RATE_HZ = 250.0
 DURATION_S = 10.0
 RATED_NM = 10.0
+#: The torque sensor's full scale (N*m, bipolar) written to run.json ``sensors``.
+FULL_SCALE_NM = 20.0
+#: The third seed of a case's artefact stream ``default_rng([seed, index, ARTIFACT_STREAM])``.
+ARTIFACT_STREAM = 20
 
 
 def cycle_profile(rated_Nm: float, n: int, steps_per_quarter: int = 8,
@@ -126,6 +142,10 @@ class Case:
     play_change_um: list[float] = field(default_factory=list)
     #: The loading drive regulates on the measured torque: its command is offset by -this.
     command_offset_Nm: float = 0.0
+    #: A real rig's measuring system (issue 20), None: the plant's columns as they are.
+    artifacts: RigArtifacts | None = None
+    #: Seed of the per-run draws of the measuring system (zero residual, ripple phase, ...).
+    artifact_seed: int = 0
 
     @property
     def expected(self) -> set[str]:
@@ -156,9 +176,12 @@ def _unit(rng: np.random.Generator, base: dict[str, Any]) -> dict[str, Any]:
 
 
 def make_case(index: int, kind: str, rng: np.random.Generator,
-              base: PlantConfig | None = None, widened: bool = False) -> Case:
+              base: PlantConfig | None = None, widened: bool = False,
+              artifacts_rng: np.random.Generator | None = None) -> Case:
     """Draw a case of ``kind`` (an effect, 'none', 'creep' or 'direction_gain'); ``widened``:
-    then draw the form, loading profile and sensor artifacts too (:func:`widen`)."""
+    then draw the form, loading profile and sensor artifacts too (:func:`widen`);
+    ``artifacts_rng``: then measure it through a real rig's measuring system, its sizes drawn
+    from this stream (:func:`with_artifacts`)."""
     base = base or load_plant_config()
     for _ in range(20):
         unit = _unit(rng, base.unit)
@@ -235,7 +258,24 @@ def make_case(index: int, kind: str, rng: np.random.Generator,
         config = config.with_effect(kind, **{k: v for k, v in truth.items() if k != "law"})
     case = Case(index, kind, config, positions, temps, truth or dict(post), post,
                 form=_classic_form(kind, truth, post))
-    return widen(case, rng) if widened else case
+    case = widen(case, rng) if widened else case
+    return with_artifacts(case, artifacts_rng) if artifacts_rng is not None else case
+
+
+def with_artifacts(case: Case, rng: np.random.Generator) -> Case:
+    """The case measured through a real rig (simulators/offline_rig.py): the artefact sizes
+    drawn from ``rng`` (:func:`simulators.offline_rig.draw_artifacts`), its encoder, no
+    pure channel delay nor fixed ringing (the sensor's lag and the contact oscillator's
+    impacts replace them). The truth under ``generator`` gains ``measuring_system``."""
+    art = draw_artifacts(rng, RATED_NM, FULL_SCALE_NM)
+    config = case.config.with_changes(rig={"encoder_counts_per_rev": art.encoder_counts_per_rev})
+    truth = {**case.truth, "encoder_counts_per_rev": art.encoder_counts_per_rev,
+             "torque_lag_s": art.torque_lag_s, "impact": {},
+             "measuring_system": art.to_dict()}
+    return Case(case.index, case.kind, config, case.positions_deg, case.temperatures_C, truth,
+                case.post, form=case.form, loading=case.loading, lag_s=0.0, impact={},
+                play_change_um=case.play_change_um, command_offset_Nm=case.command_offset_Nm,
+                artifacts=art, artifact_seed=int(rng.integers(2 ** 31)))
 
 
 def _classic_form(kind: str, truth: dict[str, Any], post: dict[str, Any]) -> str:
@@ -330,11 +370,71 @@ def loading_profile(loading: str, rated_Nm: float, n: int) -> np.ndarray:
     raise ValueError(f"unknown loading {loading!r}; known: {', '.join(LOADINGS)}")
 
 
+def _extra_twist_arcmin(case: Case, flange_Nm: np.ndarray) -> np.ndarray:
+    """The effects added outside the plant (other forms), as twist (arcmin) of the flange
+    torque: a Hertzian power-law stiffening, a smooth clearance take-up."""
+    extra = np.zeros_like(flange_Nm)
+    law = case.post.get("stiffening_power_law")
+    if law is not None:
+        extra += power_law_twist_arcmin(flange_Nm, RATED_NM, **law)
+    takeup = case.post.get("smooth_takeup")
+    if takeup is not None:
+        extra += smooth_takeup_twist_arcmin(flange_Nm, **takeup)
+    return extra
+
+
+def _plant_columns(case: Case, config: PlantConfig, profile: np.ndarray, pos: float,
+                   temp: float) -> dict[str, np.ndarray]:
+    """A run's columns from the plant with the sensor artifacts of :func:`widen`."""
+    counts = case.config.rig.encoder_counts_per_rev
+    samples = profile.size
+    cols = simulate_run(config, profile, duration_s=samples / RATE_HZ,
+                        sample_rate_Hz=RATE_HZ, input_angle_deg=pos, temperature_C=temp)
+    flange = cols["true_torque_Nm"]
+    extra = _extra_twist_arcmin(case, flange)
+    if case.impact:
+        extra += impact_ringing_arcsec(cols["t_s"], flange, **case.impact) / 60.0
+    if extra.any():
+        cols["output_angle_deg"] = quantise_deg(cols["output_angle_deg"] + extra / 60.0,
+                                                counts)
+    if case.lag_s > 0.0:
+        lagged = delayed(cols["t_s"], flange, case.lag_s)
+        cols["torque_Nm"] = cols["torque_Nm"] + lagged - flange
+    return cols
+
+
+def _measured_columns(case: Case, k: int, config: PlantConfig, pos: float,
+                      temp: float) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """A run's columns measured through the case's rig (:func:`measure_run`), and what the
+    run's own draws were (zero residual, dropped rows, impacts and bounces)."""
+    art = case.artifacts
+    assert art is not None
+    n = int(round(DURATION_S * art.sample_rate_Hz))
+    profile = path_profile(case.loading, RATED_NM, n, art.precycles,
+                           art.first_sign) - case.command_offset_Nm
+    noise = case.config.noise
+    res = measure_run(config, profile, art, twist_noise_arcsec=noise.twist_arcsec_rms,
+                      torque_noise_Nm=noise.torque_Nm_rms,
+                      rng=np.random.default_rng([case.artifact_seed, k]),
+                      input_angle_deg=pos, temperature_C=temp,
+                      extra_twist_arcmin=(lambda f: _extra_twist_arcmin(case, f))
+                      if case.post else None)
+    tr = res["truth"]
+    run_truth = {"tare_residual_Nm": float(tr["zero_Nm"][0]),
+                 "zero_drift_Nm": float(tr["zero_Nm"][-1] - tr["zero_Nm"][0]),
+                 "dropped_rows": int((~tr["keep"]).sum()), "dropped_bursts": tr["bursts"],
+                 "impacts": tr["contact"]["impacts"], "bounces": tr["contact"]["bounces"]}
+    return res["columns"], run_truth
+
+
 def simulate_campaign(case: Case, samples: int = int(DURATION_S * RATE_HZ)) -> Campaign:
-    """The case's campaign as rig-run/1 runs (labels only under run.json ``generator``)."""
-    profile = loading_profile(case.loading, RATED_NM, samples) - case.command_offset_Nm
+    """The case's campaign as rig-run/1 runs (labels only under run.json ``generator``).
+    With :attr:`Case.artifacts` the runs are measured through that rig (``samples`` is then
+    its sample rate times :data:`DURATION_S`)."""
     counts = case.config.rig.encoder_counts_per_rev
     alpha = float(case.config.unit.get("pressure_angle_deg", 20.0))
+    art = case.artifacts
+    profile = loading_profile(case.loading, RATED_NM, samples) - case.command_offset_Nm
     runs = []
     for k, (pos, temp) in enumerate(zip(case.positions_deg, case.temperatures_C, strict=True)):
         config = case.config
@@ -342,35 +442,26 @@ def simulate_campaign(case: Case, samples: int = int(DURATION_S * RATE_HZ)) -> C
             a = float(config.unit["center_distance_mm"])
             da = center_distance_change_mm(case.play_change_um[k], alpha)
             config = config.with_changes(unit={"center_distance_mm": a + da})
-        cols = simulate_run(config, profile, duration_s=samples / RATE_HZ,
-                            sample_rate_Hz=RATE_HZ, input_angle_deg=pos, temperature_C=temp)
-        flange = cols["true_torque_Nm"]
-        extra = np.zeros_like(flange)
-        law = case.post.get("stiffening_power_law")
-        if law is not None:
-            extra += power_law_twist_arcmin(flange, RATED_NM, **law)
-        takeup = case.post.get("smooth_takeup")
-        if takeup is not None:
-            extra += smooth_takeup_twist_arcmin(flange, **takeup)
-        if case.impact:
-            extra += impact_ringing_arcsec(cols["t_s"], flange, **case.impact) / 60.0
-        if extra.any():
-            cols["output_angle_deg"] = quantise_deg(cols["output_angle_deg"] + extra / 60.0,
-                                                    counts)
-        if case.lag_s > 0.0:
-            lagged = delayed(cols["t_s"], flange, case.lag_s)
-            cols["torque_Nm"] = cols["torque_Nm"] + lagged - flange
+        generator: dict[str, Any] = {"kind": case.kind, "truth": case.truth,
+                                     "what": "rig.validate (simulated, not a measurement)"}
+        if art is None:
+            cols = _plant_columns(case, config, profile, pos, temp)
+        else:
+            cols, generator["measuring_system_run"] = _measured_columns(case, k, config, pos,
+                                                                        temp)
         run_id = f"case{case.index:03d}-run{k:02d}"
         plan = {"stepped": "cycle-steps", "ramp": "cycle-ramp", "sine": "cycle-sine"}[case.loading]
+        test = {"rated_torque_Nm": RATED_NM, "input_angle_deg": pos, "temperature_C": temp,
+                "cycles": 1, "plan": plan}
+        if art is not None:
+            test["cycles"] = 1 + art.precycles
+            test["start_flank"] = -1
         runs.append(Run.from_arrays(
             run_id, cols["t_s"], cols["torque_Nm"], cols["output_angle_deg"],
             input_angle_deg=cols["input_angle_deg"], temperature_C=cols["temperature_C"],
-            unit=case.config.unit,
-            test={"rated_torque_Nm": RATED_NM, "input_angle_deg": pos, "temperature_C": temp,
-                  "cycles": 1, "plan": plan},
-            sensors={"encoder_counts_per_rev": counts, "torque_full_scale_Nm": 20.0},
-            extra_meta={"generator": {"kind": case.kind, "truth": case.truth,
-                                      "what": "rig.validate (simulated, not a measurement)"}},
+            unit=case.config.unit, test=test,
+            sensors={"encoder_counts_per_rev": counts, "torque_full_scale_Nm": FULL_SCALE_NM},
+            extra_meta={"generator": generator},
         ))
     meta = {"format": "rig-campaign/1", "name": f"validation-case{case.index:03d}",
             "runs": [r.run_id for r in runs]}
@@ -403,20 +494,27 @@ class CaseResult:
 
 def run_validation(n_cases: int, seed: int = 0,
                    progress: Callable[[CaseResult], None] | None = None,
-                   jobs: int = 1) -> list[CaseResult]:
+                   jobs: int = 1, artifacts: bool = False) -> list[CaseResult]:
     """Generate and blindly diagnose ``n_cases`` campaigns; returns one result per case."""
-    return list(iter_validation(n_cases, seed, progress, jobs))
+    return list(iter_validation(n_cases, seed, progress, jobs, artifacts))
 
 
-def validate_one(args: tuple[int, int, str]) -> CaseResult:
-    """Case ``index`` of kind ``kind`` drawn by the widened generator from its own stream
-    ``default_rng([seed, index])`` (the same case whatever the number of jobs), simulated and
-    diagnosed blind."""
+def draw_case(seed: int, index: int, kind: str, artifacts: bool = False) -> Case:
+    """Case ``index`` of ``kind`` drawn by the widened generator from its own stream
+    ``default_rng([seed, index])`` (the same case whatever the number of jobs); with
+    ``artifacts`` measured through a real rig drawn from ``[seed, index, ARTIFACT_STREAM]``."""
+    arts = np.random.default_rng([seed, index, ARTIFACT_STREAM]) if artifacts else None
+    return make_case(index, kind, np.random.default_rng([seed, index]), load_plant_config(),
+                     widened=True, artifacts_rng=arts)
+
+
+def validate_one(args: tuple[int, int, str] | tuple[int, int, str, bool]) -> CaseResult:
+    """:func:`draw_case` of ``(seed, index, kind[, artifacts])``, simulated and diagnosed
+    blind."""
     from rig.json_files import finite_for_json as _finite
 
-    seed, index, kind = args
-    case = make_case(index, kind, np.random.default_rng([seed, index]), load_plant_config(),
-                     widened=True)
+    seed, index, kind = args[:3]
+    case = draw_case(seed, index, kind, bool(args[3]) if len(args) > 3 else False)
     campaign = simulate_campaign(case)
     t0 = time.perf_counter()
     report = diagnose_campaign(campaign).to_dict()
@@ -428,11 +526,11 @@ def validate_one(args: tuple[int, int, str]) -> CaseResult:
 
 def iter_validation(n_cases: int, seed: int = 0,
                     progress: Callable[[CaseResult], None] | None = None,
-                    jobs: int = 1) -> Iterator[CaseResult]:
+                    jobs: int = 1, artifacts: bool = False) -> Iterator[CaseResult]:
     """:func:`validate_one` for cases 0..n-1 (kinds by :func:`case_kinds`), in order."""
     from rig.validate.cases import parallel_map
 
-    args = [(seed, i, kind) for i, kind in enumerate(case_kinds(n_cases))]
+    args = [(seed, i, kind, artifacts) for i, kind in enumerate(case_kinds(n_cases))]
     for res in parallel_map(validate_one, args, jobs):
         if progress is not None:
             progress(res)
@@ -450,11 +548,13 @@ def case_label(case: Case) -> Label:
 
 def graded_validation(n_cases: int, seed: int = 0, jobs: int = 1,
                       progress: Callable[[CaseResult], None] | None = None,
-                      name: str = "ours") -> tuple[list[CaseResult], dict[str, Any]]:
-    """Our generator graded exactly as a labelled folder (:func:`summarise_graded`)."""
+                      name: str = "ours", artifacts: bool = False
+                      ) -> tuple[list[CaseResult], dict[str, Any]]:
+    """Our generator graded exactly as a labelled folder (:func:`summarise_graded`); with
+    ``artifacts`` each case measured through a real rig's measuring system."""
     from rig.validate.cases import record, summarise_graded
 
-    results = run_validation(n_cases, seed, progress, jobs)
+    results = run_validation(n_cases, seed, progress, jobs, artifacts)
     records = []
     for r in results:
         rec = record(case_label(r.case), {**r.report, "seconds": r.seconds})

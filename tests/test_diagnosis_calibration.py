@@ -220,3 +220,20 @@ def test_rig_diagnose_alpha_json_and_html(tmp_path: Path) -> None:
     bad = subprocess.run([sys.executable, "-m", "rig", "diagnose", str(case), "--alpha", "2"],
                          capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "alpha" in bad.stderr.lower()
+
+
+@pytest.mark.timeout(900)
+def test_rig_diagnose_self_check_puts_the_summary_in_the_report(tmp_path: Path) -> None:
+    """rig diagnose --self-check 2: two campaigns like this one diagnosed blind; the summary
+    is the report's self_check key and a sentence of the HTML."""
+    case = Path(__file__).resolve().parent / "data" / "devset" / "a" / "cases" / "c0090888245"
+    out, page = tmp_path / "r.json", tmp_path / "r.html"
+    proc = subprocess.run([sys.executable, "-m", "rig", "diagnose", str(case), "--self-check",
+                           "2", "--jobs", "2", "--json", str(out), "--html", str(page)],
+                          capture_output=True, text=True, timeout=880)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    sc = json.loads(out.read_text())["self_check"]
+    assert sc["cases"] == 2 and 0 <= sc["correct"] <= 2 and sc["false_alarms"] <= sc["nulls"]
+    assert sum(d["n"] for d in sc["per_effect"].values()) == 2
+    sentence = f"On 2 campaigns like this one: right {sc['correct']}"
+    assert sentence in proc.stdout and sentence in page.read_text()

@@ -47,7 +47,9 @@ def register(app: typer.Typer) -> None:
             from rig.validate.like import self_check as run_self_check
 
             with console.status(f"self-check on {self_check} campaigns like this one..."):
-                report["self_check"] = run_self_check(camp, cases=self_check, jobs=jobs)
+                summary = run_self_check(camp, cases=self_check, jobs=jobs)
+                # the per-case records stay with rig validate-diagnosis --like --json
+                report["self_check"] = {k: v for k, v in summary.items() if k != "results"}
             console.print(self_check_words(report["self_check"]))
         console.print(f"[bold]verdict: {report['verdict']}[/bold] — {report['reason']}")
         if report.get("candidates"):

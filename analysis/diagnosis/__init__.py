@@ -39,6 +39,7 @@ from analysis.diagnosis.data import (
 from analysis.diagnosis.evidence import calibrated_evidence
 from analysis.diagnosis.fit import (
     HUBER_C,
+    NONLINEAR,
     LinearFit,
     Stack,
     build_stack,
@@ -439,6 +440,14 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             clear = unit.get("bearing_clearance_mm")
             take_up = cb * (f.nl.get("bearing_stage_torque_Nm") or 0.0)
             out["take_up_twist_arcmin"] = take_up
+            top = NONLINEAR["bearing_clearance"][2] * rated
+            if (f.nl.get("bearing_stage_torque_Nm") or 0.0) >= 0.99 * top:
+                # the best soft stage would end beyond the range searched: no take-up that
+                # closes inside the loaded range, a slope change over all of it
+                ok = False
+                notes.append(f"the soft stage does not end inside the loaded range (stage "
+                             f"torque at the search's bound, {top:.3g} N*m): a slope change, "
+                             "not a clearance taken up")
             if isinstance(clear, list) and clear:
                 budget = bearing_play_arcmin(clear, stack.pressure_angle_deg, m, z1)
                 out["budget_extra_play_arcmin"] = budget

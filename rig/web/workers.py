@@ -15,6 +15,7 @@ from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, TypeVar
 
+from rig.blas import worker_initializer
 from rig.errors import RigError
 
 __all__ = ["run_in_worker", "shutdown_workers", "warm_up"]
@@ -31,8 +32,10 @@ _pools: dict[str, ProcessPoolExecutor] = {}
 def _executor(pool: str) -> ProcessPoolExecutor:
     with _lock:
         if pool not in _pools:
+            # one BLAS thread (rig/blas.py): the diagnosis runs beside the rig's real time
             _pools[pool] = ProcessPoolExecutor(max_workers=POOLS[pool],
-                                               mp_context=multiprocessing.get_context("spawn"))
+                                               mp_context=multiprocessing.get_context("spawn"),
+                                               initializer=worker_initializer)
         return _pools[pool]
 
 

@@ -382,8 +382,8 @@ class PlantModel:
     # sub-step cannot resolve (the friction bristles), numerical damping ratio about
     # (gamma - 1/2) omega h / 2 at the locked resonance, taken off the contact damper.
     _GAMMA, _BETA = 0.6, 0.3025
-    _OMEGA_H = 0.25  # omega_locked * sub-step
-    _RING_TIME_CONSTANTS = 5.0  # sub-step until 5 / (zeta omega) after the last impact
+    _OMEGA_H = 0.35  # omega_locked * sub-step
+    _RING_TIME_CONSTANTS = 3.0  # sub-step until 3 / (zeta omega) after the last impact
     _RING_MIN_NM = 0.005  # impacts that ring less than this (N*m) stay implicit Euler steps
 
     def _snapshot_state(self) -> tuple:
@@ -400,15 +400,17 @@ class PlantModel:
             self.friction.bristle_Nm = bristle
 
     def _step_dynamic(self, dt: float) -> None:
-        """One step of ``dt`` with impacts resolved: an implicit Euler step while no impact
-        rings; a step in which the output reaches a flank from the free play is done again
-        in Newmark sub-steps of ``_OMEGA_H / omega`` with the contact damper ``2 zeta
-        sqrt(K J)`` (K the locked chain stiffness), and so are the steps after it until the
-        ringing has decayed (``_RING_TIME_CONSTANTS / (zeta omega)``; bounces restart it)."""
+        """One step of ``dt`` with impacts resolved. A step that starts in the free play, or
+        on a flank with no impact ringing, is an implicit Euler step; when such a step takes
+        the output from the free play onto a flank at a speed that rings (``J omega v >=
+        _RING_MIN_NM``), it is done again in Newmark sub-steps of ``_OMEGA_H / omega`` with
+        the contact damper ``2 zeta sqrt(K J)`` (K the locked chain stiffness), and so are
+        the steps on a flank after it until the ringing has decayed
+        (``_RING_TIME_CONSTANTS / (zeta omega)``; a bounce that comes back restarts it)."""
         ringing = self.zeta > 0.0 and self._ring_left_s > 0.0
-        if not ringing:
+        was_free = self.chain_Nm == 0.0
+        if not ringing or was_free:
             saved = self._snapshot_state()
-            was_free = self.chain_Nm == 0.0
             # the ringing an impact at this speed starts: J omega v (N*m); a contact that
             # merely flickers at rest (ripple at zero torque) rings below the sensor noise
             ring_Nm = self.inertia * self.omega_locked * abs(self.velocity)
@@ -416,6 +418,7 @@ class PlantModel:
             if not (self.zeta > 0.0 and was_free and self.chain_Nm != 0.0
                     and ring_Nm >= self._RING_MIN_NM):
                 self._lag_sensor(dt)
+                self._ring_left_s -= dt
                 return
             self._restore_state(saved)
             self._ring_left_s = self._ring_window_s()

@@ -9,7 +9,8 @@ so an interrupted re-analysis resumes where it stopped.
 
 The work runs on Dask (``dask.distributed``): a local cluster of ``workers`` processes by
 default, or the scheduler at ``dask_address`` (``tcp://host:8786``), whose workers must
-reach the sample files at the same path. Workers only read files; the client writes
+reach the sample files at the same path. Each task runs with one BLAS thread (rig/blas.py),
+so N workers use N cores. Workers only read files; the client writes
 the results into the store as they arrive.
 
 A run whose files are missing or unreadable is reported by its run id (and not written, so
@@ -104,8 +105,13 @@ def run_job(job: Job) -> dict[str, Any]:
 
 
 def run_batch(jobs: list[Job]) -> list[dict[str, Any]]:
-    """A Dask task: several jobs in a row."""
-    return [run_job(j) for j in jobs]
+    """A Dask task: several jobs in a row, with one BLAS thread (rig/blas.py: a worker of a
+    remote cluster may have started with a thread per core; one task per worker thread then
+    uses one core)."""
+    from rig.blas import limit_blas_threads
+
+    with limit_blas_threads():
+        return [run_job(j) for j in jobs]
 
 
 def plan(store: Store, *, since: str | None = None,
@@ -145,8 +151,16 @@ def _client(dask_address: str | None, workers: int | None):
 
     if dask_address:
         return Client(dask_address, timeout="10s")
-    cluster = LocalCluster(n_workers=workers or 1, threads_per_worker=1, processes=True,
-                           dashboard_address=None, silence_logs=40)
+    import dask
+
+    from rig.blas import ONE_THREAD_ENV
+
+    # the workers' BLAS start with one thread: set before the worker process starts (a
+    # Nanny's ``env`` comes after numpy has loaded there, too late for its OpenBLAS)
+    key = "distributed.nanny.pre-spawn-environ"
+    with dask.config.set({key: {**dask.config.get(key, {}), **ONE_THREAD_ENV}}):
+        cluster = LocalCluster(n_workers=workers or 1, threads_per_worker=1, processes=True,
+                               dashboard_address=None, silence_logs=40)
     return Client(cluster)
 
 

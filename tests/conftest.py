@@ -18,6 +18,25 @@ def repo_root() -> Path:
     return REPO
 
 
+# ------------------------------------------------------------------------- one BLAS thread each
+# Two pytest-xdist workers on a 2-core machine, each with numpy's OpenBLAS starting a thread per
+# core, and the subprocesses the tests start (simulated rigs, servers, diagnosis pools) with as
+# many again, oversubscribe the machine and starve the simulated rig's real time. The variables
+# are set in the controller's pytest_configure, before xdist starts its workers, so the workers
+# and every subprocess a test starts inherit them; a worker also limits a BLAS already loaded.
+# OPENBLAS_CORETYPE is left as it is.
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    from rig.blas import ONE_THREAD_ENV
+
+    os.environ.update(ONE_THREAD_ENV)
+    if os.environ.get("PYTEST_XDIST_WORKER") is not None:
+        from rig.blas import worker_initializer
+
+        worker_initializer()
+
+
 # ------------------------------------------------------- tests that load the machine on purpose
 # The suite runs on two pytest-xdist workers. Most tests wait on the simulated rig's real
 # time and share the machine well; a few load it on purpose (the load test's busy processes,

@@ -5,6 +5,7 @@
     rig validate-diagnosis --cases-dir DIR --labels LABELS.json [--cases-dir ... --labels ...]
                            [--with-generator] [--jobs J] [--json SUMMARY.json]
     rig validate-diagnosis --like CAMPAIGN [--cases N] [--jobs J] [--seed S] --json FILE
+    rig validate-diagnosis --over-the-wire [--cases N] [--jobs J] [--keep DIR] [--json FILE]
 """
 
 from __future__ import annotations
@@ -145,11 +146,38 @@ def _like(campaign: Path, cases: int, seed: int, jobs: int) -> dict[str, Any]:
     return summary
 
 
+def _over_the_wire(cases: int, seed: int, jobs: int, keep: Path | None, short: bool,
+                   verbose: bool) -> dict[str, Any]:
+    """Record campaigns through the sequencer, drivers and simulated devices, then grade."""
+    from rig.validate.wire import over_the_wire
+
+    with Progress(console=console, transient=True) as progress:
+        rec = progress.add_task("over the wire: recording campaigns", total=cases)
+        grade = progress.add_task("over the wire: diagnosing", total=cases)
+
+        def advance(stage: str, _r: dict[str, Any]) -> None:
+            progress.advance(rec if stage == "recorded" else grade)
+
+        summary = over_the_wire(cases, seed, jobs, keep, short, progress=advance)
+    for r in summary["recordings"]:
+        if r["status"] != "completed" or verbose:
+            console.print(f"  recorded {r['case']}: {r['status']}, {r['runs']} runs, "
+                          f"{r['record_seconds']:.0f} s" + (f" ({r['reason']})" if r.get(
+                              "reason") else ""), soft_wrap=True, markup=False)
+    _print_graded(summary, verbose)
+    if keep is not None:
+        console.print(f"recordings kept in {keep}: re-grade with rig validate-diagnosis "
+                      f"--cases-dir {keep / 'cases'} --labels {keep / 'labels.json'}",
+                      soft_wrap=True, markup=False)
+    return summary
+
+
 def register(app: typer.Typer) -> None:
     @app.command("validate-diagnosis")
     def validate_diagnosis(
-        cases: Annotated[int, typer.Option(
-            min=1, help="Number of campaigns from our generator.")] = 33,
+        cases: Annotated[int | None, typer.Option(
+            min=1, help="Number of campaigns from our generator (default 33) or recorded "
+            "over the wire (default 12).")] = None,
         seed: Annotated[int, typer.Option(help="Seed of our generator's case draws.")] = 0,
         cases_dir: Annotated[list[Path] | None, typer.Option(
             "--cases-dir", help="A folder of labelled campaigns (one folder per case); "
@@ -170,7 +198,18 @@ def register(app: typer.Typer) -> None:
             "real rig's measuring system (impacts and bounces, sensor lag, ADC grid, drive "
             "loop and ripple, drifting zero, Coulomb friction, encoder, jittered sampling with "
             "dropped rows, pre-cycles; docs/diagnosis.md), or the plant's columns.")] = True,
-        jobs: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 1,
+        over_the_wire: Annotated[bool, typer.Option(
+            "--over-the-wire", help="Record campaigns through the real sequencer, drivers and "
+            "simulated devices (rig campaign run --simulated) with the rig's dynamics on and "
+            "one withheld effect (or none) each, then diagnose and grade them.")] = False,
+        keep: Annotated[Path | None, typer.Option(
+            "--keep", help="With --over-the-wire: keep the recordings in DIR (DIR/cases/, "
+            "DIR/labels.json) to grade again with --cases-dir/--labels.")] = None,
+        short: Annotated[bool, typer.Option(
+            "--short", help="With --over-the-wire: half the positions per campaign.")
+        ] = False,
+        jobs: Annotated[int, typer.Option(min=1, help="Worker processes (with "
+                                          "--over-the-wire: simulated rigs at a time).")] = 1,
         verbose: Annotated[bool, typer.Option("--verbose", help="One line per case.")] = False,
         json_file: Annotated[
             Path | None, typer.Option("--json", help="Write the summary as JSON.")
@@ -184,7 +223,7 @@ def register(app: typer.Typer) -> None:
         if like is not None:
             if cases_dir:
                 raise RigError("--like and --cases-dir: give one of them")
-            out = _like(like, cases, seed, jobs)
+            out = _like(like, cases or 20, seed, jobs)
             if json_file is not None:
                 json_file.parent.mkdir(parents=True, exist_ok=True)
                 json_file.write_text(json.dumps(out, indent=2) + "\n")
@@ -193,9 +232,13 @@ def register(app: typer.Typer) -> None:
         if len(dirs) != len(labs):
             raise RigError(f"--cases-dir given {len(dirs)} time(s), --labels {len(labs)}: "
                            "give one labels.json per folder of cases")
+        if (keep is not None or short) and not over_the_wire:
+            raise RigError("--keep and --short go with --over-the-wire")
         summaries = []
-        if not dirs or with_generator:
-            summaries.append(_ours(cases, seed, jobs, verbose, artifacts))
+        if over_the_wire:
+            summaries.append(_over_the_wire(cases or 12, seed, jobs, keep, short, verbose))
+        if (not dirs and not over_the_wire) or with_generator:
+            summaries.append(_ours(cases or 33, seed, jobs, verbose, artifacts))
         for d, lab in zip(dirs, labs, strict=True):
             name = generator_name(d)
             with Progress(console=console, transient=True) as progress:

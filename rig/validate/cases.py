@@ -20,6 +20,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from rig.blas import limit_blas_threads, worker_initializer
 from rig.errors import RigError
 from rig.validate.labels import Label, grade, read_labels
 
@@ -41,12 +42,18 @@ def diagnose_report(folder: str) -> dict[str, Any]:
 
 
 def parallel_map(fn: Callable[[Any], Any], items: Iterable[Any], jobs: int) -> Iterator[Any]:
-    """``map(fn, items)`` in ``jobs`` processes (in order); in this process when jobs <= 1."""
+    """``map(fn, items)`` in ``jobs`` processes (in order); in this process when jobs <= 1.
+
+    Every call runs with one BLAS thread (rig/blas.py): the workers from their initializer,
+    this process while it maps; ``jobs`` processes then use ``jobs`` cores, not ``jobs``
+    times a thread per core."""
     items = list(items)
     if jobs <= 1 or len(items) <= 1:
-        yield from map(fn, items)
+        with limit_blas_threads():
+            yield from map(fn, items)
         return
-    with ProcessPoolExecutor(max_workers=min(jobs, len(items))) as pool:
+    with ProcessPoolExecutor(max_workers=min(jobs, len(items)),
+                             initializer=worker_initializer) as pool:
         yield from pool.map(fn, items)
 
 

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, TypeVar
 
+from rig.blas import worker_initializer
 from rig.errors import RigError
 
 __all__ = ["PoolBusy", "pool_full", "run_in_worker", "shutdown_workers", "warm_up",
@@ -46,19 +47,22 @@ class PoolBusy(RigError):
     """The pool already has its :data:`QUEUE_LIMIT` of requests: retry later."""
 
 
-def _lower_priority(increment: int) -> None:
-    """In a new worker process: run at a lower CPU priority."""
-    os.nice(increment)
+def _worker_start(increment: int) -> None:
+    """In a new worker process: one BLAS thread, and a lower CPU priority by ``increment``."""
+    worker_initializer()
+    if increment:
+        os.nice(increment)
 
 
 def _executor(pool: str) -> ProcessPoolExecutor:
     with _lock:
         if pool not in _pools:
+            # one BLAS thread (rig/blas.py): the work runs beside the rig's real time; a
+            # preview worker also at a lower CPU priority
             nice = POOL_NICE.get(pool, 0)
             _pools[pool] = ProcessPoolExecutor(
                 max_workers=POOLS[pool], mp_context=multiprocessing.get_context("spawn"),
-                initializer=_lower_priority if nice else None,
-                initargs=(nice,) if nice else ())
+                initializer=_worker_start, initargs=(nice,))
         return _pools[pool]
 
 

@@ -46,12 +46,19 @@ class GearPlant:
         self._rng = np.random.default_rng(config.noise.seed)
         self._twist_noise_deg = config.noise.twist_arcsec_rms / 3600.0
         self._torque_noise = config.noise.torque_Nm_rms
+        meas = config.measurement
+        self._zero_residual = meas.torque_zero_residual_Nm
+        self._zero_walk = meas.torque_zero_walk_Nm_per_sqrt_s
+        self._zero_Nm = 0.0
+        self._zero_t = 0.0
+        self._adc_lsb = (2.0 * meas.torque_adc_full_scale_Nm / 2.0 ** meas.torque_adc_bits
+                         if meas.torque_adc_bits else 0.0)
         self._prev = self._current = self._state()
 
     # -- time ------------------------------------------------------------------------------
     def _state(self) -> tuple[float, ...]:
         m = self._model
-        return (m.output_angle_deg(), m.input_deg, m.flange_Nm, m.temperature_C)
+        return (m.output_angle_deg(), m.input_deg, m.flange_Nm, m.temperature_C, m.sensor_Nm)
 
     def _advance(self) -> float:
         """Step the model to the first grid point at or after the clock; return the time."""
@@ -84,13 +91,15 @@ class GearPlant:
         """Advance to the clock's time and return the sensors' view (noise included)."""
         with self._lock:
             now = self._advance()
-            out_deg, in_deg, true_Nm, temp = self._interpolated(now)
+            out_deg, in_deg, true_Nm, temp, sensed_Nm = self._interpolated(now)
             m = self._model
-            torque = m.sensor_torque_Nm(true_Nm)
+            torque = m.sensor_torque_Nm(sensed_Nm) + self._torque_zero(now)
             if self._twist_noise_deg or self._torque_noise:
                 noise_twist, noise_torque = self._rng.standard_normal(2).tolist()
                 out_deg += noise_twist * self._twist_noise_deg
                 torque += noise_torque * self._torque_noise
+            if self._adc_lsb:
+                torque = round(torque / self._adc_lsb) * self._adc_lsb
             return PlantSnapshot(
                 t_s=now,
                 output_angle_deg=out_deg,
@@ -112,10 +121,24 @@ class GearPlant:
             self._model.command_Nm = value
 
     def enable_drive(self, enabled: bool) -> None:
-        """Enable the drive, or disable it (its torque decays to zero with the loop lag)."""
+        """Enable the drive, or disable it (its torque decays to zero with the loop lag).
+        Enabling a disabled drive starts a run: the torque channel is re-tared then, leaving
+        a residual zero of ``measurement.torque_zero_residual_Nm`` rms."""
         with self._lock:
-            self._advance()
+            now = self._advance()
+            if enabled and not self._model.enabled and self._zero_residual:
+                self._zero_Nm = float(self._rng.standard_normal()) * self._zero_residual
+                self._zero_t = now
             self._model.enabled = bool(enabled)
+
+    def _torque_zero(self, now: float) -> float:
+        """The torque channel's zero error (N*m) at ``now``: the residual of the last re-tare
+        plus a random walk of ``measurement.torque_zero_walk_Nm_per_sqrt_s``."""
+        if self._zero_walk and now > self._zero_t:
+            step = self._zero_walk * math.sqrt(now - self._zero_t)
+            self._zero_Nm += float(self._rng.standard_normal()) * step
+            self._zero_t = now
+        return self._zero_Nm
 
     def lock_input_at(self, angle_deg: float) -> None:
         """Turn the eccentric shaft to ``angle_deg`` (at rig.input_speed_deg_per_s) and lock."""

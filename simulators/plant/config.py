@@ -53,6 +53,24 @@ class RigConfig(_Strict):
     start_flank: Literal[-1, 1] = -1
     preload_torque_Nm: float = Field(5.0, ge=0)
     encoder_counts_per_rev: int = Field(8388608, gt=0)
+    contact_damping_ratio: float = Field(0.0, ge=0, lt=1)
+    """0: the flanks are integrated with the 1-step implicit Euler only (numerically damped:
+    no ringing). > 0: an impact on a flank rings at the locked resonance
+    ``sqrt(K / inertia) / 2 pi`` with this damping ratio (sub-stepped, model.py)."""
+    drive_ripple_Nm: float = Field(0.0, ge=0)
+    drive_ripple_Hz: float = Field(100.0, gt=0)
+
+
+class MeasurementConfig(_Strict):
+    """The measuring system's own artefacts on the torque channel (none by default): a
+    first-order sensor lag, an ADC grid, and a torque zero re-tared whenever the drive is
+    enabled (the start of each run) with a residual that then random-walks."""
+
+    torque_lag_s: float = Field(0.0, ge=0, le=1)
+    torque_adc_bits: int = Field(0, ge=0, le=32)
+    torque_adc_full_scale_Nm: float = Field(20.0, gt=0)
+    torque_zero_residual_Nm: float = Field(0.0, ge=0)
+    torque_zero_walk_Nm_per_sqrt_s: float = Field(0.0, ge=0)
 
 
 class HousingConfig(_Strict):
@@ -192,6 +210,7 @@ class PlantConfig(_Strict):
     housing: HousingConfig = HousingConfig()
     effects: EffectsConfig = EffectsConfig()
     noise: NoiseConfig = NoiseConfig()
+    measurement: MeasurementConfig = MeasurementConfig()
     source: str = "<memory>"
 
     def nominal(self) -> PlantConfig:
@@ -221,10 +240,11 @@ class PlantConfig(_Strict):
         )
 
     def with_changes(self, **sections: dict[str, Any]) -> PlantConfig:
-        """A copy with keys of ``rig``/``housing``/``noise`` replaced, validated."""
+        """A copy with keys of ``rig``/``housing``/``noise``/``measurement`` replaced,
+        validated."""
         data = self.model_dump()
         for section, values in sections.items():
-            if section not in ("rig", "housing", "noise", "unit"):
+            if section not in ("rig", "housing", "noise", "unit", "measurement"):
                 raise PlantConfigError(f"{self.source}: cannot change section {section!r}")
             data[section] = {**data[section], **values}
         return plant_config_from_mapping(data, self.source)

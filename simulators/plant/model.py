@@ -155,6 +155,16 @@ class PlantModel:
         self._play_value = 0.0
         self._decay_cache: dict[float, tuple[float, float, float]] = {}
         self.twist_rad = 0.0
+        # the rig's dynamics (docs/plant.md, [rig] contact_damping_ratio, drive ripple) and the
+        # torque sensor's first-order lag ([measurement] torque_lag_s)
+        self.zeta = rig.contact_damping_ratio
+        self.omega_locked = math.sqrt(1.0 / (c_lin * self.inertia))
+        self.ripple_Nm, self.ripple_Hz = rig.drive_ripple_Nm, rig.drive_ripple_Hz
+        self.sensor_lag_s = config.measurement.torque_lag_s
+        self.sensor_Nm = 0.0
+        self.accel = 0.0
+        self._ring_left_s = 0.0
+        self.impacts = 0
         self.settle_at_rest(rig.start_flank)
 
     # -- geometry --------------------------------------------------------------------------
@@ -341,7 +351,143 @@ class PlantModel:
 
     def step(self, dt: float, count: int = 1) -> None:
         """Advance by ``count`` steps of ``dt`` s (implicit Euler for the output; exact lags
-        for drive, housing temperature and creep). The loop keeps its state in locals."""
+        for drive, housing temperature and creep). The loop keeps its state in locals.
+
+        With the rig's dynamics on (contact damping, drive ripple, sensor lag) steps of at
+        most 10 integration steps go through :meth:`_step_dynamic` (impacts ring); a long
+        step at rest stays one implicit step."""
+        if (self.zeta > 0.0 or self.ripple_Nm > 0.0) and dt <= 10.0 * self.dt:
+            for _ in range(count):
+                self._step_dynamic(dt)
+            return
+        self._step_euler(dt, count)
+        self._lag_sensor(dt * count)
+
+    def _lag_sensor(self, dt: float) -> None:
+        """The torque sensor's first-order lag (exact for a flange torque constant over dt)."""
+        if self.sensor_lag_s > 0.0:
+            a = math.exp(-dt / self.sensor_lag_s)
+            self.sensor_Nm = self.flange_Nm + (self.sensor_Nm - self.flange_Nm) * a
+        else:
+            self.sensor_Nm = self.flange_Nm
+
+    def _ripple(self, t_s: float) -> float:
+        """Drive torque ripple (N*m) at time ``t_s``: a sine of drive_ripple_Nm at
+        drive_ripple_Hz while the drive is enabled."""
+        if not self.ripple_Nm or not self.enabled:
+            return 0.0
+        return self.ripple_Nm * math.sin(2.0 * math.pi * self.ripple_Hz * t_s)
+
+    # Newmark (gamma, beta) of the impact sub-steps: unconditionally stable, damps what the
+    # sub-step cannot resolve (the friction bristles), numerical damping ratio about
+    # (gamma - 1/2) omega h / 2 at the locked resonance, taken off the contact damper.
+    _GAMMA, _BETA = 0.6, 0.3025
+    _OMEGA_H = 0.35  # omega_locked * sub-step
+    _RING_TIME_CONSTANTS = 3.0  # sub-step until 3 / (zeta omega) after the last impact
+    _RING_MIN_NM = 0.005  # impacts that ring less than this (N*m) stay implicit Euler steps
+
+    def _snapshot_state(self) -> tuple:
+        fr = self.friction
+        return (self.t_s, self.drive_Nm, self.twist_rad, self.velocity, self.creep_rad,
+                self.chain_Nm, self.flange_Nm, self.accel, self.temperature_C, self.input_deg,
+                None if fr is None else fr.bristle_Nm)
+
+    def _restore_state(self, st: tuple) -> None:
+        (self.t_s, self.drive_Nm, self.twist_rad, self.velocity, self.creep_rad,
+         self.chain_Nm, self.flange_Nm, self.accel, self.temperature_C, self.input_deg,
+         bristle) = st
+        if self.friction is not None:
+            self.friction.bristle_Nm = bristle
+
+    def _step_dynamic(self, dt: float) -> None:
+        """One step of ``dt`` with impacts resolved. A step that starts in the free play, or
+        on a flank with no impact ringing, is an implicit Euler step; when such a step takes
+        the output from the free play onto a flank at a speed that rings (``J omega v >=
+        _RING_MIN_NM``), it is done again in Newmark sub-steps of ``_OMEGA_H / omega`` with
+        the contact damper ``2 zeta sqrt(K J)`` (K the locked chain stiffness), and so are
+        the steps on a flank after it until the ringing has decayed
+        (``_RING_TIME_CONSTANTS / (zeta omega)``; a bounce that comes back restarts it)."""
+        ringing = self.zeta > 0.0 and self._ring_left_s > 0.0
+        was_free = self.chain_Nm == 0.0
+        if not ringing or was_free:
+            saved = self._snapshot_state()
+            # the ringing an impact at this speed starts: J omega v (N*m); a contact that
+            # merely flickers at rest (ripple at zero torque) rings below the sensor noise
+            ring_Nm = self.inertia * self.omega_locked * abs(self.velocity)
+            self._euler_with_ripple(dt)
+            if not (self.zeta > 0.0 and was_free and self.chain_Nm != 0.0
+                    and ring_Nm >= self._RING_MIN_NM):
+                self._lag_sensor(dt)
+                self._ring_left_s -= dt
+                return
+            self._restore_state(saved)
+            self._ring_left_s = self._ring_window_s()
+            self.impacts += 1
+            self.accel = (self.drive_Nm + self._ripple(self.t_s) - self.flange_Nm) / self.inertia
+        n = max(1, math.ceil(dt * self.omega_locked / self._OMEGA_H))
+        h = dt / n
+        for _ in range(n):
+            free = self.chain_Nm == 0.0
+            self._newmark_substep(h)
+            self._lag_sensor(h)
+            if free and self.chain_Nm != 0.0:
+                self._ring_left_s = self._ring_window_s()
+        self._ring_left_s -= dt
+
+    def _ring_window_s(self) -> float:
+        return min(self._RING_TIME_CONSTANTS / (self.zeta * self.omega_locked), 0.2)
+
+    def _euler_with_ripple(self, dt: float) -> None:
+        """One implicit Euler step with the drive ripple held over it."""
+        self._step_euler(dt, 1, self._ripple(self.t_s + dt))
+
+    def _newmark_substep(self, h: float) -> None:
+        """One Newmark sub-step of ``h`` s: ``J phi'' = T_d + ripple - c phi' [contact] - G -
+        F_f`` with ``phi = phi_pred + beta h^2 phi''`` solved by :meth:`solve` (the same
+        monotone scalar root as the implicit Euler step, with mass ``J / (beta h^2)``)."""
+        g, b = self._GAMMA, self._BETA
+        target = self.drive_target_Nm()
+        self.drive_Nm = target + (self.drive_Nm - target) * math.exp(
+            -h / self.config.rig.drive_time_constant_s)
+        if self.input_deg != self.input_target_deg:
+            move = self.config.rig.input_speed_deg_per_s * h
+            diff = self.input_target_deg - self.input_deg
+            self.input_deg = self.input_target_deg if abs(diff) <= move else (
+                self.input_deg + math.copysign(move, diff))
+        if self.temperature_C != self.ambient_C:
+            a_temp = math.exp(-h / self.config.housing.time_constant_s)
+            self.temperature_C = self.ambient_C + (self.temperature_C - self.ambient_C) * a_temp
+        omega_h = self.omega_locked * h
+        zeta_c = max(self.zeta - 0.5 * (g - 0.5) * omega_h, 0.0)
+        damper = 2.0 * zeta_c * self.omega_locked * self.inertia  # N*m*s/rad
+        phi, vel, acc = self.twist_rad, self.velocity, self.accel
+        drive = self.drive_Nm + self._ripple(self.t_s + h)
+        if self.chain_Nm != 0.0:
+            drive -= damper * vel
+        mass = self.inertia / (b * h * h)
+        phi_pred = phi + h * vel + h * h * (0.5 - b) * acc
+        centre = self.pitch_offset_rad() + self.creep_rad
+        half = 0.5 * self.play_rad()
+        if self.friction is not None:
+            self.friction.begin_step(vel, h)
+        phi_new, chain, fric, bristle = self.solve(drive, mass, phi_pred, centre, half,
+                                                   self.compliance)
+        if self.friction is not None:
+            self.friction.commit(bristle)
+        acc_new = (phi_new - phi_pred) / (b * h * h)
+        self.velocity = vel + h * ((1.0 - g) * acc + g * acc_new)
+        self.accel = acc_new
+        self.twist_rad = phi_new
+        self.chain_Nm, self.flange_Nm = chain, chain + fric
+        if self.creep_c:
+            goal = chain * self.creep_c
+            self.creep_rad = goal + (self.creep_rad - goal) * math.exp(-h / self.creep_tau_s)
+        self.t_s += h
+
+    def _step_euler(self, dt: float, count: int = 1, ripple_Nm: float = 0.0) -> None:
+        """``count`` implicit Euler steps of ``dt`` s (see :meth:`step`); ``ripple_Nm`` is
+        added to the drive's torque over them (it shifts the loop's target and state alike,
+        so the lag itself is unchanged)."""
         a_drive, a_temp, a_creep = self._decays(dt)
         mass = self.inertia / (dt * dt)
         fr = self.friction
@@ -352,8 +498,8 @@ class PlantModel:
         # frictionless, piecewise-linear chain: closed-form flank torque (compliance.invert)
         linear = fr is None and not compliance.soft_rad
         c_lin, c_b, t_b = compliance.c_lin, compliance.bearing_c, compliance.bearing_torque_Nm
-        target = self.drive_target_Nm()
-        drive, temp, amb = self.drive_Nm, self.temperature_C, self.ambient_C
+        target = self.drive_target_Nm() + ripple_Nm
+        drive, temp, amb = self.drive_Nm + ripple_Nm, self.temperature_C, self.ambient_C
         phi, vel, creep = self.twist_rad, self.velocity, self.creep_rad
         chain = fric = 0.0
         pitch, half = self.pitch_offset_rad(), 0.5 * self.play_rad()
@@ -406,7 +552,8 @@ class PlantModel:
             if creep_c:
                 goal = chain * creep_c
                 creep = goal + (creep - goal) * a_creep
-        self.drive_Nm, self.twist_rad, self.velocity, self.creep_rad = drive, phi, vel, creep
+        self.drive_Nm, self.twist_rad, self.velocity, self.creep_rad = (
+            drive - ripple_Nm, phi, vel, creep)
         self.chain_Nm, self.flange_Nm = chain, chain + fric
         self.t_s += dt * count
 
@@ -458,6 +605,8 @@ class PlantModel:
                             self.compliance)
         self.flange_Nm = self.chain_Nm + (self.friction.bristle_Nm if self.friction else 0.0)
         self.flange_Nm = 0.0 if abs(self.flange_Nm) < 1e-12 else self.flange_Nm
+        self.sensor_Nm = self.flange_Nm
+        self.accel = 0.0
 
     # -- readings --------------------------------------------------------------------------
     def output_angle_deg(self) -> float:

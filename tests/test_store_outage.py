@@ -199,7 +199,8 @@ def test_a_run_kept_locally_is_indexed_at_the_next_start_not_recovered(server, t
 
     url, samples = server.url(), tmp_path / "samples"
     store = Store(url, samples=samples, run_retry_s=0.3, reconnect_s=2.0)
-    rec = store.begin_run({"unit": {"serial": "NEXT-START"}},
+    rec = store.begin_run({"unit": {"serial": "NEXT-START"},
+                           "limits": {"lost_motion_arcmin_max": 3.0}},
                           ["t_s", "torque_Nm", "output_angle_deg"])
     for k in range(50):
         rec.append([0.01 * k, 0.1 * k, 0.001 * k])

@@ -84,7 +84,9 @@ def test_rig_runs_shows_the_verdict_and_the_lost_motion(verdict_store: dict):
     assert res.returncode == 0, res.stderr
     header = next(line for line in res.stdout.splitlines() if "run" in line and "status" in line)
     assert "outcome" in header and "lost motion arcmin" in header
-    rows = {serial: next(line for line in res.stdout.splitlines() if ids[serial] in line)
+    # a run id as a whole word: "OK-1-<time>" stands inside "NOK-1-<time>" too
+    rows = {serial: next(line for line in res.stdout.splitlines()
+                         if re.search(rf"(?<![\w-]){re.escape(ids[serial])}(?![\w-])", line))
             for serial in ids}
     for serial, (_, word, lm) in EXPECTED.items():
         cells = [c.strip() for c in re.split(r"[│|]", rows[serial]) if c.strip()]

@@ -72,18 +72,9 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
 @pytest.fixture(scope="session")
 def pg_server():
     """A throw-away PostgreSQL cluster for the whole session (tests/pg_server.py)."""
-    import os
+    from tests.pg_server import PgServer, required_bin_dir
 
-    from tests.pg_server import PgServer, find_bin_dir
-
-    bin_dir = find_bin_dir()
-    if bin_dir is None:
-        message = ("PostgreSQL server binaries not found (Debian package postgresql, "
-                   "installed by .ci/install; or set PG_BIN)")
-        if os.environ.get("CI"):
-            pytest.fail(message)
-        pytest.skip(message)
-    server = PgServer(bin_dir)
+    server = PgServer(required_bin_dir())
     server.start()
     yield server
     server.destroy()

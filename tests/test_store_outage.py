@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import threading
 import time
 from pathlib import Path
@@ -43,15 +42,9 @@ CAMPAIGN = {
 
 @pytest.fixture
 def server():
-    from tests.pg_server import PgServer, find_bin_dir
+    from tests.pg_server import PgServer, required_bin_dir
 
-    bin_dir = find_bin_dir()
-    if bin_dir is None:
-        message = "PostgreSQL server binaries not found (.ci/install installs postgresql)"
-        if os.environ.get("CI"):
-            pytest.fail(message)
-        pytest.skip(message)
-    srv = PgServer(bin_dir)
+    srv = PgServer(required_bin_dir())
     try:
         srv.start()
         yield srv

@@ -155,15 +155,9 @@ def test_four_simulated_rigs_one_killed_lose_nothing(pg_url, tmp_path):
 
 def test_a_database_restart_mid_campaign_is_survived(tmp_path):
     """Own cluster: stopping it must not disturb the other tests' server."""
-    from tests.pg_server import PgServer, find_bin_dir
+    from tests.pg_server import PgServer, required_bin_dir
 
-    bin_dir = find_bin_dir()
-    if bin_dir is None:
-        message = "PostgreSQL server binaries not found (.ci/install installs postgresql)"
-        if os.environ.get("CI"):
-            pytest.fail(message)
-        pytest.skip(message)
-    server = PgServer(bin_dir)
+    server = PgServer(required_bin_dir())
     try:
         server.start()
         url = server.url()

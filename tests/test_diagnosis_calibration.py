@@ -157,6 +157,22 @@ def test_settling_rule_leaves_out_ringing_only() -> None:
     assert 10 <= mask.sum() <= 60 and not mask[:100].any()
 
 
+def test_a_bounce_held_mid_play_between_two_jumps_is_left_out() -> None:
+    """Friction can hold the output still in the play for a few samples between two bounces
+    (seen in an over-the-wire recording): still, but not settled on a flank."""
+    n = 120
+    twist = np.zeros(n)
+    twist[50:] = 10.0          # lands on the far flank
+    twist[53:56] = 6.0         # bounces back and is held mid-play for 3 samples
+    twist += np.random.default_rng(7).normal(0, 0.01, n)
+    jump = np.abs(np.diff(twist)) > 1.0
+    mask = settling_mask(twist, jump)
+    # sample 53 sits next to a jump (left out by the transit mask); 54-55 are still, but
+    # not settled on a flank
+    assert mask[54:56].all()
+    assert not mask[:50].any() and not mask[70:].any()
+
+
 def test_time_base_counts_dropped_rows() -> None:
     t = np.arange(1000) / 1000.0
     keep = np.ones(1000, dtype=bool)

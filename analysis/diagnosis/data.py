@@ -22,6 +22,7 @@ from analysis.diagnosis.measurement import (
     crossing_events,
     crossing_zero,
     gap_breaks,
+    restamped_rows,
     settling_mask,
     time_base,
     torque_lag_s,
@@ -280,6 +281,12 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
     # torque channel's lag (a filter or delay: taken out by reading the torque channel at the
     # shifted time), transients after impacts, the torque zero at the play crossings
     tbase = time_base(t)
+    # rows stamped on arrival after a stall pair the twist with the torque of a later moment
+    restamped = restamped_rows(t)
+    if restamped.any() and int((~restamped).sum()) >= 20:
+        t, torque, twist = t[~restamped], torque[~restamped], twist[~restamped]
+        if temp is not None:
+            temp = temp[~restamped]
     amplitude = float(np.percentile(np.abs(torque), 99.5))
     direction0, _ = direction_and_reversal(t, torque, max(8.0 * sigma_t, 0.02 * amplitude))
     lag_s = torque_lag_s(t, torque, twist, direction0, sigma, LAG_EVIDENCE)
@@ -344,7 +351,7 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
     events = crossing_events(t, torque, twist, jump, direction, amplitude, play)
     zero = crossing_zero(events)
     measurement = {
-        "time_base": tbase.to_dict(),
+        "time_base": {**tbase.to_dict(), "restamped": int(restamped.sum())},
         "torque_lag_s": lag_s,
         "torque_lag_taken_out": bool(lag_s) and correct_lag,
         "twist_resolution_arcsec": q_twist * 60.0,

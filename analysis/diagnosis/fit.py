@@ -184,28 +184,44 @@ def flank_band_Nm(run: PreparedRun) -> float:
 def run_floating(run: PreparedRun, nl: dict[str, float]) -> np.ndarray:
     """Points whose chain torque is within the flank band: nothing holds the unit on a flank,
     it floats in the free play (True)."""
+    return run_float_masks(run, nl)[0]
+
+
+def run_float_masks(run: PreparedRun, nl: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
+    """(floating, across): ``floating`` as :func:`run_floating`; ``across`` the floating
+    points whose chain torque, inside its noise band, already points away from the flank last
+    touched. The switch of flank lies inside the torque's noise there, so the unit may
+    already have crossed: it may lie anywhere in the play (:func:`censor_floating`)."""
     torque = run.torque_Nm - nl.get("torque_offset_Nm", 0.0)
     g = chain_torque_Nm(torque, nl.get("friction_Nm", 0.0), run.start_flank)
-    return np.abs(g) < flank_band_Nm(run)
+    band = flank_band_Nm(run)
+    floating = np.abs(g) < band
+    kept = flank_sign(g, band, run.start_flank)
+    return floating, floating & (g * kept < 0)
 
 
-def censor_floating(r: np.ndarray, X: np.ndarray, beta: np.ndarray, floating: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def censor_floating(r: np.ndarray, X: np.ndarray, beta: np.ndarray, floating: np.ndarray,
+                    across: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Residuals (arcmin) with the float across the play modelled: a floating point may lie
     anywhere between the flank it last touched (the model's value) and the centre of the play
     (half the play towards the other flank), at no cost; beyond the centre only the excess
-    counts, outwards the full residual. Returns (effective residual, inside mask). Column 0 of
-    X is ``s / 2`` (the play column), ``beta[0]`` the play."""
+    counts, outwards the full residual. A point of ``across`` (its chain torque, inside the
+    noise band, already points to the other flank: :func:`run_float_masks`) may lie anywhere
+    up to the other flank. Returns (effective residual, inside mask). Column 0 of X is
+    ``s / 2`` (the play column), ``beta[0]`` the play."""
     if not floating.any():
         return r, np.zeros(r.size, dtype=bool)
     s = 2.0 * X[:, 0]
-    half = max(float(beta[0]), 0.0) / 2.0
+    full = max(float(beta[0]), 0.0)
+    reach = np.full(r.size, full / 2.0)
+    if across is not None:
+        reach[across] = full
     d = s * r  # > 0: beyond the kept flank outwards; < 0: drifted towards the centre
-    inside = floating & (d <= 0) & (d >= -half)
-    past = floating & (d < -half)
+    inside = floating & (d <= 0) & (d >= -reach)
+    past = floating & (d < -reach)
     out = r.copy()
     out[inside] = 0.0
-    out[past] = r[past] + s[past] * half
+    out[past] = r[past] + s[past] * reach[past]
     return out, inside
 
 
@@ -271,6 +287,7 @@ def _centre(values: np.ndarray, weights: np.ndarray, run: np.ndarray, n_runs: in
 def _solve(X: np.ndarray, y: np.ndarray, sig: np.ndarray, run: np.ndarray, n_runs: int,
            lo: np.ndarray, hi: np.ndarray, prior: np.ndarray, fixed: np.ndarray | None,
            iterations: int = 3, want_cov: bool = False, floating: np.ndarray | None = None,
+           across: np.ndarray | None = None,
            ) -> tuple[np.ndarray, float, float, np.ndarray, np.ndarray | None]:
     """Robust bounded LS with per-run offsets projected out (``run``: run index per point).
     ``fixed``: coefficients held (predictive gap) instead of fitted. Huber re-weighting.
@@ -303,7 +320,7 @@ def _solve(X: np.ndarray, y: np.ndarray, sig: np.ndarray, run: np.ndarray, n_run
         u = np.abs(r) / sig
         w = np.minimum(1.0, HUBER_C / np.maximum(u, 1e-12))
         if flt is not None:
-            r_eff, inside = censor_floating(r, X0, beta, flt)
+            r_eff, inside = censor_floating(r, X0, beta, flt, across)
             w = np.minimum(1.0, HUBER_C / np.maximum(np.abs(r_eff) / sig, 1e-12))
             w[inside] = 0.0
             past = flt & ~inside & (2.0 * X0[:, 0] * r < 0)
@@ -313,7 +330,7 @@ def _solve(X: np.ndarray, y: np.ndarray, sig: np.ndarray, run: np.ndarray, n_run
     r = _centre(y - X0 @ beta, ww, run, n_runs)
     float_cost = 0.0
     if flt is not None:
-        r, inside = censor_floating(r, X0, beta, flt)
+        r, inside = censor_floating(r, X0, beta, flt, across)
         # a floating point inside its interval costs what a fitted point costs on average
         # (E[u^2 / 2] = 1/2): letting points float is no free lunch for a candidate
         float_cost = 0.5 * float(inside.sum())
@@ -345,9 +362,11 @@ def fit(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None = None,
     fixed_beta = None
     if fixed is not None:
         fixed_beta = np.array([fixed.get(nm, 0.0) for nm in names])
-    floating = np.concatenate([run_floating(stack.runs[i], nl) for i in idx])
+    masks = [run_float_masks(stack.runs[i], nl) for i in idx]
+    floating = np.concatenate([m[0] for m in masks])
+    across = np.concatenate([m[1] for m in masks])
     beta, obj, chi2, r, cov = _solve(X, y, sig, run, len(idx), lo, hi, prior, fixed_beta,
-                                     want_cov=want_cov, floating=floating)
+                                     want_cov=want_cov, floating=floating, across=across)
     fitres = LinearFit(tuple(names), beta, nl, obj, chi2, int(y.size), cov=cov)
     fitres.residual = {stack.runs[i].run_id: r[run == k] for k, i in enumerate(idx)}
     return fitres
@@ -572,11 +591,11 @@ def predict_run(stack: Stack, f: LinearFit, effects: Sequence[str], i: int) -> n
     run = stack.runs[i]
     teeth = teeth_of(stack)
     X = run_columns(stack, run, effects, f.nl, teeth)
-    floating = run_floating(run, f.nl)
+    floating, across = run_float_masks(run, f.nl)
     r = run.twist_arcmin - X @ f.beta
     keep = ~floating
     r = r - (r[keep].mean() if keep.any() else r.mean())
-    return censor_floating(r, X, f.beta, floating)[0]
+    return censor_floating(r, X, f.beta, floating, across)[0]
 
 
 def run_lost_motion(stack: Stack, params: LoopParams, i: int) -> float:

@@ -74,6 +74,44 @@ def time_base(t_s: np.ndarray) -> TimeBase:
                     missing / (missing + t_s.size))
 
 
+#: An interval below this share of the median is not a sample interval: the row was stamped
+#: when it arrived, in a burst after the acquisition stalled, not when it was sampled.
+RESTAMP_SHARE = 0.25
+
+
+def restamped_rows(t_s: np.ndarray) -> np.ndarray:
+    """Rows whose time stamp is later than their sampling time by more than half a sample
+    interval (True): a burst of rows stamped on arrival after a stall (intervals below
+    RESTAMP_SHARE of the median). Their samples were taken one interval apart after the last
+    row stamped on time, so row j of a burst starting at row a was sampled near
+    ``t[a-1] + (j - a + 1) * dt`` and stamped at ``t[j]``; a channel read at the stamp
+    (the torque, interpolated at the master's time) belongs to another moment than the twist.
+    A dropped row (a gap with no burst) keeps its neighbours' times and is not flagged."""
+    t = np.asarray(t_s, dtype=float)
+    out = np.zeros(t.size, dtype=bool)
+    dt = np.diff(t)
+    if dt.size < 2:
+        return out
+    med = float(np.median(dt))
+    if not med > 0:
+        return out
+    squeezed = dt < RESTAMP_SHARE * med  # the step k -> k+1 is inside a burst
+    k = 0
+    while k < squeezed.size:
+        if not squeezed[k]:
+            k += 1
+            continue
+        m = k
+        while m + 1 < squeezed.size and squeezed[m + 1]:
+            m += 1
+        a, b = k, m + 1  # rows a..b arrived together; row a - 1 was the last on time
+        start = t[a - 1] if a > 0 else t[a] - med
+        sampled = start + med * np.arange(1, b - a + 2)
+        out[a:b + 1] = (t[a:b + 1] - sampled) > 0.5 * med
+        k = m + 1
+    return out
+
+
 def gap_breaks(t_s: np.ndarray) -> np.ndarray:
     """``gap[k]``: the step k -> k+1 is a gap in the time base (rows dropped there)."""
     dt = np.diff(np.asarray(t_s, dtype=float))
@@ -105,6 +143,10 @@ def settling_mask(twist: np.ndarray, jump: np.ndarray) -> np.ndarray:
         k, calm, last = j + 2, 0, j + 1
         while k < n - 1 and calm < SETTLED_SAMPLES:
             if jump[k]:
+                # the next jump (a bounce) came before the twist settled: everything up to
+                # it is still in flight, however still it looked (friction can hold the
+                # output mid-play for a few samples between two bounces)
+                last = k
                 break
             if abs(d2[k]) > band:
                 calm, last = 0, k

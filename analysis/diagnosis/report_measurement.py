@@ -122,11 +122,14 @@ def measurement_report(runs: Sequence[RunInput], prepared: Sequence[PreparedRun]
     tb = [r.measurement.get("time_base", {}) for r in prepared]
     out["sample_times"] = {
         "what": "sample interval, its jitter and the gaps (dropped rows); block means never "
-                "span a gap",
+                "span a gap. Rows stamped on arrival after a stall (restamped: later than "
+                "their sampling time by over half an interval) are left out: their torque "
+                "belongs to another moment than their twist",
         "interval_s": float(np.median([d.get("interval_s", math.nan) for d in tb])),
         "jitter_s": float(np.max([d.get("jitter_s", 0.0) for d in tb])),
         "gaps": int(sum(d.get("gaps", 0) for d in tb)),
         "longest_gap_s": float(np.max([d.get("longest_gap_s", 0.0) for d in tb])),
         "missing_share": float(np.mean([d.get("missing_share", 0.0) for d in tb])),
+        "restamped": int(sum(d.get("restamped", 0) for d in tb)),
     }
     return out

@@ -392,7 +392,7 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
     )
 
 
-def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float
+def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float, allowance_Nm: float = 0.0
                        ) -> tuple[list[PreparedRun], dict[str, Any]]:
     """Take each run's torque zero, read at its play crossings
     (:func:`analysis.diagnosis.measurement.crossing_zero`), out of its torque.
@@ -404,7 +404,9 @@ def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float
     not distinguishable from the scatter the whole zero of each run is taken out; when it is,
     only each run's departure from the mean (and its drift) is taken out and the common part
     is left for the torque_sensor_offset candidate to find. With one or two runs read, only
-    the departures. Returns the runs and the report's ``torque_zero`` entry."""
+    the departures. A common zero within ``allowance_Nm`` (what a re-tare and the zero's
+    drift over a campaign leave on a sound transducer) is the measuring system's too, and is
+    taken out whole. Returns the runs and the report's ``torque_zero`` entry."""
     from scipy.stats import t as student_t
 
     est = [(i, r.crossing) for i, r in enumerate(runs) if r.crossing is not None]
@@ -421,7 +423,7 @@ def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float
             p_common = float(2.0 * student_t.sf(abs(common) / se, len(est) - 1))
         else:
             p_common = 0.0 if common != 0.0 else 1.0
-        keep_common = p_common <= alpha
+        keep_common = p_common <= alpha and abs(common) > allowance_Nm
     for i, c in est:
         r = runs[i]
         removed = c.zero_at(r.t_s) - (common if keep_common else 0.0)
@@ -434,6 +436,10 @@ def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float
         "common_Nm": common,
         "scatter_Nm": float(np.std(zeros, ddof=1)) if len(est) > 1 else None,
         "common_false_alarm_probability": p_common,
+        "allowance_Nm": allowance_Nm,
         "treated_as": ("common offset left for the diagnosis; run-to-run departures removed"
-                       if keep_common else "re-tare residual of each run, removed"),
+                       if keep_common else
+                       "re-tare residual of each run, removed (their common part is within "
+                       "the zero allowance)" if p_common is not None and p_common <= alpha
+                       else "re-tare residual of each run, removed"),
     }

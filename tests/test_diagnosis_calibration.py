@@ -26,6 +26,7 @@ from analysis.diagnosis.calibration import block_length, calibrate, orthonormal
 from analysis.diagnosis.data import RunInput, direction_and_reversal, transit_mask
 from analysis.diagnosis.measurement import (
     crossing_events,
+    after_restamped,
     crossing_zero,
     restamped_rows,
     settling_mask,
@@ -191,8 +192,12 @@ def test_rows_stamped_in_a_burst_after_a_stall_are_found() -> None:
     t[100:110] = t[109] + np.arange(10) * 1e-5   # rows 100..109 held back, stamped together
     t = np.delete(t, np.arange(300, 320))         # 20 rows dropped: a gap, true times
     flagged = restamped_rows(t)
-    assert flagged[100:108].all()                 # held back by 4-36 ms
+    assert flagged[100:109].all()                 # held back by 4-36 ms
     assert not flagged[109] and not flagged[:100].any() and not flagged[110:].any()
+    # after the burst, for as long as the rows were held back, where the unit switched flank
+    # is not known to the torque: those rows are marked
+    after = after_restamped(t, flagged)
+    assert after[109:119].all() and not after[:109].any() and not after[200:].any()
 
 
 def test_a_burst_stamped_on_arrival_across_the_play_crossing_is_no_effect() -> None:

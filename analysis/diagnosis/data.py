@@ -18,6 +18,7 @@ import numpy as np
 
 from analysis.diagnosis.measurement import (
     CrossingZero,
+    after_restamped,
     best_torque_shift,
     crossing_events,
     crossing_zero,
@@ -90,6 +91,9 @@ class PreparedRun:
     measurement: dict[str, Any] = field(default_factory=dict, repr=False)
     #: Torque zero, friction and drift read at the play crossings (None: not readable).
     crossing: CrossingZero | None = field(default=None, repr=False)
+    #: Blocks just after a burst of restamped rows (analysis.diagnosis.measurement.
+    #: after_restamped): where the unit switched flank is not known to the torque noise.
+    time_unsure: np.ndarray | None = field(default=None, repr=False)
     #: The torque zero taken out of ``torque_Nm`` (N*m per block; zeros when none).
     zero_removed_Nm: np.ndarray | None = field(default=None, repr=False)
 
@@ -283,8 +287,10 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
     tbase = time_base(t)
     # rows stamped on arrival after a stall pair the twist with the torque of a later moment
     restamped = restamped_rows(t)
+    unsure = after_restamped(t, restamped)
     if restamped.any() and int((~restamped).sum()) >= 20:
         t, torque, twist = t[~restamped], torque[~restamped], twist[~restamped]
+        unsure = unsure[~restamped]
         if temp is not None:
             temp = temp[~restamped]
     amplitude = float(np.percentile(np.abs(torque), 99.5))
@@ -293,7 +299,7 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
     if lag_s:
         inside = (t + lag_s >= t[0]) & (t + lag_s <= t[-1])
         torque = np.interp(t[inside] + lag_s, t, torque) if correct_lag else torque[inside]
-        t, twist = t[inside], twist[inside]
+        t, twist, unsure = t[inside], twist[inside], unsure[inside]
         if temp is not None:
             temp = temp[inside]
     if nominal is not None and math.isfinite(nominal.stiffness_Nm_per_arcmin):
@@ -389,6 +395,7 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
         mean_temperature_C=None if temp is None else float(np.mean(temp)),
         start_flank=run.start_flank, nominal=nominal, lost_motion_arcmin=lost_motion, raw=run,
         measurement=measurement, crossing=zero,
+        time_unsure=_block_means(unsure.astype(float), segments, block)[held] > 0,
     )
 
 

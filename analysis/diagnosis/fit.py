@@ -189,15 +189,19 @@ def run_floating(run: PreparedRun, nl: dict[str, float]) -> np.ndarray:
 
 def run_float_masks(run: PreparedRun, nl: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
     """(floating, across): ``floating`` as :func:`run_floating`; ``across`` the floating
-    points whose chain torque, inside its noise band, already points away from the flank last
-    touched. The switch of flank lies inside the torque's noise there, so the unit may
-    already have crossed: it may lie anywhere in the play (:func:`censor_floating`)."""
+    points just after a burst of rows stamped on arrival (``run.time_unsure``) whose chain
+    torque, inside its noise band, already points away from the flank last touched. The
+    crossing inside the burst was not observed at its torque, so the unit may already have
+    switched: it may lie anywhere in the play (:func:`censor_floating`). Elsewhere the centre
+    rule holds: a unit held on the other flank at zero torque shows a torque-sensor offset."""
     torque = run.torque_Nm - nl.get("torque_offset_Nm", 0.0)
     g = chain_torque_Nm(torque, nl.get("friction_Nm", 0.0), run.start_flank)
     band = flank_band_Nm(run)
     floating = np.abs(g) < band
+    if run.time_unsure is None or not run.time_unsure.any():
+        return floating, np.zeros(floating.size, dtype=bool)
     kept = flank_sign(g, band, run.start_flank)
-    return floating, floating & (g * kept < 0)
+    return floating, floating & run.time_unsure & (g * kept < 0)
 
 
 def censor_floating(r: np.ndarray, X: np.ndarray, beta: np.ndarray, floating: np.ndarray,

@@ -112,6 +112,24 @@ def restamped_rows(t_s: np.ndarray) -> np.ndarray:
     return out
 
 
+def after_restamped(t_s: np.ndarray, restamped: np.ndarray) -> np.ndarray:
+    """Rows (True) within one stall's length after a burst of restamped rows: a play crossing
+    inside the burst was not observed at its torque, so where the unit switched flank is
+    unknown there to the torque the ramp covers in that time."""
+    t = np.asarray(t_s, dtype=float)
+    out = np.zeros(t.size, dtype=bool)
+    idx = np.flatnonzero(restamped)
+    if idx.size == 0:
+        return out
+    bursts = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
+    for burst in bursts:
+        a, b = int(burst[0]), int(burst[-1])
+        start = t[a - 1] if a > 0 else t[a]
+        span = max(t[b] - start, 0.0)
+        out |= (t > t[b]) & (t <= t[b] + span)
+    return out
+
+
 def gap_breaks(t_s: np.ndarray) -> np.ndarray:
     """``gap[k]``: the step k -> k+1 is a gap in the time base (rows dropped there)."""
     dt = np.diff(np.asarray(t_s, dtype=float))

@@ -346,3 +346,29 @@ def test_the_heading_names_the_design(tmp_path):
     assert "Design (none)" not in page
     only = spc_report(st, design=gear)
     assert [(d["design"], d["n_tests"]) for d in only["designs"]] == [(gear, 3)]
+
+
+def test_a_run_outside_campaigns_is_judged_by_its_own_run_json_limits(tmp_path):
+    """Two campaigns with a lost-motion limit of 3 arcmin, then one run measured on its own
+    (no campaign) with 2.5 in its run.json: its point carries 2.5, not a campaign's 3."""
+    from rig.spc import spc_report
+    from rig.store import Store
+    from rig.synthetic_runs import COLUMNS, closed_form_metrics, loop_samples, write_campaign
+
+    st = Store(tmp_path / "store")
+    for k, play in enumerate([2.0, 2.2]):
+        write_campaign(st, f"C-{k}", play_arcmin=play, positions_deg=(0.0,), design="SYN-1",
+                       unit_data=UNIT, n_quarter=40, limits={"lost_motion_arcmin_max": 3.0})
+    meta = {"unit": {**UNIT, "serial": "S-1", "design": "SYN-1"}, "operator": "t",
+            "test": {"rated_torque_Nm": 10.0, "input_angle_deg": 0.0},
+            "limits": {"lost_motion_arcmin_max": 2.5, "backlash_arcmin_max": None,
+                       "stiffness_Nm_per_arcmin_min": None}}
+    with st.begin_run(meta, COLUMNS) as rec:
+        for row in loop_samples(2.1, 30.0, 10.0, 40).tolist():
+            rec.append(row)
+        rec.finish(result=closed_form_metrics(2.1, 30.0, 10.0), extra={"outcome": "ok"})
+    (d,) = spc_report(st)["designs"]
+    lm = d["metrics"]["lost_motion_arcmin"]
+    assert [(p["unit_serial"], p["usl"]) for p in lm["points"]] == [
+        ("C-0", 3.0), ("C-1", 3.0), ("S-1", 2.5)]
+    assert lm["limits_differ"] is True and lm["usl"] is None

@@ -8,6 +8,16 @@ Individuals and moving-range (I-MR) charts, ISO 7870-2:2023 Table 3 / Montgomery
 centre ``xbar``, limits ``xbar ± 3 sigma_within``; moving-range chart centre ``MRbar``, upper
 limit ``D4 MRbar`` with ``D4 = 3.267``, lower limit ``D3 MRbar = 0``.
 
+A quantity that cannot be negative (``lower_bound = 0``: lost motion, backlash, hysteresis
+loss, stiffness) gets a one-sided chart where ``xbar - 3 sigma_within`` falls below the bound:
+the lower control limit is the bound itself, ``LCL = max(xbar - 3 sigma_within, lower_bound)``,
+and the chart says so (``lcl_clipped``); the upper limit stays ``xbar + 3 sigma_within``. A
+limit below zero could never be crossed, so the chart has no lower limit there: the rule
+of the c chart (Montgomery, ch. 7: a negative LCL is set to zero) and of the moving-range
+chart's ``D3 = 0``. The zones of the run rules stay ``xbar ± k sigma_within``.
+An individuals chart of the logarithm was not chosen: a zero-backlash unit is measured at 0
+exactly, whose logarithm does not exist, and the limits would be read in log arcmin.
+
 Run rules on the individuals chart (Western Electric Handbook, 1956; the zones are 1, 2, 3
 sigma_within from the centre), plus Nelson's trend rule; on the MR chart only rule 1:
 
@@ -74,11 +84,16 @@ class IMRChart:
     mr_centre: float
     mr_ucl: float
     violations: list[Violation] = field(default_factory=list)
+    lcl_clipped: bool = False
+    """True where ``centre - 3 sigma_within`` was below ``lower_bound``: LCL is the bound
+    (a one-sided chart, module doc)."""
+    lower_bound: float | None = None
 
     def to_dict(self) -> dict:
         return {
             "individuals": {"values": self.values.tolist(), "centre": self.centre,
-                            "ucl": self.ucl, "lcl": self.lcl},
+                            "ucl": self.ucl, "lcl": self.lcl,
+                            "lcl_clipped": self.lcl_clipped, "lower_bound": self.lower_bound},
             "moving_range": {"values": self.moving_ranges.tolist(), "centre": self.mr_centre,
                              "ucl": self.mr_ucl, "lcl": 0.0},
             "sigma_within": self.sigma_within,
@@ -86,8 +101,12 @@ class IMRChart:
         }
 
 
-def imr_chart(values: np.ndarray | list[float]) -> IMRChart:
-    """The I-MR chart of ``values`` in time order, with its rule violations (>= 2 values)."""
+def imr_chart(values: np.ndarray | list[float], lower_bound: float | None = None) -> IMRChart:
+    """The I-MR chart of ``values`` in time order, with its rule violations (>= 2 values).
+
+    ``lower_bound``: the smallest value the quantity can take (0 for lost motion, backlash,
+    stiffness; None: unbounded); the LCL is never below it (a one-sided chart, module doc).
+    """
     x = np.asarray(values, dtype=float)
     if x.ndim != 1 or x.size < 2:
         raise AnalysisError(f"an individuals chart needs at least 2 values, got {x.size}")
@@ -97,9 +116,12 @@ def imr_chart(values: np.ndarray | list[float]) -> IMRChart:
     mr_bar = float(mr.mean())
     centre = float(x.mean())
     sigma = mr_bar / D2
+    lcl = centre - 3.0 * sigma
+    clipped = lower_bound is not None and lcl < lower_bound
     chart = IMRChart(values=x, centre=centre, sigma_within=sigma, ucl=centre + 3.0 * sigma,
-                     lcl=centre - 3.0 * sigma, moving_ranges=mr, mr_centre=mr_bar,
-                     mr_ucl=D4 * mr_bar)
+                     lcl=float(lower_bound) if clipped else lcl, moving_ranges=mr,
+                     mr_centre=mr_bar, mr_ucl=D4 * mr_bar, lcl_clipped=bool(clipped),
+                     lower_bound=None if lower_bound is None else float(lower_bound))
     chart.violations.extend(run_rules(x, centre, sigma))
     chart.violations.extend(
         Violation("WE1", "MR", int(i) + 1, (int(i), int(i) + 1))

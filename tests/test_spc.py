@@ -202,3 +202,173 @@ def test_the_view_uses_the_newest_reanalysis(tmp_path):
     assert lm["chart"]["individuals"]["centre"] == pytest.approx(
         (2.02 + 2.22 + 2.12 + expected_p3 + 2.32) / 5, abs=1e-12)
     assert doc["n_runs_reanalysed"] == 1
+
+
+# ------------------------------------------------------------- issue 21 item 18: the SPC page
+
+
+def test_a_quantity_that_cannot_be_negative_gets_no_negative_lower_limit():
+    """x = 0.1, 1.0, 0.2, 0.9, 0.1: mean 2.3 / 5 = 0.46, MR-bar = 3.2 / 4 = 0.8, 3 sigma =
+    2.4 / 1.128 = 2.1276596; centre - 3 sigma = -1.6676596 < 0: with the bound 0 the LCL is 0
+    (one-sided), the UCL stays 0.46 + 2.1276596 = 2.5876596."""
+    x = [0.1, 1.0, 0.2, 0.9, 0.1]
+    free = imr_chart(x)
+    assert free.lcl == pytest.approx(-1.6676596, abs=1e-7) and not free.lcl_clipped
+    bounded = imr_chart(x, lower_bound=0.0)
+    assert bounded.lcl == 0.0 and bounded.lcl_clipped
+    assert bounded.ucl == pytest.approx(2.5876596, abs=1e-7) == free.ucl
+    assert bounded.to_dict()["individuals"]["lcl_clipped"] is True
+    far = imr_chart(X, lower_bound=0.0)  # 2.24 - 0.731 > 0: a two-sided chart as before
+    assert far.lcl == pytest.approx(1.5086170, abs=1e-7) and not far.lcl_clipped
+
+
+def test_spc_charts_of_lost_motion_backlash_stiffness_have_no_negative_lcl(tmp_path):
+    """Units of a near-zero-backlash design (backlash = play 0.1, 1.0, 0.2, 0.9, 0.1 arcmin,
+    lost motion 0.02 more): both charts' centre - 3 sigma is below 0 (above); the LCL is 0
+    on the JSON and on the page, which says why. Stiffness (30 for all) stays two-sided."""
+    from rig.spc import spc_report
+    from rig.spc.html import render_html
+    from rig.store import Store
+    from rig.synthetic_runs import write_campaign
+
+    st = Store(tmp_path / "store")
+    for k, play in enumerate([0.1, 1.0, 0.2, 0.9, 0.1]):
+        write_campaign(st, f"Z-{k}", play_arcmin=play, positions_deg=(0.0,), design="ZB-1",
+                       unit_data=UNIT, n_quarter=40)
+    (d,) = spc_report(st)["designs"]
+    for metric in ("lost_motion_arcmin", "backlash_arcmin"):
+        ind = d["metrics"][metric]["chart"]["individuals"]
+        assert ind["lcl"] == 0.0 and ind["lcl_clipped"] is True, metric
+        assert ind["ucl"] == pytest.approx(ind["centre"] + 2.4 / 1.128, abs=1e-9)
+    stiff = d["metrics"]["stiffness_Nm_per_arcmin"]["chart"]["individuals"]
+    assert stiff["lcl"] == pytest.approx(30.0) and stiff["lcl_clipped"] is False
+    page = render_html(spc_report(st))
+    assert page.count("<td>0 (one-sided)</td>") == 2
+    assert "the LCL is 0 and the chart is one-sided" in page
+    assert "<td>-" not in page  # no negative figure in the tables
+
+
+def test_each_unit_test_is_charted_against_its_own_campaigns_limits(tmp_path):
+    """Units P-0..P-2 tested with a lost-motion limit of 3 arcmin, then P-3 and P-4 with 2
+    (worst lost motion 2.02, 2.22, 2.12 | 2.62, 2.32). Each point carries its campaign's limit
+    and verdict; no single USL is applied to all. Capability per set of limits, with the
+    chart's sigma_within 0.275 / 1.128 (3 sigma = 0.825 / 1.128): limit 3, mean 2.12:
+    Cpk = 0.88 * 1.128 / 0.825 = 1.2032; limit 2, mean 2.47: Cpk = -0.47 * 1.128 / 0.825 =
+    -0.6426182."""
+    from rig.spc import spc_report
+    from rig.spc.html import render_html
+    from rig.store import Store
+    from rig.synthetic_runs import write_campaign
+
+    st = Store(tmp_path / "store")
+    plays = [[2.0, 1.9], [2.1, 2.2], [2.1, 1.8], [2.6, 2.5], [2.3, 2.2]]
+    for k, p in enumerate(plays):
+        write_campaign(st, f"P-{k}", play_arcmin=p, design="SYN-1", unit_data=UNIT,
+                       limits={"lost_motion_arcmin_max": 3.0 if k < 3 else 2.0},
+                       n_quarter=60)
+    (d,) = spc_report(st)["designs"]
+    lm = d["metrics"]["lost_motion_arcmin"]
+    assert [p["usl"] for p in lm["points"]] == [3.0, 3.0, 3.0, 2.0, 2.0]
+    assert [p["verdict"] for p in lm["points"]] == ["OK", "OK", "OK", "NOT OK", "NOT OK"]
+    assert [t["limits"] for t in d["tests"]] == [{"lost_motion_arcmin_max": 3.0}] * 3 + [
+        {"lost_motion_arcmin_max": 2.0}] * 2
+    assert lm["usl"] is None and lm["limits_differ"] is True
+    assert lm["capability"]["cpk"] is None  # no one limit for the whole chart
+    by = {c["usl"]: c for c in lm["capability_by_limits"]}
+    assert (by[3.0]["n"], by[2.0]["n"]) == (3, 2)
+    assert by[3.0]["cpk"] == pytest.approx(1.2032, abs=1e-7)
+    assert by[2.0]["cpk"] == pytest.approx(-0.6426182, abs=1e-7)
+    assert d["limit_sets"] == [{"limits": {"lost_motion_arcmin_max": 3.0}, "n_tests": 3},
+                               {"limits": {"lost_motion_arcmin_max": 2.0}, "n_tests": 2}]
+    page = render_html(spc_report(st))
+    assert "lost_motion_arcmin_max 3 (3 unit tests); lost_motion_arcmin_max 2 (2 unit tests)" \
+        in page
+    assert "<td>each unit's own</td>" in page and "<td>1.203</td>" in page
+
+
+def test_the_x_axis_is_the_test_order_and_each_point_names_its_serial(tmp_path):
+    """The charts' x axis is the test order 1..5 with integer ticks; the page puts a hover
+    target on every drawn point (the PNG's pixel there is the points' colour) naming the test
+    order, the serial, the value and the verdict."""
+    import io
+
+    import matplotlib.image
+    import numpy as np
+    from matplotlib.colors import to_rgb
+
+    from rig.spc import spc_report
+    from rig.spc.html import POINT_COLOUR, draw_chart, hover_targets, render_html
+    from rig.store import Store
+
+    st = Store(tmp_path / "store")
+    small_line(st)
+    doc = spc_report(st, design="SYN-1")
+    lm = doc["designs"][0]["metrics"]["lost_motion_arcmin"]
+    assert [p["order"] for p in lm["points"]] == [1, 2, 3, 4, 5]
+    image = draw_chart("lost_motion_arcmin", lm)
+    assert image.xticks == [1.0, 2.0, 3.0, 4.0, 5.0]
+    rgba = matplotlib.image.imread(io.BytesIO(image.png))
+    assert rgba.shape[:2] == (image.height, image.width)
+    for px, py in image.points:
+        colour = rgba[int(round(py)), int(round(px)), :3]
+        assert np.abs(colour - np.array(to_rgb(POINT_COLOUR))).max() < 0.15, (px, py)
+    targets = hover_targets(image, lm, "arcmin")
+    assert [t["text"] for t in targets] == [
+        f"unit test {k + 1}: P-{k} · {v} arcmin · OK"
+        for k, v in enumerate(["2.02", "2.22", "2.12", "2.62", "2.32"])]
+    page = render_html(doc)
+    assert 'title="unit test 4: P-3 · 2.62 arcmin · OK"' in page
+    assert page.count('class="pt') == 15  # 5 points on each of the 3 charts
+
+
+def test_the_heading_names_the_design(tmp_path):
+    """Units whose runs record no design name are named by their gear data (and can be
+    asked for by that name); runs without any unit data say so, never "Design (none)"."""
+    from rig.spc import spc_report
+    from rig.spc.html import render_html
+    from rig.store import Store
+    from rig.synthetic_runs import write_campaign
+
+    st = Store(tmp_path / "store")
+    for k, play in enumerate([2.0, 2.2, 2.1]):
+        write_campaign(st, f"G-{k}", play_arcmin=play, positions_deg=(0.0,), design=None,
+                       unit_data=UNIT, n_quarter=40)
+    for k, play in enumerate([2.0, 2.4]):
+        write_campaign(st, f"N-{k}", play_arcmin=play, positions_deg=(0.0,), design=None,
+                       n_quarter=40)
+    gear = "internal_involute, 45/40 teeth, module 1 mm"
+    doc = spc_report(st)
+    assert [(d["design"], d["design_named_by"], d["n_tests"]) for d in doc["designs"]] == [
+        ("(not recorded)", "none", 2), (gear, "gear data", 3)]
+    page = render_html(doc)
+    assert f"<h2>Design {gear}: 3 unit tests, 3 runs</h2>" in page
+    assert "<h2>Design not recorded: 2 unit tests, 2 runs</h2>" in page
+    assert "Design (none)" not in page
+    only = spc_report(st, design=gear)
+    assert [(d["design"], d["n_tests"]) for d in only["designs"]] == [(gear, 3)]
+
+
+def test_a_run_outside_campaigns_is_judged_by_its_own_run_json_limits(tmp_path):
+    """Two campaigns with a lost-motion limit of 3 arcmin, then one run measured on its own
+    (no campaign) with 2.5 in its run.json: its point carries 2.5, not a campaign's 3."""
+    from rig.spc import spc_report
+    from rig.store import Store
+    from rig.synthetic_runs import COLUMNS, closed_form_metrics, loop_samples, write_campaign
+
+    st = Store(tmp_path / "store")
+    for k, play in enumerate([2.0, 2.2]):
+        write_campaign(st, f"C-{k}", play_arcmin=play, positions_deg=(0.0,), design="SYN-1",
+                       unit_data=UNIT, n_quarter=40, limits={"lost_motion_arcmin_max": 3.0})
+    meta = {"unit": {**UNIT, "serial": "S-1", "design": "SYN-1"}, "operator": "t",
+            "test": {"rated_torque_Nm": 10.0, "input_angle_deg": 0.0},
+            "limits": {"lost_motion_arcmin_max": 2.5, "backlash_arcmin_max": None,
+                       "stiffness_Nm_per_arcmin_min": None}}
+    with st.begin_run(meta, COLUMNS) as rec:
+        for row in loop_samples(2.1, 30.0, 10.0, 40).tolist():
+            rec.append(row)
+        rec.finish(result=closed_form_metrics(2.1, 30.0, 10.0), extra={"outcome": "ok"})
+    (d,) = spc_report(st)["designs"]
+    lm = d["metrics"]["lost_motion_arcmin"]
+    assert [(p["unit_serial"], p["usl"]) for p in lm["points"]] == [
+        ("C-0", 3.0), ("C-1", 3.0), ("S-1", 2.5)]
+    assert lm["limits_differ"] is True and lm["usl"] is None

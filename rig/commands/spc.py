@@ -19,7 +19,7 @@ def register(app: typer.Typer) -> None:
         samples: SamplesOption = None,
         design: Annotated[str | None, typer.Option(
             "--design", help="Only units of this design (run.json unit.design, else "
-            "unit.model).")] = None,
+            "unit.model, else the name made of its gear data that the output shows).")] = None,
         since: Annotated[str | None, typer.Option(
             "--since", help="Only tests started on or after this UTC date/time "
             "(ISO 8601, e.g. 2026-11-01).")] = None,
@@ -29,8 +29,9 @@ def register(app: typer.Typer) -> None:
             "--json", help="Write every figure as JSON ('-': stdout).")] = None,
     ) -> None:
         """Lost motion, backlash and stiffness per unit over time: individuals/moving-range
-        charts with control limits, the Western Electric rules, Cp/Cpk against the campaign
-        limits and the seed 000 batch band of the design (docs/deployment.md)."""
+        charts with control limits (one-sided, LCL 0, where centre - 3 sigma < 0), the
+        Western Electric rules, Cp/Cpk against each unit's own campaign limits and the seed
+        000 batch band of the design (docs/deployment.md)."""
         from rich.console import Console
         from rich.markup import escape
         from rich.table import Table
@@ -77,8 +78,10 @@ def register(app: typer.Typer) -> None:
                     table.add_row(name, "", m["error"], "", "", "", "", "")
                     continue
                 c, cap = m["chart"], m["capability"]
+                lcl = f(c["individuals"]["lcl"]) + (
+                    " (one-sided)" if c["individuals"].get("lcl_clipped") else "")
                 table.add_row(name, str(cap["n"]), f(c["individuals"]["centre"]),
-                              f(c["individuals"]["lcl"]), f(c["individuals"]["ucl"]),
+                              lcl, f(c["individuals"]["ucl"]),
                               f(c["moving_range"]["centre"]), f(cap["cpk"]),
                               str(len(c["violations"])))
             out.print(table)

@@ -2,9 +2,9 @@
 as a page) and ``GET /api/spc`` (every figure as JSON), for the store the page serves.
 
 Lost motion, backlash and stiffness per unit over time as individuals/moving-range charts
-with control limits, the out-of-control rules, Cp/Cpk against the campaign limits and the
-seed 000 batch band of the design (rig/spc/__init__.py, docs/deployment.md). Computed in the page's
-worker process (rig/web/workers.py): a large store never holds up the page.
+with control limits, the out-of-control rules, Cp/Cpk against each unit's own campaign
+limits and the seed 000 batch band of the design (rig/spc/__init__.py, docs/deployment.md).
+Computed in the page's worker process (rig/web/workers.py): a large store never holds up the page.
 """
 
 from __future__ import annotations

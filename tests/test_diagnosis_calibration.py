@@ -25,8 +25,8 @@ from analysis.diagnosis import diagnose
 from analysis.diagnosis.calibration import block_length, calibrate, orthonormal
 from analysis.diagnosis.data import RunInput, direction_and_reversal, transit_mask
 from analysis.diagnosis.measurement import (
-    crossing_events,
     after_restamped,
+    crossing_events,
     crossing_zero,
     restamped_rows,
     settling_mask,
@@ -235,7 +235,7 @@ def test_a_common_torque_zero_within_the_retare_allowance_is_no_offset() -> None
     runs = [prepare_run(_run(i, params, rng, angle=90.0 * i, n=3000,
                              zero_Nm=0.015 + float(rng.normal(0, 0.001)))) for i in range(4)]
     allowance = ZERO_ALLOWANCE * 10.0
-    assert 0.015 < allowance
+    assert allowance > 0.015
     _, within = remove_torque_zero(runs, 0.01, allowance)
     _, beyond = remove_torque_zero(runs, 0.01, 0.0)
     assert within["common_false_alarm_probability"] <= 0.01  # common to every run...

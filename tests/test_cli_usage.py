@@ -62,6 +62,7 @@ def _commands() -> list[list[str]]:
     return sorted(names)
 
 
+@pytest.mark.timeout(600)
 def test_help_at_80_columns_keeps_every_option_name_whole():
     import typer.main
 
@@ -82,6 +83,7 @@ def test_help_at_80_columns_keeps_every_option_name_whole():
         assert max(len(line) for line in res.output.splitlines()) <= 80, path
 
 
+@pytest.mark.timeout(600)
 def test_analyse_table_keeps_its_headers_and_shows_the_loop_area_in_mJ(tmp_path: Path):
     out = tmp_path / "c.json"
     res = CliRunner().invoke(app, ["analyse", str(CAMPAIGN), "--json", str(out)],
@@ -110,6 +112,7 @@ def test_analyse_table_keeps_its_headers_and_shows_the_loop_area_in_mJ(tmp_path:
 
 
 # -- item 22: --json - is stdout; no folder made for a mistyped path ----------------------------
+@pytest.mark.timeout(600)
 @pytest.mark.parametrize("args", [
     ["analyse", str(RUNS_DIR / "pair1-pos000")],
     ["analyse", str(CAMPAIGN)],

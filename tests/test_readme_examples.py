@@ -112,6 +112,7 @@ def test_pair3_after_compensation_is_2_arcmin_on_average_and_fails_at_180(worksp
     assert all("above the limit 3" in cause for cause in doc["failures"]), doc["failures"]
 
 
+@pytest.mark.timeout(600)
 def test_analyse_examples_write_what_they_say(workspace: Path) -> None:
     res = run(ANALYSE_RUN, workspace)
     assert res.returncode == 0, res.stderr

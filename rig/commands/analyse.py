@@ -15,7 +15,6 @@ if TYPE_CHECKING:
     from rig.analyse import RunAnalysis
 
 
-
 def _num(value: Any, digits: int = 3) -> str:
     return "—" if value is None else f"{value:.{digits}f}"
 

@@ -24,6 +24,9 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # click's plain help: rich's option table cuts long option names at 80 columns
+    # ("--realtime-prior…"); click's wraps the help text and keeps every name whole
+    rich_markup_mode=None,
 )
 
 
@@ -71,7 +74,16 @@ def main() -> None:
 
     configure_cli_logging()
     try:
-        app()
+        code = app(standalone_mode=False)
+    except typer.TyperException as exc:  # a usage error (click's, in typer): one line, exit 2
+        if type(exc).__name__ == "NoArgsIsHelpError":  # `rig` alone: the help, as click does
+            exc.show()
+        else:
+            print(usage_error_line(exc), file=sys.stderr)
+        sys.exit(2)
+    except typer.Abort:  # end of input at a prompt
+        print("rig: error: aborted", file=sys.stderr)
+        sys.exit(2)
     except (RigError, DeviceError, AnalysisError) as exc:
         print(f"rig: error: {redact_text(str(exc))}", file=sys.stderr)
         sys.exit(2)
@@ -80,6 +92,22 @@ def main() -> None:
         print(f"rig: internal error: {type(exc).__name__}: {redact_text(str(exc))} (a bug; "
               f"the traceback is in {log_file})", file=sys.stderr)
         sys.exit(2)
+    # click's non-standalone mode returns the code of ``typer.Exit`` (a command's own value
+    # is None)
+    sys.exit(code if isinstance(code, int) and not isinstance(code, bool) else 0)
+
+
+def usage_error_line(exc: typer.TyperException) -> str:
+    """click's error (an option without its value, a value out of range, an unknown command
+    with the nearest names) as one line, with where the help is: ``rig: error: Invalid value
+    for '--limit': ... (rig runs --help)``. click itself prints a usage line, a hint and the
+    error, and typer frames them in a box: 5-6 lines."""
+    format_message = getattr(exc, "format_message", None)
+    text = format_message() if callable(format_message) else str(exc)
+    message = " ".join(redact_text(text).split())
+    ctx = getattr(exc, "ctx", None)
+    where = f" ({ctx.command_path} --help)" if ctx is not None else ""
+    return f"rig: error: {message}{where}"
 
 
 def _terminate_like_ctrl_c(signum: int, frame: object) -> None:

@@ -389,10 +389,16 @@ def serve_until_signalled(sim: SimulatedRig, poll_s: float = 0.2,
                           parent_pid: int | None = None) -> int:
     """Run ``sim`` (started) until SIGTERM/SIGINT, or until the process ``parent_pid`` is no
     longer this one's parent (it died: an orphaned simulator would load the PC for ever);
-    then stop cleanly and return 0."""
+    then stop cleanly and return 0.
+
+    Started by a parent (``parent_pid``), SIGINT is ignored: the simulated devices stand in
+    for hardware, which a Ctrl-C in the terminal (it reaches the whole process group) does
+    not switch off; the parent brings the rig to its safe state, then stops them (SIGTERM)."""
     done = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: done.set())
-                for sig in (signal.SIGTERM, signal.SIGINT)}
+    signals = (signal.SIGTERM,) if parent_pid is not None else (signal.SIGTERM, signal.SIGINT)
+    previous = {sig: signal.signal(sig, lambda *_: done.set()) for sig in signals}
+    if parent_pid is not None:
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, signal.SIG_IGN)
     stats_path = os.environ.get("RIG_SIM_STATS")
     try:
         while not done.wait(poll_s):

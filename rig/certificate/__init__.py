@@ -453,8 +453,9 @@ def write_certificate(subject: Subject, pdf: Path | None = None, html: Path | No
     for path, data in ((html, page.encode("utf-8")), (pdf, html_to_pdf(page) if pdf else b"")):
         if path is None:
             continue
+        if not path.parent.is_dir():  # a mistyped folder is not made: said (rig certificate)
+            raise CertificateError(f"{path}: no folder {path.parent} to write into")
         try:
-            path.parent.mkdir(parents=True, exist_ok=True)
             path.write_bytes(data)
         except OSError as exc:
             raise CertificateError(f"{path}: cannot write: {exc.strerror or exc}") from exc

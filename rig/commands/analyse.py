@@ -2,63 +2,87 @@
 
 from __future__ import annotations
 
-import json
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
-
-from rig.json_files import finite_for_json
 
 if TYPE_CHECKING:
     from rig.analyse import RunAnalysis
-
-console = Console()
 
 
 def _num(value: Any, digits: int = 3) -> str:
     return "—" if value is None else f"{value:.{digits}f}"
 
 
+def significant(value: float, u: float | None = None, digits: int = 3) -> str:
+    """``value`` with ``digits`` significant digits (``0.435``, ``12.3``), and ``± u`` with as
+    many decimals, or more for a ``u`` that would round to nothing (one significant digit)."""
+    if not math.isfinite(value):
+        return str(value)
+    magnitude = math.floor(math.log10(abs(value))) if value else 0
+    decimals = max(0, digits - 1 - magnitude)
+    if u is not None and math.isfinite(u) and u > 0:
+        decimals = max(decimals, -math.floor(math.log10(u)))
+    decimals = min(decimals, 9)
+    text = f"{value:.{decimals}f}"
+    if u is not None:
+        text += f" ± {u:.{decimals}f}"
+    return text
+
+
+ROWS: tuple[tuple[str, str, str, float, Any], ...] = (
+    # (metric key, label, unit, factor from the JSON key's unit, format)
+    ("lost_motion_arcmin", "lost motion", "arcmin", 1.0, 3),
+    ("backlash_arcmin", "backlash", "arcmin", 1.0, 3),
+    ("stiffness_Nm_per_arcmin", "stiffness", "N·m/arcmin", 1.0, 2),
+    ("loop_area_J", "loop area", "mJ", 1e3, significant),
+    ("torque_offset_Nm", "torque offset", "N·m", 1.0, 4),
+)
+"""The table's rows per run. The loop area is shown in mJ with 3 significant digits: a loop of
+the rated ±10 N·m encloses a few tenths of a millijoule, which in J and 4 decimals read
+"0.0004 ± 0.0000"."""
+
+
+def _cell(value: Any, u: Any, fmt: Any, factor: float) -> str:
+    if value is None:
+        return "[red]n/a[/red]"
+    u = None if u is None else u * factor
+    if callable(fmt):
+        return fmt(value * factor, u)
+    return _num(value * factor, fmt) + ("" if u is None else f" ± {_num(u, fmt)}")
+
+
 def _table(items: list[RunAnalysis]) -> Table:
+    """One row per metric of each run (run, metric, measured ± standard uncertainty, the
+    model's prediction, unit): narrow enough for an 80-column terminal with every header and
+    figure whole (nine metric columns side by side cut them: "backl…")."""
     table = Table(
         title=f"Hysteresis loop metrics (±{items[0].lost_motion_pct:g} % of rated torque)"
     )
-    table.add_column("run")
-    table.add_column("lost motion\narcmin", justify="right")
-    table.add_column("model\narcmin", justify="right")
-    table.add_column("backlash\narcmin", justify="right")
-    table.add_column("model\narcmin", justify="right")
-    table.add_column("stiffness\nN·m/arcmin", justify="right")
-    table.add_column("model\nN·m/arcmin", justify="right")
-    table.add_column("loop area\nJ", justify="right")
-    table.add_column("T offset\nN·m", justify="right")
+    table.add_column("run", overflow="fold")
+    table.add_column("metric", no_wrap=True)
+    table.add_column("measured ± u", justify="right", no_wrap=True)
+    table.add_column("model", justify="right", no_wrap=True)
+    table.add_column("unit", no_wrap=True)
     for item in items:
         d = item.to_dict()
-        u = d.get("uncertainty", {})
+        u = d.get("uncertainty") or {}
         m = d.get("model") or {}
-
-        def with_u(key: str, digits: int = 3, d=d, u=u) -> str:
-            if d.get(key) is None:
-                return "[red]n/a[/red]"
-            text = _num(d[key], digits)
-            if u.get(key) is not None:
-                text += f" ± {_num(u[key], digits)}"
-            return text
-
-        table.add_row(
-            d["run_id"],
-            with_u("lost_motion_arcmin"),
-            _num(m.get("lost_motion_arcmin")),
-            with_u("backlash_arcmin"),
-            _num(m.get("backlash_arcmin")),
-            with_u("stiffness_Nm_per_arcmin", 2),
-            _num(m.get("stiffness_Nm_per_arcmin"), 2),
-            with_u("loop_area_J", 4),
-            with_u("torque_offset_Nm", 4),
-        )
+        for i, (key, label, unit, factor, fmt) in enumerate(ROWS):
+            model = m.get(key)
+            table.add_row(
+                escape(d["run_id"]) if i == 0 else "",
+                label,
+                _cell(d.get(key), u.get(key), fmt, factor),
+                "" if model is None else _cell(model, None, fmt, factor),
+                unit,
+                end_section=i == len(ROWS) - 1,
+            )
     return table
 
 
@@ -85,7 +109,7 @@ def register(app: typer.Typer) -> None:
             float | None, typer.Option(help="Harmonic Drive T2 (N·m) for K1/K2/K3.")
         ] = None,
         json_file: Annotated[
-            Path | None, typer.Option("--json", help="Write the metrics as JSON.")
+            Path | None, typer.Option("--json", help="Write the metrics as JSON ('-': stdout).")
         ] = None,
         plot: Annotated[
             Path | None, typer.Option(help="Write the Fig. 6-style loop picture (PNG).")
@@ -93,8 +117,11 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Compute lost motion, backlash, stiffness, loop area and torque offset, with the model."""
         from rig.analyse import analyse_run
+        from rig.json_output import JsonOutput
         from rig.runformat import is_campaign, read_run_or_campaign
 
+        json_out = JsonOutput(json_file)
+        console = Console(stderr=json_out.to_stdout)
         campaign = read_run_or_campaign(path)
         items = [
             analyse_run(
@@ -122,10 +149,8 @@ def register(app: typer.Typer) -> None:
                     "campaign": campaign.meta.get("name"),
                     "runs": [item.to_dict() for item in items],
                 }
-            json_file.parent.mkdir(parents=True, exist_ok=True)
-            text = json.dumps(finite_for_json(payload), indent=2, allow_nan=False)
-            json_file.write_text(text + "\n")
-            console.print(f"metrics written to {json_file}")
+            json_out.write(payload, ensure_ascii=True)
+            console.print(f"metrics written to {json_out.where}")
         if plot is not None:
             from rig.plots import plot_loops
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
@@ -23,7 +22,8 @@ def register(app: typer.Typer) -> None:
         ] = False,
         rated_torque: Annotated[float, typer.Option(help="Rated torque, N·m.")] = 10.0,
         percent: Annotated[float, typer.Option(help="Lost-motion band, % of rated.")] = 3.0,
-        json_file: Annotated[Path | None, typer.Option("--json", help="Write JSON.")] = None,
+        json_file: Annotated[Path | None, typer.Option(
+            "--json", help="Write the report as JSON ('-': stdout).")] = None,
     ) -> None:
         """Monte Carlo lost motion of a batch built to this design within seed 000 Table 1.
 
@@ -34,7 +34,9 @@ def register(app: typer.Typer) -> None:
         from analysis.models.seed000_batch import lost_motion_batch
         from analysis.models.seed000_unit import InternalPairUnit
         from rig.commands.model import load_unit_mapping
+        from rig.json_output import JsonOutput
 
+        json_out = JsonOutput(json_file)
         unit, _ = InternalPairUnit.from_mapping(load_unit_mapping(unit_file))
         result = lost_motion_batch(
             unit,
@@ -64,11 +66,10 @@ def register(app: typer.Typer) -> None:
                 label,
                 *(f"{row[k]:.3f}'" for k in ("mean", "std", "p2_5", "median", "p97_5", "max")),
             )
-        console = Console()
+        console = Console(stderr=json_out.to_stdout)
         console.print(table)
         console.print(
             f"units that bind somewhere (play < 0): {100 * result.interference_fraction:.1f} % "
             f"(deepest {result.interference_max_um:.2f} um)"
         )
-        if json_file is not None:
-            json_file.write_text(json.dumps(report, indent=2) + "\n")
+        json_out.write(report)

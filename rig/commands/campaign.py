@@ -52,7 +52,7 @@ def _summary_table(result: dict[str, Any]) -> Table:
 
 def register(app: typer.Typer) -> None:
     campaign_app = typer.Typer(help="Measurement campaigns (TOML files, docs/campaigns.md).",
-                               no_args_is_help=True)
+                               no_args_is_help=True, rich_markup_mode=None)
     app.add_typer(campaign_app, name="campaign")
 
     @campaign_app.command("run")

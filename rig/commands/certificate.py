@@ -32,6 +32,11 @@ def register(app: typer.Typer) -> None:
 
         if pdf is None and html is None:
             raise CertificateError("give --pdf FILE and/or --html FILE: nothing to write")
+        for option, path in (("--pdf", pdf), ("--html", html)):
+            # refused before any work, and nothing made: a mistyped folder is not created
+            if path is not None and not path.parent.is_dir():
+                raise CertificateError(f"{option} {path}: no folder {path.parent} (make it "
+                                       "first, or give an existing one)")
         subject = resolve_subject(target, store, samples)
         context = write_certificate(subject, pdf=pdf, html=html)
         header = context["header"]

@@ -9,15 +9,14 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-console = Console()
-
 
 def register(app: typer.Typer) -> None:
     @app.command()
     def diagnose(
         campaign: Annotated[Path, typer.Argument(help="A campaign folder (or one run folder).")],
         json_file: Annotated[
-            Path | None, typer.Option("--json", help="Write the rig-diagnosis/1 report.")
+            Path | None, typer.Option("--json", help="Write the rig-diagnosis/1 report "
+                                      "('-': stdout).")
         ] = None,
         html_file: Annotated[
             Path | None, typer.Option("--html", help="Write the HTML report (self-contained).")
@@ -37,8 +36,11 @@ def register(app: typer.Typer) -> None:
                                           help="Worker processes of the self-check.")] = 2,
     ) -> None:
         """Where model and measurement disagree, which unmodelled effect, how far it shrinks."""
-        from rig.diagnose import diagnose_path, report_dict, write_json
+        from rig.diagnose import diagnose_path, report_dict
+        from rig.json_output import JsonOutput
 
+        json_out = JsonOutput(json_file)
+        console = Console(stderr=json_out.to_stdout)
         with console.status("diagnosing..."):
             camp, result = diagnose_path(campaign, alpha=alpha)
             report = report_dict(camp, result)
@@ -74,8 +76,8 @@ def register(app: typer.Typer) -> None:
         console.print(f"gap before: {report['gap_before']['rms_arcsec']:.3f} arcsec RMS "
                       f"(noise {report['noise_arcsec']:.3f})")
         if json_file is not None:
-            write_json(report, json_file)
-            console.print(f"report written to {json_file}")
+            json_out.write(report, ensure_ascii=True)
+            console.print(f"report written to {json_out.where}")
         if html_file is not None:
             from rig.certificate.header import header_for_campaign
             from rig.report_html import write_html

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -14,8 +13,6 @@ from analysis.errors import AnalysisError
 from analysis.models.seed000 import Seed000Design, design_chain, format_arcmin
 from rig.errors import RigError, RunFormatError
 from rig.json_files import read_json_file
-
-console = Console()
 
 
 def load_unit_mapping(path: Path) -> dict[str, Any]:
@@ -94,10 +91,15 @@ def register(app: typer.Typer) -> None:
     def model(
         unit_file: Annotated[Path, typer.Argument(help="unit JSON (or a whole run.json)")],
         json_out: Annotated[
-            Path | None, typer.Option("--json", help="write the model as JSON to this file")
+            Path | None, typer.Option("--json", help="Write the model as JSON to this file "
+                                      "('-': stdout).")
         ] = None,
     ) -> None:
         """Seed 000 design chain (eqs. 1-16) and the reference nominal model of a gear unit."""
+        from rig.json_output import JsonOutput
+
+        out = JsonOutput(json_out)
+        console = Console(stderr=out.to_stdout)
         mapping = load_unit_mapping(unit_file)
         try:
             design = design_chain(mapping)
@@ -106,8 +108,4 @@ def register(app: typer.Typer) -> None:
         console.print(_table(design, unit_file))
         for note in design.assumptions:
             console.print(f"[yellow]assumed:[/yellow] {note}")
-        if json_out is not None:
-            try:
-                json_out.write_text(json.dumps(design.to_dict(), indent=2) + "\n", "utf-8")
-            except OSError as exc:
-                raise RigError(f"{json_out}: cannot write: {exc.strerror or exc}") from None
+        out.write(design.to_dict(), ensure_ascii=True)

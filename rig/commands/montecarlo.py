@@ -7,7 +7,6 @@ dominant spectral line, prints the comparison with the paper and optionally writ
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -138,20 +137,14 @@ def _print_report(console: Console, report: dict[str, Any]) -> None:
     console.print(ranking)
 
 
-def _write_json(path: Path, report: dict[str, Any]) -> None:
-    try:
-        path.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
-    except OSError as exc:
-        raise RigError(f"{path}: cannot write the report: {exc.strerror or exc}") from exc
-
-
 def register(app: typer.Typer) -> None:
     @app.command()
     def montecarlo(
         samples: Annotated[int, typer.Option("--samples", "-n", help="Samples.")] = 50_000,
         seed: Annotated[int, typer.Option("--seed", help="Random seed.")] = 0,
         json_path: Annotated[
-            Path | None, typer.Option("--json", help="Write the report (JSON) here.")
+            Path | None, typer.Option("--json", help="Write the report (JSON) here ('-': "
+                                      "stdout).")
         ] = None,
         signs: Annotated[
             str, typer.Option("--signs", help="Table 1 signs: " + "|".join(SIGNS))
@@ -174,8 +167,12 @@ def register(app: typer.Typer) -> None:
             stage3_planet_row=_choice(planet_row, PLANET_ROWS, "--planet-row"),  # type: ignore
         )
         check_sample_count(samples)
-        if json_path is not None and not json_path.parent.is_dir():
+        from rig.json_output import JsonOutput, json_to_stdout
+
+        if (json_path is not None and not json_to_stdout(json_path)
+                and not json_path.parent.is_dir()):
             raise RigError(f"{json_path}: cannot write the report: no directory {json_path.parent}")
+        json_out = JsonOutput(json_path)
         console = Console(stderr=True)
         if quiet:
             report = run_montecarlo(samples, seed, reading, window_revs=window_revs)
@@ -188,6 +185,5 @@ def register(app: typer.Typer) -> None:
             )
             with Progress(*columns, console=console, transient=False) as progress:
                 report = run_montecarlo(samples, seed, reading, progress, window_revs)
-            _print_report(Console(), report)
-        if json_path is not None:
-            _write_json(json_path, report)
+            _print_report(Console(stderr=json_out.to_stdout), report)
+        json_out.write(report)

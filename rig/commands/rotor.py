@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
@@ -12,14 +11,13 @@ from rich.table import Table
 
 from rig.errors import RigError
 
-console = Console()
-
 
 def register(app: typer.Typer) -> None:
     @app.command()
     def rotor(
         json_file: Annotated[
-            Path | None, typer.Option("--json", help="Write all critical speeds as JSON.")
+            Path | None, typer.Option("--json", help="Write all critical speeds as JSON "
+                                      "('-': stdout).")
         ] = None,
         disc_at: Annotated[
             float, typer.Option(help="Disc position, fraction of each shaft's length.")
@@ -31,7 +29,10 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Seed 004 Table 3: single-rotor and coupled critical speeds (r/min), paper vs ours."""
         from analysis.models.seed004_paper import Assumptions, table3
+        from rig.json_output import JsonOutput
 
+        json_out = JsonOutput(json_file)
+        console = Console(stderr=json_out.to_stdout)
         for name, value in (("--disc-at", disc_at), ("--gear-at", gear_at)):
             if not 0.0 <= value <= 1.0:
                 raise RigError(f"{name} must be between 0 and 1 (a fraction of the shaft), "
@@ -64,6 +65,5 @@ def register(app: typer.Typer) -> None:
                       f"ends; disc at {disc_at:.3f} L, gear at {gear_at:.3f} L; J_d = J_p / 2 "
                       "(docs/seed004.md)[/dim]")
         if json_file is not None:
-            json_file.parent.mkdir(parents=True, exist_ok=True)
-            json_file.write_text(json.dumps(result.to_dict(), indent=2, allow_nan=False) + "\n")
-            console.print(f"critical speeds written to {json_file}")
+            json_out.write(result.to_dict(), ensure_ascii=True)
+            console.print(f"critical speeds written to {json_out.where}")

@@ -10,7 +10,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -212,21 +211,23 @@ def register(app: typer.Typer) -> None:
                                           "--over-the-wire: simulated rigs at a time).")] = 1,
         verbose: Annotated[bool, typer.Option("--verbose", help="One line per case.")] = False,
         json_file: Annotated[
-            Path | None, typer.Option("--json", help="Write the summary as JSON.")
+            Path | None, typer.Option("--json", help="Write the summary as JSON ('-': "
+                                      "stdout).")
         ] = None,
     ) -> None:
         """Diagnose labelled campaigns blind and grade them: per-effect confusion, false alarms,
         also recall/precision, median shrink, one summary line per generator. Without
         --cases-dir: campaigns from our own generator (rig/validate/)."""
+        from rig.json_output import JsonOutput
         from rig.validate.cases import generator_name, grade_folder, summarise_graded
+
+        json_out = JsonOutput(json_file)
+        console.stderr = json_out.to_stdout  # with --json -: the tables on stderr
 
         if like is not None:
             if cases_dir:
                 raise RigError("--like and --cases-dir: give one of them")
-            out = _like(like, cases or 20, seed, jobs)
-            if json_file is not None:
-                json_file.parent.mkdir(parents=True, exist_ok=True)
-                json_file.write_text(json.dumps(out, indent=2) + "\n")
+            json_out.write(_like(like, cases or 20, seed, jobs), ensure_ascii=True)
             return
         dirs, labs = list(cases_dir or []), list(labels or [])
         if len(dirs) != len(labs):
@@ -255,8 +256,5 @@ def register(app: typer.Typer) -> None:
             console.print("each generator apart:")
             for s in summaries:
                 console.print("  " + summary_line(s), soft_wrap=True)
-        if json_file is not None:
-            json_file.parent.mkdir(parents=True, exist_ok=True)
-            out = summaries[0] if len(summaries) == 1 else {
-                "generators": {s["generator"]: s for s in summaries}}
-            json_file.write_text(json.dumps(out, indent=2) + "\n")
+        json_out.write(summaries[0] if len(summaries) == 1 else {
+            "generators": {s["generator"]: s for s in summaries}}, ensure_ascii=True)

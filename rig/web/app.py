@@ -59,9 +59,11 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
         try:
             yield
         finally:
-            await asyncio.to_thread(controller.close)
-            await hub.stop()
+            # the workers and the live pump stop while the rig closes (the slow part: the
+            # safe state, the devices, a simulated rig's processes)
             shutdown_workers()
+            await hub.stop()
+            await asyncio.to_thread(controller.close)
 
     app = FastAPI(title="backlash-rig control page", version=__version__,
                   description=DESCRIPTION, lifespan=lifespan, responses=RATE_LIMITED)

@@ -87,6 +87,7 @@ class LiveHub:
         self._run_id: str | None = None
         self._clients: set[ClientQueue] = set()
         self._task: asyncio.Task | None = None
+        self._closing = False
         self.rows_in = 0
         self.batches_out = 0
 
@@ -120,6 +121,13 @@ class LiveHub:
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await task
+        self.close_streams()
+
+    def close_streams(self) -> None:
+        """End every client's stream (a ``bye`` each; a client connecting later gets one at
+        once): the server is stopping. Called on the event loop (rig/web/server.py) before the
+        server waits for its connections, so that no stream holds the stop up."""
+        self._closing = True
         for client in list(self._clients):
             client.put({"type": "bye"})
 
@@ -170,6 +178,8 @@ class LiveHub:
         rows = list(self._display)
         if rows:
             client.put(self._batch(self._run_id, rows, 0) | {"type": "rows_replay"})
+        if self._closing:
+            client.put({"type": "bye"})
         self._clients.add(client)
         return client
 

@@ -1,6 +1,7 @@
 """Running the page's app with uvicorn on a socket bound first (so port 0 gives a free port
-whose number is known before the first request): :func:`bind` and :class:`BackgroundServer`
-(a server on a thread, for tests and benchmarks)."""
+whose number is known before the first request): :func:`bind`, :class:`RigServer` (stops
+cleanly: the live streams end first) and :class:`BackgroundServer` (a server on a thread, for
+tests and benchmarks)."""
 
 from __future__ import annotations
 
@@ -26,11 +27,32 @@ def bind(host: str, port: int) -> socket.socket:
     return sock
 
 
-def uvicorn_server(app: FastAPI) -> uvicorn.Server:
-    """A uvicorn server for ``app`` (warnings only, lifespan on, 5 s graceful shutdown)."""
+class RigServer(uvicorn.Server):
+    """uvicorn's server, whose stop (Ctrl-C, SIGTERM, ``should_exit``) first ends every live
+    stream of the app's :class:`~rig.web.live.LiveHub` (``app.state.hub``).
+
+    uvicorn stops by waiting for every open connection to finish its response (up to
+    ``timeout_graceful_shutdown``), then cancels what is left. A server-sent-events stream
+    never finishes by itself: without this, each open page held the stop up for the whole
+    timeout and then printed an "Exception in ASGI application ... CancelledError" traceback.
+    Ended first, the streams complete their responses, the connections close and the stop
+    takes a fraction of a second (tests/test_serve_stop.py).
+    """
+
+    async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
+        app = self.config.app
+        hub = getattr(getattr(app, "state", None), "hub", None)
+        if hub is not None:
+            hub.close_streams()
+        await super().shutdown(sockets=sockets)
+
+
+def uvicorn_server(app: FastAPI) -> RigServer:
+    """A server for ``app`` (warnings only, lifespan on, 5 s graceful shutdown for requests
+    other than the live streams, which end at once)."""
     config = uvicorn.Config(app, log_level="warning", lifespan="on",
                             timeout_graceful_shutdown=5)
-    return uvicorn.Server(config)
+    return RigServer(config)
 
 
 class BackgroundServer:

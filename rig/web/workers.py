@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import threading
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
@@ -48,7 +49,10 @@ class PoolBusy(RigError):
 
 
 def _worker_start(increment: int) -> None:
-    """In a new worker process: one BLAS thread, and a lower CPU priority by ``increment``."""
+    """In a new worker process: one BLAS thread, and a lower CPU priority by ``increment``.
+    Ctrl-C is the server's to handle (it reaches every process of the terminal's group): the
+    worker ignores it and is stopped by :func:`shutdown_workers`."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     worker_initializer()
     if increment:
         os.nice(increment)

@@ -358,8 +358,6 @@ def test_header_box_holds_simulated_and_not_recorded(measured: dict):
 def test_a_metric_below_zero_is_never_printed_as_a_measurement(measured: dict):
     """Issue 21 item 15: a loop area of -4.58e-06 ± 1.36e-05 J reads "below resolution
     (< 2.72e-05 J)" (U = 2u); one far below zero "below zero: no measurement"."""
-    from rig.certificate import below_zero_text
-
     run = measured["run"]
     pdf, _ = _probe(measured, "below-zero", result={
         "loop_area_J": -4.58e-06,
@@ -368,6 +366,8 @@ def test_a_metric_below_zero_is_never_printed_as_a_measurement(measured: dict):
     assert "below resolution (< 2.72e-05 J)" in text
     assert "-4.58e-06" not in text and "4.58e-06" not in text
     assert "a value below zero is no measurement" in text
+    from rig.certificate import below_zero_text
+
     assert below_zero_text("lost_motion_arcmin", -0.5, 0.01, ".3f", " arcmin") == \
         "below zero: no measurement"
     assert below_zero_text("lost_motion_arcmin", -0.01, 0.01, ".3f", " arcmin") == \

@@ -27,13 +27,16 @@ LONGEST_UNBROKEN_WORD = 40
 """Words (runs of non-space characters) up to this many characters are never broken across
 lines on a certificate; a longer one may be, so that it cannot run off the page."""
 _SPACES = re.compile(r"(\s+)")
+_NO_BREAK_INSIDE = re.compile(r"[\w.,:;'\"()\[\]]*")
+"""A word of only these characters offers the line breaker no place to break (UAX #14)."""
 
 
 def whole_words(value: Any) -> Markup:
-    """``value`` as escaped HTML that wraps at spaces only: each word of up to
-    :data:`LONGEST_UNBROKEN_WORD` characters in a ``<span class="w">`` (``white-space:
-    nowrap``), so that "SN-CERT-1", "D-K-15070" or "2026-01-15" never break at their hyphens
-    (a break there also makes ``pdftotext`` drop the hyphen); a longer word in a ``<span
+    """``value`` as escaped HTML that wraps at spaces only. A word of up to
+    :data:`LONGEST_UNBROKEN_WORD` characters that holds a hyphen, a slash or another place
+    the line breaker would break at goes in a ``<span class="w">`` (``white-space:
+    nowrap``): "SN-CERT-1", "D-K-15070" or "2026-01-15" never break at their hyphens (a break
+    there also makes ``pdftotext`` drop the hyphen). A longer word goes in a ``<span
     class="long">`` (``overflow-wrap: anywhere``) so that it stays on the page."""
     out = []
     for part in _SPACES.split(str(value)):
@@ -41,10 +44,12 @@ def whole_words(value: Any) -> Markup:
             continue
         if part.isspace():
             out.append(Markup(" "))
-        elif len(part) <= LONGEST_UNBROKEN_WORD:
-            out.append(Markup('<span class="w">%s</span>') % part)
-        else:
+        elif len(part) > LONGEST_UNBROKEN_WORD:
             out.append(Markup('<span class="long">%s</span>') % part)
+        elif _NO_BREAK_INSIDE.fullmatch(part):
+            out.append(escape(part))
+        else:
+            out.append(Markup('<span class="w">%s</span>') % part)
     return Markup("").join(out) if out else escape("")
 
 

@@ -8,6 +8,7 @@ the PDF: serial, operator, outcome word, limits and the measured lost motion mus
 
 from __future__ import annotations
 
+import html
 import json
 import os
 import re
@@ -20,6 +21,7 @@ import pytest
 
 from rig.certificate import CertificateError, resolve_subject, write_certificate
 from rig.certificate.header import software_version
+from tests.test_html_escaping import page_text
 from tests.test_measure_cli import TINY
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -121,7 +123,8 @@ def test_campaign_certificate_with_position_band_and_diagnosis(measured: dict):
     assert res.returncode == 0, res.stderr
     report = json.loads((folder / "diagnosis.json").read_text())
     page = (tmp / "diag.html").read_text()  # the diagnosis page has the same header
-    assert 'class="cert-head"' in page and "SN-CERT-2" in page and "Q. Inspector" in page
+    assert 'class="cert-head"' in page
+    assert "SN-CERT-2" in page_text(page) and "Q. Inspector" in page_text(page)
     # by its id in the store (in this process: the command line was run above)
     write_certificate(resolve_subject(camp["campaign_id"], tmp / "s2"), pdf=tmp / "camp2.pdf")
     text = _pdf_text(tmp / "camp2.pdf")
@@ -151,6 +154,9 @@ def test_certificate_from_the_page(measured: dict):
         assert client.get("/api/campaigns/no-such/certificate.html").status_code == 404
         js = client.get("/static/app.js")
         assert js.status_code == 200 and "/certificate.pdf" in js.text
+        # History links the HTML certificate too (issue 21 item 13), for runs and campaigns
+        assert "/api/runs/${id}/certificate.html" in js.text
+        assert "/api/campaigns/${id}/certificate.html" in js.text
 
 
 @pytest.mark.parametrize(("args", "message"), [
@@ -191,10 +197,10 @@ def test_calibration_operator_and_an_aborted_run(measured: dict):
     (folder / "run.json").write_text(json.dumps(meta))
     context = write_certificate(resolve_subject(str(folder), tmp / "s1"),
                                 html=tmp / "edited.html")
-    page = (tmp / "edited.html").read_text()
+    page = page_text((tmp / "edited.html").read_text())
     assert context["outcome_word"] == "OK" and "B. Tester" in page
     for text in ("TT-12", "DAkkS D-K-1234 2026-17", "2026-06-01", "0.05 % of full scale",
-                 "calibration of sensor &#39;torque_transducer&#39; was past due"):
+                 "calibration of sensor 'torque_transducer' was past due"):
         assert text in page, text
     meta["calibration"] = {"output_encoder": {"certificate": "ENC-7", "due": "2099-01-01"}}
     meta.update(status="aborted", reason="E-stop pressed", outcome="incomplete")
@@ -202,7 +208,7 @@ def test_calibration_operator_and_an_aborted_run(measured: dict):
     (folder / "run.json").write_text(json.dumps(meta))
     context = write_certificate(resolve_subject(str(folder), tmp / "s1"),
                                 html=tmp / "aborted.html")
-    page = (tmp / "aborted.html").read_text()
+    page = page_text((tmp / "aborted.html").read_text())
     assert context["outcome_word"] == "INCOMPLETE"
     assert "E-stop pressed" in page and "not measured" in page and "ENC-7" in page
     assert "past due" not in page
@@ -247,3 +253,156 @@ def test_a_nan_metric_is_never_certified_ok_and_no_limits_is_no_verdict(measured
     assert not re.search(r"\bOK\b", text), text  # neither OK nor NOT OK
     results = rig.open(free_folder).results()
     assert (results["outcome"][0], results["verdict"][0]) == ("no_limits", "NO LIMITS")
+
+
+# --------------------------------------------------------------------------- issue 21 item 13
+
+A4_WIDTH_PT, MARGIN_PT = 595.28, 11 / 25.4 * 72  # @page margin 10mm 11mm (certificate.html)
+CALIBRATION = [
+    {"sensor": "transducer", "id": "T40B-123456-ABCDEFGH", "certificate":
+     "DAkkS D-K-15070-01-00 2026-0881", "date": "2025-01-15", "due": "2026-01-15",
+     "uncertainty": "0.05 % of full scale (k = 2)"},
+    {"sensor": "output_encoder", "id": "RESOLUTE-RA26BTA-SN0123456789",
+     "certificate": "PTB 5.22-2025-4411", "date": "2025-06-01", "due": "2027-06-01",
+     "uncertainty": "±0.5 arcsec"},
+    {"sensor": "input_encoder", "id": "ECN-1313-SN98765", "certificate":
+     "DAkkS D-K-15070 2026-990", "date": "2026-02-01", "due": "2027-02-01",
+     "uncertainty": 0.0003},
+    {"sensor": "torque_sensor", "id": "TS-70-000042", "certificate": "ISO 17025 LAB-77 2026/12",
+     "date": "2026-03-10", "due": "2027-03-10", "uncertainty": "0.1 % FS"},
+]
+OVERRIDE_REASON = ("transducer is back from the lab on 2026-12-03; checked against the "
+                   "reference transducer T40B-999 this morning, within 0.02 % at 10 N·m")
+
+
+def _words(pdf: Path) -> list[tuple[str, float, float, float]]:
+    """(word, xMin, xMax, yMin) of every word pdftotext finds on the page(s)."""
+    out = subprocess.run(["pdftotext", "-bbox", str(pdf), "-"], capture_output=True,
+                         text=True, check=True).stdout
+    return [(html.unescape(w), float(x0), float(x1), float(y0)) for x0, y0, x1, w in
+            re.findall(r'<word xMin="([\d.]+)" yMin="([\d.]+)" xMax="([\d.]+)" '
+                       r'yMax="[\d.]+">(.*?)</word>', out)]
+
+
+def _assert_laid_out(pdf: Path) -> str:
+    """One A4 page, nothing beyond its margins, no word broken at a hyphen (a word ending in
+    "-" at a line's end: pdftotext would then drop the hyphen); returns the page's text."""
+    assert _pages(pdf) == 1
+    words = _words(pdf)
+    assert words
+    off = [w for w in words if w[2] > A4_WIDTH_PT - MARGIN_PT + 0.5 or w[1] < MARGIN_PT - 0.5]
+    assert not off, f"beyond the page's margins: {off}"
+    broken = [w[0] for w in words if w[0].endswith("-") and w[0] != "-"]
+    assert not broken, f"words broken at a hyphen: {broken}"
+    return _pdf_text(pdf)
+
+
+def _probe(measured: dict, name: str, **changes) -> tuple[Path, dict]:
+    """The measured run's folder copied and its run.json changed; its certificate as PDF."""
+    tmp, run = measured["tmp"], measured["run"]
+    folder = tmp / name
+    shutil.copytree(run["path"], folder)
+    meta = json.loads((folder / "run.json").read_text())
+    for key, value in changes.items():
+        if value is None:
+            meta.pop(key, None)
+        elif isinstance(value, dict) and isinstance(meta.get(key), dict):
+            meta[key] = {**meta[key], **value}
+        else:
+            meta[key] = value
+    (folder / "run.json").write_text(json.dumps(meta))
+    write_certificate(resolve_subject(str(folder), tmp / "s1"), pdf=tmp / f"{name}.pdf")
+    return tmp / f"{name}.pdf", meta
+
+
+def test_calibration_fields_and_override_reason_complete_on_one_page(measured: dict):
+    """Four calibrated sensors, one expired and used with an override reason, a long serial,
+    design and operator: one A4 page, and every calibration field (sensor, id, certificate,
+    calibrated, due, uncertainty), the past-due line and the override reason complete on it."""
+    pdf, meta = _probe(
+        measured, "calibrated", calibration=CALIBRATION, operator="Bartholomew Fitzgerald-Smith",
+        unit={"serial": "SN-2026-LINE-B-0000001234", "design":
+              "RV-320E-171.5 CRB long-life variant for welding robots"},
+        calibration_override={"reason": OVERRIDE_REASON, "operator": "B. Tester",
+                              "time": "2026-11-26T08:00:00Z",
+                              "expired": ["calibration of transducer expired on 2026-01-15"]})
+    text = _assert_laid_out(pdf)
+    for entry in CALIBRATION:
+        for key in ("sensor", "id", "certificate", "date", "due", "uncertainty"):
+            shown = f"{entry[key]:g}" if isinstance(entry[key], float) else entry[key]
+            assert shown in text, (key, shown)
+    assert (f"calibration of sensor 'transducer' was past due at the start of the run (due "
+            f"2026-01-15, run started {meta['started_at'][:10]})") in text
+    assert f"reason: {OVERRIDE_REASON}" in text
+    assert "Calibration override by B. Tester, 2026-11-26 08:00:00 UTC" in text
+    for whole in ("SN-2026-LINE-B-0000001234", "RV-320E-171.5 CRB long-life variant for "
+                  "welding robots", "Bartholomew Fitzgerald-Smith", meta["run_id"]):
+        assert whole in text, whole
+
+
+def test_header_box_holds_simulated_and_not_recorded(measured: dict):
+    """A simulated run with no operator, design or software version recorded: "simulated"
+    and each "not recorded" stand whole on one line inside the header box (the page's
+    margins), the page is one A4 page."""
+    pdf, _ = _probe(measured, "unrecorded", operator=None, software_version=None,
+                    rig_id="simulated")
+    _assert_laid_out(pdf)
+    words = _words(pdf)
+    nots = [(i, w) for i, w in enumerate(words) if w[0] == "not" and i + 1 < len(words)
+            and words[i + 1][0] == "recorded"]
+    assert len(nots) >= 3  # design, operator, measured with
+    for i, w in nots:
+        assert abs(words[i + 1][3] - w[3]) < 1.0, "'not recorded' broken over two lines"
+    assert any(w[0] == "simulated" for w in words)
+
+
+def test_a_metric_below_zero_is_never_printed_as_a_measurement(measured: dict):
+    """Issue 21 item 15: a loop area of -4.58e-06 ± 1.36e-05 J reads "below resolution
+    (< 2.72e-05 J)" (U = 2u); one far below zero "below zero: no measurement"."""
+    run = measured["run"]
+    pdf, _ = _probe(measured, "below-zero", result={
+        "loop_area_J": -4.58e-06,
+        "uncertainty": {**run["uncertainty"], "loop_area_J": 1.36e-05}})
+    text = _assert_laid_out(pdf)
+    assert "below resolution (< 2.72e-05 J)" in text
+    assert "-4.58e-06" not in text and "4.58e-06" not in text
+    assert "a value below zero is no measurement" in text
+    from rig.certificate import below_zero_text
+
+    assert below_zero_text("lost_motion_arcmin", -0.5, 0.01, ".3f", " arcmin") == \
+        "below zero: no measurement"
+    assert below_zero_text("lost_motion_arcmin", -0.01, 0.01, ".3f", " arcmin") == \
+        "below resolution (< 0.020 arcmin)"
+    assert below_zero_text("torque_offset_Nm", -0.5, 0.01, ".4f", " N·m") is None
+    assert below_zero_text("loop_area_J", 0.0, 0.01, ".3g", " J") is None
+
+
+def test_an_imported_run_without_limits_reads_no_limits(measured: dict, tmp_path: Path):
+    """A run exported and imported into a store (no outcome and no limits recorded by the
+    import): its certificate says NO LIMITS / "no limits set", never OK, on one page."""
+    tmp, run = measured["tmp"], measured["run"]
+    work = tmp_path  # not under tmp: it holds run.json (rig measure --json), a run folder
+    res = _rig("export", run["run_id"], "--store", str(tmp / "s1"), "--format", "csv",
+               "--out", str(work / "exported"), cwd=work)
+    assert res.returncode == 0, res.stderr
+    (work / "map.toml").write_text('[columns]\nt_s = "t_s"\ntorque_Nm = "torque_Nm"\n'
+                                  'output_angle_deg = "output_angle_deg"\n\n[test]\n'
+                                  'rated_torque_Nm = 10.0\n')
+    res = _rig("import", str(work / "exported" / "samples.csv"), "--map",
+               str(work / "map.toml"), "--unit", str(UNIT), "--into", str(work / "imported"),
+               cwd=work)
+    assert res.returncode == 0, res.stderr
+    from rig.store import Store
+
+    st = Store(work / "imported", create=False)
+    try:
+        (info,) = st.list_runs()
+    finally:
+        st.close()
+    res = _rig("certificate", info.run_id, "--store", str(work / "imported"), "--pdf",
+               str(work / "imported.pdf"), cwd=work)
+    assert res.returncode == 0, res.stderr
+    assert "): NO LIMITS" in res.stdout, res.stdout
+    text = _assert_laid_out(work / "imported.pdf")
+    assert "NO LIMITS" in text and "no limits set" in text
+    assert not re.search(r"\bOK\b", text), text

@@ -18,12 +18,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from rig.certificate.header import NOT_RECORDED, header_fields, template_env
+from rig.certificate.header import NOT_RECORDED, header_fields, template_env, utc_text
 from rig.errors import RigError
 from rig.outcome import (
     LIMIT_KEYS,
     OUTCOME_MEANINGS,
     OUTCOME_WORDS,
+    finite_number,
     metric_check,
     recorded_campaign_outcome,
     recorded_outcome,
@@ -35,7 +36,8 @@ from rig.store import Store
 from rig.store.ids import ID_PATTERN, StoreError, UnknownIdError
 
 __all__ = ["CertificateError", "Subject", "certificate_context", "render_certificate",
-           "html_to_pdf", "resolve_subject", "write_certificate", "certificate_bytes"]
+           "html_to_pdf", "certificate_pdf", "resolve_subject", "write_certificate",
+           "certificate_bytes"]
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +54,8 @@ METRICS = (
 """(result key, label, unit, format) of the metrics on the certificate."""
 LIMIT_OF_METRIC = {metric: (key, side) for key, (metric, side) in LIMIT_KEYS.items()}
 DIAGNOSIS_FORMAT = "rig-diagnosis/1"
+IN_HEADER = ("serial", "kind", "design")
+"""Unit keys the header shows: the unit table leaves them out when the header has their value."""
 CALIBRATION_ORDER = ("sensor", "id", "certificate", "date", "due", "due_date", "uncertainty")
 
 
@@ -155,8 +159,36 @@ def _limit_text(bound: Any, side: str | None, unit: str) -> str | None:
     return f"{'≤' if side == 'above' else '≥'} {bound:g} {unit}"
 
 
+NON_NEGATIVE = ("lost_motion_arcmin", "backlash_arcmin", "stiffness_Nm_per_arcmin",
+                "loop_area_J")
+"""Metrics that no gear unit has below zero (a loop's area is the energy lost per cycle)."""
+COVERAGE_K = 2.0
+"""Coverage factor of the bound printed for a value below zero: U = k·u (GUM, about 95 %)."""
+BELOW_NOTE = ("a value below zero is no measurement: within three standard uncertainties "
+              "u of zero it is printed as \"below resolution (< U)\", U = 2u, else as "
+              "\"below zero: no measurement\"")
+"""How the certificate prints a non-negative metric measured below zero (docs/certificate.md)."""
+
+
+def below_zero_text(key: str, value: Any, uncertainty: Any, spec: str, unit: str
+                    ) -> str | None:
+    """How a metric that cannot be negative (:data:`NON_NEGATIVE`) measured below zero is
+    printed instead of its value: ``below resolution (< U unit)`` when it lies within three
+    standard uncertainties of zero (U = 2u, the expanded uncertainty, k = 2, in the metric's
+    unit), else ``below zero: no measurement`` (as rig/outcome.py ``impossible_metrics``
+    judges it). None for a value that is printed as it is (zero or above, another metric,
+    not a finite number)."""
+    if key not in NON_NEGATIVE or not finite_number(value) or value >= 0:
+        return None
+    if finite_number(uncertainty) and uncertainty > 0 and value + 3.0 * uncertainty >= 0:
+        return f"below resolution (< {format(COVERAGE_K * uncertainty, spec)}{unit})"
+    return "below zero: no measurement"
+
+
 def _metric_rows(meta: dict[str, Any]) -> list[dict[str, Any]]:
-    """One row per metric of a run.json: value ± uncertainty, nominal model, limit, verdict."""
+    """One row per metric of a run.json: value ± uncertainty, nominal model, limit, verdict;
+    ``below`` (with the unit) and ``below_short`` (without) for a metric that cannot be
+    negative measured below zero (:func:`below_zero_text`), printed instead of the value."""
     result = meta.get("result") or {}
     unc = result.get("uncertainty") or {}
     model = result.get("model") or {}
@@ -171,6 +203,8 @@ def _metric_rows(meta: dict[str, Any]) -> list[dict[str, Any]]:
         rows.append({
             "key": key, "label": label, "unit": unit, "value": _fmt(value, spec),
             "uncertainty": _fmt(unc.get(key), spec) if value is not None else None,
+            "below": below_zero_text(key, value, unc.get(key), spec, f" {unit}"),
+            "below_short": below_zero_text(key, value, unc.get(key), spec, ""),
             "model": _fmt(model.get(key), spec), "limit": _limit_text(bound, side, unit),
             "verdict": verdict,
             "why": (why if check in ("not_applicable", "not_finite") else None)
@@ -201,9 +235,16 @@ def _value_text(value: Any) -> str:
     return str(value)
 
 
+CALIBRATION_HEADINGS = {"sensor": "sensor", "id": "id / serial", "certificate": "certificate",
+                        "date": "calibrated", "due": "due", "due_date": "due",
+                        "uncertainty": "uncertainty"}
+"""run.json calibration key -> its column heading on the certificate (others: the key)."""
+
+
 def _calibration(meta: dict[str, Any]) -> dict[str, Any]:
     """The run's calibration references as a table: a list of ``{"sensor": ..}`` entries or a
-    mapping sensor -> entry; with the messages of calibrations past due at the start."""
+    mapping sensor -> entry; with the messages of calibrations past due at the start (those
+    rows' due dates marked) and the override (reason, operator, time) when one was given."""
     from rig.store.records import past_due
 
     raw = meta.get("calibration")
@@ -217,17 +258,43 @@ def _calibration(meta: dict[str, Any]) -> dict[str, Any]:
     keys = list(dict.fromkeys(k for e in entries for k in e))
     columns = [k for k in CALIBRATION_ORDER if k in keys] + \
         [k for k in keys if k not in CALIBRATION_ORDER]
-    rows = [[_value_text(e[k]) if e.get(k) is not None else "" for k in columns]
-            for e in entries]
+    rows = []
+    for entry in entries:
+        due = entry.get("due") or entry.get("due_date")
+        try:
+            late = bool(due) and bool(past_due([{"sensor": entry.get("sensor"), "due": due}],
+                                               meta.get("started_at")))
+        except ValueError:
+            late = False
+        rows.append({"cells": [_value_text(entry[k]) if entry.get(k) is not None else ""
+                               for k in columns], "past_due": late})
     due = [{"sensor": e.get("sensor"), "due": e.get("due") or e.get("due_date")}
            for e in entries if e.get("due") or e.get("due_date")]
     try:
         warnings = past_due(due, meta.get("started_at"))
     except ValueError:
         warnings = []
-    override = meta.get("calibration_override")
-    return {"columns": columns, "rows": rows, "warnings": warnings,
-            "override": None if override in (None, False) else _value_text(override)}
+    return {"columns": columns, "headings": [CALIBRATION_HEADINGS.get(k, k) for k in columns],
+            "rows": rows, "warnings": warnings,
+            "override": _override(meta.get("calibration_override"), bool(warnings))}
+
+
+def _override(override: Any, warned: bool) -> dict[str, Any] | None:
+    """run.json ``calibration_override`` (rig/calibration.py: reason, operator, time,
+    expired; or a bare reason) for the template; the ``expired`` messages only where the
+    past-due lines above do not say it already."""
+    if override in (None, False, ""):
+        return None
+    if not isinstance(override, dict):
+        return {"reason": _value_text(override), "operator": None, "time": None, "more": []}
+    more = [f"{k}: {_value_text(v)}" for k, v in override.items()
+            if k not in ("reason", "operator", "time") and v not in (None, "", [])
+            and not (k == "expired" and warned)]
+    time = override.get("time")
+    return {"reason": _value_text(override.get("reason")) if override.get("reason") is not None
+            else "not recorded",
+            "operator": _value_text(override["operator"]) if override.get("operator") else None,
+            "time": utc_text(time) if time else None, "more": more}
 
 
 def _loop_figure(runs: list[Run], title: str | None) -> tuple[str | None, list[str]]:
@@ -371,9 +438,13 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
             "status": r.meta.get("status"), "metrics": {m["key"]: m for m in _metric_rows(r.meta)},
             "outcome": OUTCOME_WORDS[o],
         } for r, (o, _) in zip(runs, run_outcomes, strict=True)]
+        for r in ctx["runs"]:
+            r["below_any"] = any(m["below"] for m in r["metrics"].values())
+        below = any(r["below_any"] for r in ctx["runs"])
         ctx["position"] = _position_figure(campaign, runs, limits)
         lm = summary.get("lost_motion_arcmin") or {}
-        ctx["lm_summary"] = {k: _fmt(lm.get(k), ".3f") for k in ("mean", "min", "max", "std")}
+        ctx["lm_summary"] = {k: below_zero_text("lost_motion_arcmin", lm.get(k), None, "", "")
+                             or _fmt(lm.get(k), ".3f") for k in ("mean", "min", "max", "std")}
         ctx["lm_summary"]["n"] = lm.get("n")
         sig = summary.get("runout_signature") or None
         ctx["runout"] = None if not sig else (
@@ -389,6 +460,7 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
         limits = meta.get("limits") or {}
         outcome, causes = _run_outcome(meta)
         ctx["metrics"] = _metric_rows(meta)
+        below = any(m["below"] for m in ctx["metrics"])
         ctx["run"] = {"label": meta.get("label"), "status": meta.get("status"),
                       "reason": meta.get("reason"),
                       "position": _fmt((meta.get("test") or {}).get("input_angle_deg"), "g")}
@@ -401,17 +473,41 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
                             if k in LIMIT_OF_METRIC else None}
                            for k, label, u, _ in METRICS]
     ctx["limits"] = [h for h in ctx["metric_heads"] if h["limit"]]
+    ctx["below_note"] = BELOW_NOTE if below else None
     ctx["outcome"] = outcome
     ctx["outcome_word"] = OUTCOME_WORDS[outcome]
     ctx["outcome_meaning"] = OUTCOME_MEANINGS[outcome]
     ctx["causes"] = causes
-    ctx["unit"] = [(k, _value_text(v)) for k, v in unit.items()]
+    ctx["unit"] = _pairs([(k, _value_text(v)) for k, v in unit.items()
+                          if k not in IN_HEADER or ctx["header"].get(k) != _value_text(v)])
     ctx["sensors"] = [(k, _value_text(v)) for k, v in (first.get("sensors") or {}).items()]
     ctx["calibration"] = _calibration(first)
     ctx["test"] = _test_line(first)
     ctx["loop"], ctx["loop_notes"] = _loop_figure(runs, title)
     ctx["not_recorded"] = NOT_RECORDED
     return ctx
+
+
+SHORT_VALUE = 16
+"""A unit value up to this many characters shares its table row with another."""
+
+
+def _pairs(items: list[tuple[str, str]]) -> list[list[tuple[str, str]]]:
+    """The unit table's rows: two short (key, value) items side by side, a long value (a list
+    of measurements, notes) on a row of its own; in the record's order as far as that allows."""
+    rows: list[list[tuple[str, str]]] = []
+    pending: tuple[str, str] | None = None
+    for item in items:
+        if len(item[1]) > SHORT_VALUE:
+            rows.append([item])
+        elif pending is None:
+            pending = item
+        else:
+            rows.append([pending, item])
+            pending = None
+    if pending is not None:
+        rows.append([pending])
+    return rows
 
 
 def _test_line(meta: dict[str, Any]) -> str | None:
@@ -431,18 +527,43 @@ def _test_line(meta: dict[str, Any]) -> str | None:
     return ", ".join(parts) or None
 
 
-def render_certificate(context: dict[str, Any]) -> str:
-    """The certificate page (self-contained HTML: figures inline, no external resources)."""
-    return template_env().get_template("certificate.html").render(**context)
+FIGURE_HEIGHTS_MM = (85, 75, 65, 55, 45)
+"""Heights of the loop figure (mm) the PDF tries, largest first, until the page is one A4
+page; the HTML certificate uses the first."""
+
+
+def render_certificate(context: dict[str, Any], figure_mm: float = FIGURE_HEIGHTS_MM[0]) -> str:
+    """The certificate page (self-contained HTML: figures inline, no external resources);
+    ``figure_mm``: the height of the loop figure (and the largest of a campaign's figures)."""
+    return template_env().get_template("certificate.html").render(
+        **{**context, "figure_mm": figure_mm})
 
 
 def html_to_pdf(html: str) -> bytes:
-    """The page as PDF (WeasyPrint; A4, one page for a run or a campaign of a few runs)."""
+    """The page as PDF (WeasyPrint, A4)."""
+    return _weasyprint().HTML(string=html).write_pdf()
+
+
+def certificate_pdf(context: dict[str, Any]) -> bytes:
+    """The certificate as a PDF of one A4 page: laid out with the loop figure at each height
+    of :data:`FIGURE_HEIGHTS_MM` until the page holds everything (a campaign of many runs or
+    a record with very many calibration entries may still need a second page)."""
+    weasyprint = _weasyprint()
+    document = None
+    for height in FIGURE_HEIGHTS_MM:
+        document = weasyprint.HTML(string=render_certificate(context, height)).render()
+        if len(document.pages) == 1:
+            break
+    assert document is not None
+    return document.write_pdf()
+
+
+def _weasyprint() -> Any:
     try:
         import weasyprint
     except (ImportError, OSError) as exc:  # OSError: pango missing
         raise CertificateError(f"the PDF needs WeasyPrint and pango: {exc}") from exc
-    return weasyprint.HTML(string=html).write_pdf()
+    return weasyprint
 
 
 def write_certificate(subject: Subject, pdf: Path | None = None, html: Path | None = None
@@ -450,7 +571,8 @@ def write_certificate(subject: Subject, pdf: Path | None = None, html: Path | No
     """Write the certificate as PDF and/or HTML; return its context (outcome, header ...)."""
     context = certificate_context(subject)
     page = render_certificate(context)
-    for path, data in ((html, page.encode("utf-8")), (pdf, html_to_pdf(page) if pdf else b"")):
+    for path, data in ((html, page.encode("utf-8")), (pdf, certificate_pdf(context) if pdf
+                                                       else b"")):
         if path is None:
             continue
         if not path.parent.is_dir():  # a mistyped folder is not made: said (rig certificate)
@@ -472,5 +594,5 @@ def certificate_bytes(folder: str, store_root: str | None, samples: str | None, 
             store = Store(store_root, create=False, recover=False, samples=samples)
         except StoreError as exc:
             log.warning("store %s not opened: %s", redact(store_root), redact(str(exc)))
-    page = render_certificate(certificate_context(Subject(Path(folder), store)))
-    return html_to_pdf(page) if fmt == "pdf" else page.encode("utf-8")
+    context = certificate_context(Subject(Path(folder), store))
+    return certificate_pdf(context) if fmt == "pdf" else render_certificate(context).encode()

@@ -7,9 +7,12 @@ what the record says: run.json and campaign.json (``unit``, ``operator``, ``star
 
 from __future__ import annotations
 
+import re
 from importlib import metadata
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from markupsafe import Markup, escape
 
 from rig import __version__
 
@@ -20,6 +23,34 @@ if TYPE_CHECKING:
 
 TEMPLATES = Path(__file__).resolve().parent.parent / "templates"
 NOT_RECORDED = "not recorded"
+LONGEST_UNBROKEN_WORD = 40
+"""Words (runs of non-space characters) up to this many characters are never broken across
+lines on a certificate; a longer one may be, so that it cannot run off the page."""
+_SPACES = re.compile(r"(\s+)")
+_NO_BREAK_INSIDE = re.compile(r"[\w.,:;'\"()\[\]]*")
+"""A word of only these characters offers the line breaker no place to break (UAX #14)."""
+
+
+def whole_words(value: Any) -> Markup:
+    """``value`` as escaped HTML that wraps at spaces only. A word of up to
+    :data:`LONGEST_UNBROKEN_WORD` characters that holds a hyphen, a slash or another place
+    the line breaker would break at goes in a ``<span class="w">`` (``white-space:
+    nowrap``): "SN-CERT-1", "D-K-15070" or "2026-01-15" never break at their hyphens (a break
+    there also makes ``pdftotext`` drop the hyphen). A longer word goes in a ``<span
+    class="long">`` (``overflow-wrap: anywhere``) so that it stays on the page."""
+    out = []
+    for part in _SPACES.split(str(value)):
+        if not part:
+            continue
+        if part.isspace():
+            out.append(Markup(" "))
+        elif len(part) > LONGEST_UNBROKEN_WORD:
+            out.append(Markup('<span class="long">%s</span>') % part)
+        elif _NO_BREAK_INSIDE.fullmatch(part):
+            out.append(escape(part))
+        else:
+            out.append(Markup('<span class="w">%s</span>') % part)
+    return Markup("").join(out) if out else escape("")
 
 
 def software_version() -> str:
@@ -32,11 +63,14 @@ def software_version() -> str:
 
 def template_env() -> Environment:
     """The jinja2 environment of rig/templates: every value HTML-escaped, whatever the
-    template's file name (not ``select_autoescape()``, which skips ``.j2``)."""
+    template's file name (not ``select_autoescape()``, which skips ``.j2``); the filter
+    ``words`` (:func:`whole_words`) keeps words whole on the page."""
     from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
-    return Environment(loader=FileSystemLoader(TEMPLATES), autoescape=True,
-                       undefined=StrictUndefined)
+    env = Environment(loader=FileSystemLoader(TEMPLATES), autoescape=True,
+                      undefined=StrictUndefined)
+    env.filters["words"] = whole_words
+    return env
 
 
 def _text(value: Any) -> str | None:
@@ -49,7 +83,7 @@ def _first(*values: Any) -> str:
     return next((t for t in map(_text, values) if t is not None), NOT_RECORDED)
 
 
-def _utc(stamp: Any) -> str:
+def utc_text(stamp: Any) -> str:
     """``2026-11-25T08:26:49Z`` as ``2026-11-25 08:26:49 UTC``."""
     text = _text(stamp)
     if text is None:
@@ -79,8 +113,8 @@ def header_fields(run_meta: dict[str, Any], campaign_meta: dict[str, Any] | None
         "kind": _first(unit.get("kind")),
         "design": _first(unit.get("design"), unit.get("model"), unit.get("name")),
         "operator": _first(run_meta.get("operator"), camp.get("operator")),
-        "date": _utc(started),
-        "finished": _utc(finished),
+        "date": utc_text(started),
+        "finished": utc_text(finished),
         "rig": _first(run_meta.get("rig_name"), run_meta.get("rig_id"), camp.get("rig_name"),
                       camp.get("rig_id")),
         "software": software_version(),

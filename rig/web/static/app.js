@@ -780,7 +780,8 @@ async function refreshHistory() {
         `<td class="verdict">${outcomeHtml(r.outcome)}</td><td>${esc(r.unit_serial || "")}</td>` +
         `<td>${esc(r.started_at)}</td><td class="lost-motion">${lostMotionText(r.metrics)}</td>` +
         `<td><a href="/api/runs/${id}/run.zip">zip</a> · <a href="/api/runs/${id}/samples.csv">csv</a> · ` +
-        `<a href="/api/runs/${id}/loop.png">png</a> · <a href="/api/runs/${id}/certificate.pdf">Certificate</a></td>`;
+        `<a href="/api/runs/${id}/loop.png">png</a> · <a href="/api/runs/${id}/certificate.pdf">Certificate</a>` +
+        ` (<a href="/api/runs/${id}/certificate.html" target="_blank">html</a>)</td>`;
       tb.appendChild(tr);
     }
     const cb = $("campaigns").querySelector("tbody");
@@ -797,7 +798,8 @@ async function refreshHistory() {
         `<td>${byPos}</td><td><a href="/api/campaigns/${id}/diagnosis.html" target="_blank">diagnosis</a>` +
         ` · <a href="/api/campaigns/${id}/diagnosis.html" download="${esc(c.campaign_id)}-diagnosis.html">html</a>` +
         ` · <a href="/api/campaigns/${id}/diagnosis.json" download>json</a>` +
-        ` · <a href="/api/campaigns/${id}/certificate.pdf">Certificate</a></td>`;
+        ` · <a href="/api/campaigns/${id}/certificate.pdf">Certificate</a>` +
+        ` (<a href="/api/campaigns/${id}/certificate.html" target="_blank">html</a>)</td>`;
       cb.appendChild(tr);
     }
   } catch (e) { notice("history: " + e.message, true); }

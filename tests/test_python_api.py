@@ -201,6 +201,10 @@ def test_connect_simulated_campaign_measure_and_store_query(tmp_path: Path) -> N
                            limits={"lost_motion_arcmin_max": 1.0})
     kinds = [e.kind for e in events]
     assert kinds[0] == "start" and kinds[-1] == "finished" and "run_finished" in kinds
+    # issue 21 item 20: the run_finished event names the run that finished
+    (finished,) = [e for e in events if e.kind == "run_finished"]
+    assert finished.run_label == "pos090-a100-r0"
+    assert finished.run_id == campaign[0].run_id == finished.data["run_id"]
     assert campaign.result["outcome"] == "ok" and campaign.result["failures"] == []
     (row,) = campaign.results().to_dict("records")
     assert row["label"] == "pos090-a100-r0" and row["input_angle_deg"] == 90.0
@@ -220,6 +224,11 @@ def test_connect_simulated_campaign_measure_and_store_query(tmp_path: Path) -> N
     assert str(every["started_at"].dtype).startswith("datetime64")
     assert list(st.runs(serial="SN-API-1")["run_id"]) == [campaign[0].run_id]
     assert list(st.runs(outcome="not_ok")["run_id"]) == [single.run_id]
+    # the displayed words as well as the codes; anything else names the valid values
+    assert list(st.runs(outcome="NOT OK")["run_id"]) == [single.run_id]
+    assert list(st.runs(outcome="ok")["run_id"]) == [campaign[0].run_id]
+    with pytest.raises(ValueError, match="no_limits"):
+        st.runs(outcome="FAIL")
     assert st.runs(since="2100-01-01").empty and list(st.runs(since="2000-01-01")["run_id"]) \
         == list(every["run_id"])
     listed = subprocess.run([*RIG, "runs", "--store", str(store), "--json", "-"],

@@ -174,7 +174,7 @@ def _flank_rss(torque: np.ndarray, twist: np.ndarray, direction: np.ndarray, amp
     if n_on < 30:
         return math.nan
     scale = amplitude if amplitude > 0 else 1.0
-    offset = float(np.mean(twist[on]))
+    offset = float(twist[on.argmax()])  # any twist of the flanks: only the rounding cares
     factors: dict[float, np.ndarray | None] = {1.0: None, -1.0: None}
     n = torque.size
     for a in range(0, n, RSS_CHUNK_ROWS):
@@ -223,8 +223,14 @@ def best_torque_shift(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
     if n < 200 or amplitude <= 0 or shifts_s.size == 0:
         return 0.0
     edge = float(np.max(np.abs(shifts_s)))
-    core = (t >= t[0] + edge) & (t <= t[-1] - edge)
-    if core.sum() < 100:
+    if bool(np.all(t[1:] > t[:-1])):  # ascending time: the core is a slice (views, no copy)
+        core: np.ndarray | slice = slice(int(np.searchsorted(t, t[0] + edge, "left")),
+                                         int(np.searchsorted(t, t[-1] - edge, "right")))
+        n_core = max(0, core.stop - core.start)
+    else:
+        core = (t >= t[0] + edge) & (t <= t[-1] - edge)
+        n_core = int(core.sum())
+    if n_core < 100:
         return 0.0
     tc, yc, dc = t[core], twist[core], direction[core]
     away = (travel_since_reversal(torque, direction)[core] > HOLD_SHARE * amplitude

@@ -41,6 +41,33 @@ def loop_centre_arcmin(twist_arcmin: np.ndarray) -> float:
     return 0.5 * float(low + high)
 
 
+TWIST_COLUMN = "twist_arcmin"
+"""The samples' twist column of the Python API (``.to_arrow()``/``.to_pandas()``) and of
+every sample export (``rig export``): :func:`sample_twist_arcmin`."""
+
+
+def run_twist_arcmin(run: Run) -> np.ndarray:
+    """Twist of the run in arcmin, as :func:`analyse_run` computes it
+    (:func:`analysis.loop.twist_arcmin`): output angle minus input angle / ``test.ratio``
+    when both are known, else the output angle alone (input locked). Its zero is the
+    encoder's (arbitrary: run-format.md)."""
+    ratio = run.test.get("ratio")
+    if run.input_angle_deg is not None and ratio:
+        return twist_arcmin(run.output_angle_deg, run.input_angle_deg, float(ratio))
+    return twist_arcmin(run.output_angle_deg)
+
+
+def sample_twist_arcmin(run: Run) -> np.ndarray:
+    """The ``twist_arcmin`` column (arcmin): :func:`run_twist_arcmin` less its loop centre
+    (:func:`loop_centre_arcmin`, midway between the 0.5 and 99.5 percentiles of the twist),
+    the zero the loop plots and the model overlay use; the loop's metrics do not depend on
+    the zero."""
+    twist = run_twist_arcmin(run)
+    if not np.isfinite(twist).any():
+        return twist
+    return twist - loop_centre_arcmin(twist)
+
+
 def _finite_or_none(value: float | None) -> float | None:
     """JSON has no infinity or NaN: an unknown value is written as null."""
     if value is None or not np.isfinite(value):
@@ -258,10 +285,13 @@ def channel_lag_s(t_s: np.ndarray, torque_Nm: np.ndarray, twist: np.ndarray) -> 
     from analysis.loop.branches import white_noise_std
 
     t = np.asarray(t_s, dtype=float)
-    ok = np.isfinite(t) & np.isfinite(torque_Nm) & np.isfinite(twist)
+    torque, tw = np.asarray(torque_Nm, dtype=float), np.asarray(twist, dtype=float)
+    ok = np.isfinite(t) & np.isfinite(torque) & np.isfinite(tw)
     if ok.sum() < 200:
         return 0.0
-    t, torque, tw = t[ok], np.asarray(torque_Nm)[ok], np.asarray(twist)[ok]
+    if not ok.all():  # a long run with no gap is not copied
+        t, torque, tw = t[ok], torque[ok], tw[ok]
+    del ok
     sigma = max(white_noise_std(tw), 1e-9)
     lag = channel_lag_samples(t, torque, tw, sigma)
     return float(-lag * np.median(np.diff(t))) if lag else 0.0

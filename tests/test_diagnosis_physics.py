@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from analysis.diagnosis import Candidate, curvature_effect, series_compliance
 from analysis.diagnosis.fit import LinearFit, censor_floating
@@ -121,6 +122,46 @@ def test_lag_between_channels_is_found() -> None:
         twist = twist + rng.normal(0, 0.2 / 60, n)
         measured = np.concatenate([np.full(lag, torque[0]), torque[:n - lag]])
         assert channel_lag_samples(t, measured, twist, 0.2 / 60) == expected
+
+
+def test_flank_residual_folded_in_chunks_is_one_least_squares_fit(monkeypatch) -> None:
+    """The lag search's flank residual (analysis.diagnosis.measurement._flank_rss) is folded
+    chunk by chunk (issue 21 item 8: no design matrix of a 5.5 M-sample run in memory): it
+    equals one least-squares fit of every row at once, with and without friction's order,
+    for a twist far from its zero (an encoder's 6730')."""
+    from analysis.diagnosis import measurement
+    from analysis.diagnosis.data import direction_and_reversal
+    from analysis.effects import LoopParams, predict_twist_arcmin
+
+    rng = np.random.default_rng(7)
+    n = 5000
+    t = np.arange(n) / 250.0
+    torque = 10.0 * np.sin(2 * np.pi * t / 4.0) + rng.normal(0, 0.01, n)
+    direction, _ = direction_and_reversal(t, torque, 0.2)
+    for friction in (0.0, 0.8):
+        twist = 6730.0 + predict_twist_arcmin(LoopParams(3.0, 25.0, friction_Nm=friction),
+                                              torque) + rng.normal(0, 0.2 / 60, n)
+        shifted = np.interp(t - 2 / 250.0, t, torque)
+        for order in (True, False):
+            on = np.abs(shifted) > 0.2 * 10.0
+            cols = []
+            for sign in (1.0, -1.0):
+                m = (np.sign(shifted) == sign).astype(float)
+                cols += [m, m * shifted, m * shifted**2, m * direction]
+            x, y = np.column_stack(cols)[on], twist[on]
+            free = list(range(8))
+            for _ in range(3):
+                beta = np.zeros(8)
+                beta[free] = np.linalg.lstsq(x[:, free], y, rcond=None)[0]
+                wrong = [j for j in (3, 7) if order and j in free and beta[j] > 0]
+                if not wrong:
+                    break
+                free = [j for j in free if j not in wrong]
+            direct = float((y - x @ beta) @ (y - x @ beta)) / (0.2 / 60) ** 2
+            monkeypatch.setattr(measurement, "RSS_CHUNK_ROWS", 333)
+            folded = measurement._flank_rss(shifted, twist, direction, 10.0, 0.2 / 60,
+                                            None, order)
+            assert folded == pytest.approx(direct, rel=1e-9), (friction, order)
 
 
 def test_no_lag_is_read_from_a_coarse_encoders_staircase() -> None:

@@ -23,7 +23,8 @@ import pytest
 import scipy.io as sio
 from nptdms import ChannelObject, GroupObject, TdmsWriter
 
-from rig.runformat import read_run, runs_equal
+import rig
+from rig.runformat import read_run
 from rig.store import Store
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -155,27 +156,98 @@ def test_export_run_formats_read_back(native: dict, tmp_path: Path) -> None:
         res = _rig("export", native["run_id"], "--store", str(native["store"]),
                    "--format", fmt, "--out", out, cwd=tmp_path)
         assert res.returncode == 0, res.stderr
-    assert runs_equal(read_run(tmp_path / "run-folder"), run)  # bit for bit
+    # issue 21 item 20: every sample export carries the twist_arcmin of .to_pandas(), last
+    twist = rig.open(native["folder"]).to_pandas()["twist_arcmin"].to_numpy()
+    assert abs(float(np.median(twist))) < 5.0  # centred on the loop, not the encoder's zero
+    columns = [*run.columns, "twist_arcmin"]
+    back = read_run(tmp_path / "run-folder")
+    assert back.columns == columns and back.meta == run.meta
+    for name in run.columns:  # bit for bit
+        assert back.data[name].tobytes() == run.data[name].tobytes(), name
+    np.testing.assert_array_equal(back.data["twist_arcmin"], twist)
+    # a run that holds the column (this folder) exports it once, recomputed
+    res = _rig("export", str(tmp_path / "run-folder"), "--format", "parquet", "--out",
+               "again.parquet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    again = pq.read_table(tmp_path / "again.parquet")
+    assert again.column_names == columns
+    np.testing.assert_array_equal(again.column("twist_arcmin").to_numpy(), twist)
 
     table = pq.read_table(tmp_path / "run.parquet")
-    assert table.column_names == run.columns
+    assert table.column_names == columns
     for name in run.columns:
         np.testing.assert_array_equal(table.column(name).to_numpy(), run.data[name])
+    np.testing.assert_array_equal(table.column("twist_arcmin").to_numpy(), twist)
     assert json.loads(table.schema.metadata[b"run.json"]) == run.meta
 
     mat = sio.loadmat(tmp_path / "run.mat")
     for name in run.columns:
         np.testing.assert_array_equal(mat[name].ravel(), run.data[name])
+    np.testing.assert_array_equal(mat["twist_arcmin"].ravel(), twist)
     assert json.loads(str(mat["meta_json"][0])) == run.meta
-    assert [str(c[0]) for c in mat["columns"].ravel()] == run.columns
+    assert [str(c[0]) for c in mat["columns"].ravel()] == columns
 
     sheets = pd.read_excel(tmp_path / "run.xlsx", sheet_name=None)
-    assert list(sheets["samples"].columns) == run.columns
+    assert list(sheets["samples"].columns) == columns
     for name in run.columns:  # openpyxl writes 16 significant digits ("%.16g")
         np.testing.assert_allclose(sheets["samples"][name].to_numpy(float), run.data[name],
                                    rtol=1e-15, atol=0)
+    np.testing.assert_allclose(sheets["samples"]["twist_arcmin"].to_numpy(float), twist,
+                               rtol=1e-15, atol=0)
     meta = dict(zip(sheets["meta"]["key"], sheets["meta"]["value"], strict=True))
     assert meta["run_id"] == run.run_id and meta["test.rated_torque_Nm"] == 10.0
+
+
+def test_reimported_export_keeps_every_column_and_the_metrics(native: dict,
+                                                              tmp_path: Path) -> None:
+    """Issue 21 item 20: an export imported again (``rig import`` of its samples.csv) keeps
+    every column (the rig's torque command, step ...; the analysis uses the command), so
+    ``rig analyse`` gives the same numbers, within 1e-9 relative."""
+    run = native["run"]
+    res = _rig("export", native["run_id"], "--store", str(native["store"]), "--format", "csv",
+               "--out", "exported", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    mapping = tmp_path / "rig-export.toml"
+    mapping.write_text(f"""
+[columns]
+t_s = "t_s"
+torque_Nm = "torque_Nm"
+output_angle_deg = "output_angle_deg"
+[test]
+rated_torque_Nm = {run.test["rated_torque_Nm"]!r}
+start_flank = {run.test["start_flank"]!r}
+[sensors]
+encoder_counts_per_rev = {run.sensors["encoder_counts_per_rev"]!r}
+""")
+    for how in (["--out", "again"], ["--into", "store"]):
+        res = _rig("import", str(tmp_path / "exported" / "samples.csv"), "--map", str(mapping),
+                   "--unit", str(native["unit"]), *how, cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+    again = read_run(tmp_path / "again")
+    assert again.columns == [*run.columns, "twist_arcmin"]
+    for name in run.columns:
+        assert again.data[name].tobytes() == run.data[name].tobytes(), name
+    before = json.loads(_analyse_text(native["folder"], tmp_path))
+    (info,) = Store(tmp_path / "store", create=False).list_runs()
+    stored = read_run(info.path).meta["result"]
+    for after in (json.loads(_analyse_text(tmp_path / "again", tmp_path)), stored):
+        for key in ("lost_motion_arcmin", "backlash_arcmin", "stiffness_Nm_per_arcmin",
+                    "stiffness_loading_Nm_per_arcmin", "loop_area_J", "torque_offset_Nm"):
+            if key not in after:
+                continue
+            if before[key] is None:
+                assert after[key] is None, key
+            else:
+                assert after[key] == pytest.approx(before[key], rel=1e-9, abs=0), key
+        for key, value in before["uncertainty"].items():
+            assert after["uncertainty"][key] == pytest.approx(value, rel=1e-9, abs=0), key
+
+
+def _analyse_text(run: Path, cwd: Path) -> str:
+    out = cwd / f"analyse-{run.name}.json"
+    res = _rig("analyse", str(run), "--json", str(out), cwd=cwd)
+    assert res.returncode == 0, res.stderr[-2000:]
+    return out.read_text()
 
 
 def test_export_campaign_results_table(tmp_path: Path) -> None:
@@ -206,6 +278,10 @@ def test_export_campaign_results_table(tmp_path: Path) -> None:
     mat = sio.loadmat(tmp_path / "table.mat")
     np.testing.assert_array_equal(mat["lost_motion_arcmin"].ravel(),
                                   frames["csv"]["lost_motion_arcmin"].to_numpy())
+    # issue 21 item 20: the table's run_id keeps its name (no run_id_2)
+    assert "run_id_2" not in mat
+    assert [str(c[0]) for c in mat["run_id"].ravel()] == list(frames["csv"]["run_id"])
+    assert [str(c[0]) for c in mat["variables"].ravel()] == list(frames["csv"].columns)
 
 
 def _one_line_error(res: subprocess.CompletedProcess) -> str:

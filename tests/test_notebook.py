@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import nbformat
@@ -30,3 +31,9 @@ def test_example_notebook_executes(tmp_path: Path, monkeypatch: pytest.MonkeyPat
     assert "'runout'" in text  # the diagnosis' verdict on the example campaign
     assert "'ok')" in text  # the simulated campaign passed its limit
     assert any("image/png" in o.get("data", {}) for o in outputs)  # the plots are drawn
+    # issue 21 item 20: the twist column is centred on the loop (not the encoder's ~6730')
+    low, high = map(float, re.search(
+        r"'twist_arcmin': \((-?[0-9.]+), (-?[0-9.]+)\)", text).groups())
+    assert -10.0 < low < 0.0 < high < 10.0 and abs(low + high) < 0.5 * (high - low)
+    # the run_finished event names the run that finished
+    assert "('pos090-a100-r0', 'run pos090-a100-r0 completed')" in text

@@ -71,9 +71,16 @@ def test_open_run_gives_samples_with_twist_as_arrow_and_pandas() -> None:
     assert isinstance(table, pa.Table)
     assert table.column_names == [*run.columns, "twist_arcmin"]
     assert table.num_rows == run.n_samples == 2850
-    # no test.ratio in this run: twist is the output angle alone (input locked), in arcmin
-    expected = run.raw.output_angle_deg * 60.0
-    assert np.allclose(table.column("twist_arcmin").to_numpy(), expected, rtol=0, atol=1e-9)
+    # no test.ratio in this run: twist is the output angle alone (input locked), in arcmin,
+    # centred on the loop as the loop analysis centres it (issue 21 item 20: not ~7405')
+    raw = run.raw.output_angle_deg * 60.0
+    low, high = np.percentile(raw, [0.5, 99.5])
+    expected = raw - 0.5 * (low + high)
+    twist = table.column("twist_arcmin").to_numpy()
+    assert np.allclose(twist, expected, rtol=0, atol=1e-9)
+    assert np.allclose(twist, run.twist_arcmin, rtol=0, atol=0)
+    assert abs(np.percentile(twist, 0.5) + np.percentile(twist, 99.5)) < 1e-9
+    assert np.ptp(twist) < 10.0 and abs(float(np.median(twist))) < 5.0
     frame = run.to_pandas()
     assert isinstance(frame, pd.DataFrame) and list(frame.columns) == table.column_names
     assert frame["torque_Nm"].to_numpy().tobytes() == run.raw.torque_Nm.tobytes()
@@ -88,7 +95,9 @@ def test_twist_uses_the_ratio_and_text_columns_survive(tmp_path: Path) -> None:
     folder = write_run(raw, tmp_path / "with-ratio")
     run = rig.open(folder)
     twist = run.to_arrow().column("twist_arcmin").to_numpy()
-    assert np.allclose(twist, (10.0 + 0.01 * t - 300.0 * t / 100.0) * 60.0, atol=1e-9)
+    raw_twist = (10.0 + 0.01 * t - 300.0 * t / 100.0) * 60.0
+    low, high = np.percentile(raw_twist, [0.5, 99.5])
+    assert np.allclose(twist, raw_twist - 0.5 * (low + high), atol=1e-9)
     assert run.to_pandas()["phase"].tolist() == ["a"] * 50
     # a bare CSV of samples (another lab's export) opens too, named by its file
     bare = tmp_path / "export.csv"
@@ -201,6 +210,10 @@ def test_connect_simulated_campaign_measure_and_store_query(tmp_path: Path) -> N
                            limits={"lost_motion_arcmin_max": 1.0})
     kinds = [e.kind for e in events]
     assert kinds[0] == "start" and kinds[-1] == "finished" and "run_finished" in kinds
+    # issue 21 item 20: the run_finished event names the run that finished
+    (finished,) = [e for e in events if e.kind == "run_finished"]
+    assert finished.run_label == "pos090-a100-r0"
+    assert finished.run_id == campaign[0].run_id == finished.data["run_id"]
     assert campaign.result["outcome"] == "ok" and campaign.result["failures"] == []
     (row,) = campaign.results().to_dict("records")
     assert row["label"] == "pos090-a100-r0" and row["input_angle_deg"] == 90.0
@@ -220,6 +233,11 @@ def test_connect_simulated_campaign_measure_and_store_query(tmp_path: Path) -> N
     assert str(every["started_at"].dtype).startswith("datetime64")
     assert list(st.runs(serial="SN-API-1")["run_id"]) == [campaign[0].run_id]
     assert list(st.runs(outcome="not_ok")["run_id"]) == [single.run_id]
+    # the displayed words as well as the codes; anything else names the valid values
+    assert list(st.runs(outcome="NOT OK")["run_id"]) == [single.run_id]
+    assert list(st.runs(outcome="ok")["run_id"]) == [campaign[0].run_id]
+    with pytest.raises(ValueError, match="no_limits"):
+        st.runs(outcome="FAIL")
     assert st.runs(since="2100-01-01").empty and list(st.runs(since="2000-01-01")["run_id"]) \
         == list(every["run_id"])
     listed = subprocess.run([*RIG, "runs", "--store", str(store), "--json", "-"],

@@ -144,33 +144,42 @@ def resolution_of(values: np.ndarray) -> float:
     return q
 
 
+#: Samples the reversal tracker (:func:`direction_and_reversal`) reads at a time as Python
+#: floats: a long run is never held as one list.
+DIRECTION_CHUNK = 1 << 16
+
+
 def direction_and_reversal(t_s: np.ndarray, torque_Nm: np.ndarray, threshold_Nm: float
                            ) -> tuple[np.ndarray, np.ndarray]:
     """Torque direction (+1 rising, -1 falling) with hysteresis ``threshold_Nm`` and the time
     (s) since the last reversal (the running extreme) for every sample."""
-    values = torque_Nm.tolist()
-    times = t_s.tolist()
-    n = len(values)
-    direction = [0.0] * n
-    since = [0.0] * n
+    n = int(torque_Nm.size)
+    direction = np.empty(n)
+    since = np.empty(n)
     d = 1.0
-    extreme = values[0] if n else 0.0
-    t_ext = times[0] if n else 0.0
-    for k in range(n):
-        v = values[k]
-        if d > 0:
-            if v >= extreme:
-                extreme, t_ext = v, times[k]
-            elif v < extreme - threshold_Nm:
-                d, extreme, t_ext = -1.0, v, times[k]
-        else:
-            if v <= extreme:
-                extreme, t_ext = v, times[k]
-            elif v > extreme + threshold_Nm:
-                d, extreme, t_ext = 1.0, v, times[k]
-        direction[k] = d
-        since[k] = times[k] - t_ext
-    return np.asarray(direction), np.asarray(since)
+    extreme = float(torque_Nm[0]) if n else 0.0
+    t_ext = float(t_s[0]) if n else 0.0
+    for a in range(0, n, DIRECTION_CHUNK):
+        values = torque_Nm[a:a + DIRECTION_CHUNK].tolist()
+        times = t_s[a:a + DIRECTION_CHUNK].tolist()
+        dirs = [0.0] * len(values)
+        ages = [0.0] * len(values)
+        for k, v in enumerate(values):
+            if d > 0:
+                if v >= extreme:
+                    extreme, t_ext = v, times[k]
+                elif v < extreme - threshold_Nm:
+                    d, extreme, t_ext = -1.0, v, times[k]
+            else:
+                if v <= extreme:
+                    extreme, t_ext = v, times[k]
+                elif v > extreme + threshold_Nm:
+                    d, extreme, t_ext = 1.0, v, times[k]
+            dirs[k] = d
+            ages[k] = times[k] - t_ext
+        direction[a:a + len(values)] = dirs
+        since[a:a + len(values)] = ages
+    return direction, since
 
 
 def transit_mask(twist_arcmin: np.ndarray, torque_Nm: np.ndarray, sigma_arcmin: float,

@@ -197,6 +197,20 @@ def travel_since_reversal(torque: np.ndarray, direction: np.ndarray) -> np.ndarr
     return out
 
 
+#: Rows of the loaded flanks folded into the running triangular factor at a time
+#: (:func:`_flank_rss`): the design matrix of a long run is never held whole.
+RSS_CHUNK_ROWS = 1 << 16
+
+
+def _fold_rows(r: np.ndarray | None, rows: np.ndarray) -> np.ndarray | None:
+    """The triangular factor R (``R.T @ R == A.T @ A``) of the rows folded so far (``r``)
+    and ``rows``: Householder QR of ``[r; rows]`` (a tall-skinny QR, one chunk at a time)."""
+    if rows.shape[0] == 0:
+        return r
+    stacked = rows if r is None else np.vstack([r, rows])
+    return np.linalg.qr(stacked, mode="r")
+
+
 def _flank_rss(torque: np.ndarray, twist: np.ndarray, direction: np.ndarray, amplitude: float,
                sigma: float, away: np.ndarray | None = None,
                friction_order: bool = True) -> float:
@@ -205,32 +219,53 @@ def _flank_rss(torque: np.ndarray, twist: np.ndarray, direction: np.ndarray, amp
     (Coulomb friction's 2F/K): what a lag between the channels adds is a separation
     proportional to the torque rate, which this law cannot hold. ``away``: samples far
     enough from a reversal (HOLD_SHARE) to count; ``friction_order``: the separation only in
-    friction's order (see below)."""
+    friction's order (see below).
+
+    The two flanks' laws share no coefficient, so each flank is its own least-squares fit of
+    ``[1, T/A, (T/A)^2, direction]`` (A the amplitude; the scaling changes no residual) to the
+    twist less its mean over the flanks (the constant columns absorb it). The rows are folded
+    chunk by chunk into the triangular factor R of ``[X | y]`` (``R.T R = [X|y].T [X|y]``), and
+    the fit is solved on R: the same minimum-norm solution and residual as a least-squares
+    fit of all rows at once, in memory of a chunk."""
     on = np.abs(torque) > 0.2 * amplitude
     if away is not None:
         on &= away
-    if on.sum() < 30:
+    n_on = int(np.count_nonzero(on))
+    if n_on < 30:
         return math.nan
-    s = np.sign(torque)
-    cols = []
-    for sign in (1.0, -1.0):
-        m = (s == sign).astype(float)
-        cols += [m, m * torque, m * torque**2, m * direction]
-    X = np.column_stack(cols)[on]
-    y = twist[on]
-    # friction puts the loading branch below the unloading one (the direction's coefficient
-    # -F/K <= 0 on both flanks); a lag of the torque channel puts it above, which friction
-    # must not absorb
-    free = list(range(X.shape[1]))
-    for _ in range(3):
-        beta = np.zeros(X.shape[1])
-        beta[free], *_ = np.linalg.lstsq(X[:, free], y, rcond=None)
-        wrong = [j for j in (3, 7) if friction_order and j in free and beta[j] > 0]
-        if not wrong:
-            break
-        free = [j for j in free if j not in wrong]
-    r = y - X @ beta
-    return float(r @ r) / max(sigma, 1e-12) ** 2
+    scale = amplitude if amplitude > 0 else 1.0
+    offset = float(twist[on.argmax()])  # any twist of the flanks: only the rounding cares
+    factors: dict[float, np.ndarray | None] = {1.0: None, -1.0: None}
+    n = torque.size
+    for a in range(0, n, RSS_CHUNK_ROWS):
+        sel = on[a:a + RSS_CHUNK_ROWS]
+        if not sel.any():
+            continue
+        tq = torque[a:a + RSS_CHUNK_ROWS][sel] / scale
+        rows = np.column_stack([np.ones_like(tq), tq, tq * tq,
+                                direction[a:a + RSS_CHUNK_ROWS][sel],
+                                twist[a:a + RSS_CHUNK_ROWS][sel] - offset])
+        positive = tq > 0
+        factors[1.0] = _fold_rows(factors[1.0], rows[positive])
+        factors[-1.0] = _fold_rows(factors[-1.0], rows[~positive])
+    rss = 0.0
+    for r in factors.values():
+        if r is None:
+            continue
+        x, y = r[:, :4], r[:, 4]
+        # friction puts the loading branch below the unloading one (the direction's
+        # coefficient -F/K <= 0 on both flanks); a lag of the torque channel puts it above,
+        # which friction must not absorb
+        free = [0, 1, 2, 3]
+        for _ in range(2):
+            beta = np.zeros(4)
+            beta[free], *_ = np.linalg.lstsq(x[:, free], y, rcond=None)
+            if not (friction_order and 3 in free and beta[3] > 0):
+                break
+            free = [0, 1, 2]
+        res = y - x @ beta
+        rss += float(res @ res)
+    return rss / max(sigma, 1e-12) ** 2
 
 
 def best_torque_shift(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
@@ -248,8 +283,14 @@ def best_torque_shift(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
     if n < 200 or amplitude <= 0 or shifts_s.size == 0:
         return 0.0
     edge = float(np.max(np.abs(shifts_s)))
-    core = (t >= t[0] + edge) & (t <= t[-1] - edge)
-    if core.sum() < 100:
+    if bool(np.all(t[1:] > t[:-1])):  # ascending time: the core is a slice (views, no copy)
+        core: np.ndarray | slice = slice(int(np.searchsorted(t, t[0] + edge, "left")),
+                                         int(np.searchsorted(t, t[-1] - edge, "right")))
+        n_core = max(0, core.stop - core.start)
+    else:
+        core = (t >= t[0] + edge) & (t <= t[-1] - edge)
+        n_core = int(core.sum())
+    if n_core < 100:
         return 0.0
     tc, yc, dc = t[core], twist[core], direction[core]
     away = (travel_since_reversal(torque, direction)[core] > HOLD_SHARE * amplitude

@@ -16,6 +16,7 @@ import pandas as pd
 import pyarrow as pa
 
 from rig import runformat as rf
+from rig.analyse import TWIST_COLUMN, sample_twist_arcmin
 from rig.api.plots import axes_or_new, draw_positions_table
 from rig.api.reports import (
     Analysis,
@@ -26,15 +27,13 @@ from rig.api.reports import (
     model,
     one_run_campaign,
 )
-from rig.api.results import results_frame, run_twist_arcmin
+from rig.api.results import results_frame
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
 __all__ = ["TWIST_COLUMN", "Campaign", "Run"]
 
-TWIST_COLUMN = "twist_arcmin"
-"""The column added to the samples: output twist in arcmin (:func:`run_twist_arcmin`)."""
 
 
 def _arrow_column(values: rf.Column) -> pa.Array:
@@ -84,8 +83,9 @@ class Run:
 
     @property
     def columns(self) -> list[str]:
-        """The sample columns of the file, in order (without the twist)."""
-        return list(self.raw.columns)
+        """The sample columns of the file, in order (a ``twist_arcmin`` column the file
+        holds, as an export writes it, is left out: it is recomputed)."""
+        return [c for c in self.raw.columns if c != TWIST_COLUMN]
 
     @property
     def n_samples(self) -> int:
@@ -93,16 +93,17 @@ class Run:
 
     @property
     def twist_arcmin(self) -> np.ndarray:
-        """Output twist in arcmin, as ``rig analyse`` computes it (uses ``test.ratio``)."""
+        """Output twist in arcmin, as ``rig analyse`` computes it (uses ``test.ratio``),
+        centred on the loop (:func:`rig.analyse.sample_twist_arcmin`)."""
         if self._twist is None:
-            self._twist = run_twist_arcmin(self.raw)
+            self._twist = sample_twist_arcmin(self.raw)
         return self._twist
 
     def to_arrow(self) -> pa.Table:
         """The samples as a pyarrow Table: the file's columns (numbers as float64, NaN a
         missing value; text columns as strings), then ``twist_arcmin``."""
-        names = [*self.raw.columns, TWIST_COLUMN]
-        arrays = [_arrow_column(self.raw.data[c]) for c in self.raw.columns]
+        names = [*self.columns, TWIST_COLUMN]
+        arrays = [_arrow_column(self.raw.data[c]) for c in self.columns]
         arrays.append(pa.array(self.twist_arcmin, type=pa.float64()))
         return pa.Table.from_arrays(arrays, names=names)
 

@@ -16,8 +16,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from analysis.loop import twist_arcmin
-from rig.analyse import METRIC_KEYS, RunAnalysis, analyse_run, resolve_profile
+from rig.analyse import (
+    METRIC_KEYS,
+    RunAnalysis,
+    analyse_run,
+    resolve_profile,
+    run_twist_arcmin,
+)
 from rig.errors import RigError
 from rig.json_files import finite_for_json
 from rig.outcome import LIMIT_KEYS, outcome_word, recorded_outcome, run_outcome
@@ -36,15 +41,6 @@ MODEL_KEYS = ("lost_motion_arcmin", "backlash_arcmin", "stiffness_Nm_per_arcmin"
 """The model values of ``rig analyse --json`` ``model``, as ``model_<key>`` columns."""
 LIMIT_COLUMNS = tuple(LIMIT_KEYS)
 """The limit keys of run.json / campaign.json (None: not checked)."""
-
-
-def run_twist_arcmin(run: Run) -> np.ndarray:
-    """Twist of the run in arcmin, as ``rig analyse`` computes it: output angle minus input
-    angle / ``test.ratio`` when both are known, else the output angle alone (input locked)."""
-    ratio = run.test.get("ratio")
-    if run.input_angle_deg is not None and ratio:
-        return twist_arcmin(run.output_angle_deg, run.input_angle_deg, float(ratio))
-    return twist_arcmin(run.output_angle_deg)
 
 
 def _number(value: Any) -> float | None:

@@ -216,9 +216,11 @@ class Engine:
 
     # ------------------------------------------------------------------ events
 
-    def _publish(self, kind: str, message: str = "", data: dict[str, Any] | None = None
-                 ) -> None:
-        open_run = self._open
+    def _publish(self, kind: str, message: str = "", data: dict[str, Any] | None = None,
+                 run: Any = None) -> None:
+        """Publish a progress event; ``run_label``/``run_id`` are those of ``run`` (the run
+        just finished, no longer open) if given, else of the open run."""
+        open_run = run if run is not None else self._open
         n = self._estimate.n_steps
         done = min(self._step_index, n)
         self.hub.publish(ProgressEvent(
@@ -320,7 +322,7 @@ class Engine:
             open_run.samples_dropped = self._dropped_total() - self._dropped_at_begin
             self.outcomes.append(open_run.finish_aborted(reason))
             self._publish("run_finished", message=f"run {open_run.label} aborted: {reason}",
-                          data=self.outcomes[-1].to_dict())
+                          data=self.outcomes[-1].to_dict(), run=open_run)
 
     def _next_begin(self) -> BeginRun | None:
         """The BeginRun step the plan was preparing when it stopped (None: no run ahead)."""
@@ -809,7 +811,7 @@ class Engine:
         outcome = open_run.finish_completed()
         self.outcomes.append(outcome)
         self._publish("run_finished", message=f"run {open_run.label} completed",
-                      data=outcome.to_dict())
+                      data=outcome.to_dict(), run=open_run)
         if not getattr(open_run.recorder, "indexed", True):
             self._wait_for_store(
                 f"store: PostgreSQL unreachable; run {outcome.run_id} kept locally, will be "

@@ -1,9 +1,11 @@
 """``rig export``: a run or a campaign in the formats other tools read.
 
-A run:
+A run (its sample columns, then ``twist_arcmin``: the twist in arcmin centred on the loop,
+:func:`rig.analyse.sample_twist_arcmin`, the column the Python API's ``.to_pandas()`` adds; a
+``twist_arcmin`` the run already holds is recomputed, never doubled):
 
 - ``csv``: a rig-run/1 run folder (run.json + samples.csv), :func:`rig.runformat.write_run`;
-  it reads back bit for bit.
+  its columns read back bit for bit.
 - ``parquet``: one file of the samples (float64 columns, text columns as strings) whose
   schema metadata ``run.json`` holds the run.json text.
 - ``mat``: MATLAB (``scipy.io.savemat``, v5): one variable per column (numeric columns as
@@ -40,7 +42,7 @@ from rig.io.safe_write import atomic_file, atomic_folder, check_target
 from rig.runformat import Campaign, Run, write_run
 
 __all__ = ["FORMATS", "XLSX_MAX_ROWS", "ExportError", "default_out", "export_campaign",
-           "export_run", "matlab_names", "meta_rows", "resolve_target"]
+           "export_run", "matlab_names", "meta_rows", "resolve_target", "with_twist"]
 
 FORMATS = ("csv", "parquet", "mat", "xlsx")
 XLSX_MAX_ROWS = 1_048_576
@@ -64,11 +66,19 @@ def default_out(name: str, fmt: str, campaign: bool) -> Path:
     return Path(f"{name}-results.{fmt}" if campaign else f"{name}.{fmt}")
 
 
-def matlab_names(columns: list[str]) -> list[str]:
+RUN_MAT_VARIABLES = ("run_id", "meta_json", "columns", "variables")
+"""The variables a run's .mat holds besides its columns."""
+CAMPAIGN_MAT_VARIABLES = ("meta_json", "columns", "variables")
+"""The variables a campaign's .mat holds besides its table's columns (its ``run_id`` is the
+table's column)."""
+
+
+def matlab_names(columns: list[str], reserved: tuple[str, ...] = RUN_MAT_VARIABLES
+                 ) -> list[str]:
     """Valid, distinct MATLAB variable names for ``columns`` (at most 63 characters, a
-    letter first, letters, digits and ``_``)."""
+    letter first, letters, digits and ``_``), none of ``reserved`` (the file's other
+    variables)."""
     out: list[str] = []
-    reserved = {"run_id", "meta_json", "columns", "variables"}
     for name in columns:
         base = re.sub(r"\W", "_", name, flags=re.ASCII)
         if not base or not base[0].isalpha():
@@ -101,6 +111,17 @@ def _meta_json(meta: dict[str, Any]) -> str:
     return json.dumps(meta, ensure_ascii=False)
 
 
+def with_twist(run: Run) -> Run:
+    """``run`` with :data:`rig.analyse.TWIST_COLUMN` as its last column (same meta)."""
+    from rig.analyse import TWIST_COLUMN, sample_twist_arcmin
+
+    columns = [c for c in run.columns if c != TWIST_COLUMN]
+    data = {c: run.data[c] for c in columns}
+    data[TWIST_COLUMN] = sample_twist_arcmin(run)
+    return Run(meta=run.meta, columns=[*columns, TWIST_COLUMN], data=data, path=run.path,
+               notes=list(run.notes))
+
+
 def export_run(run: Run, fmt: str, out: Path | None = None, *, force: bool = False) -> Path:
     """Write ``run`` as ``fmt`` to ``out`` (default :func:`default_out`); the path.
 
@@ -114,6 +135,7 @@ def export_run(run: Run, fmt: str, out: Path | None = None, *, force: bool = Fal
         out = default_out(run.run_id, fmt, False)
     sources = [run.path] if run.path is not None else []
     out = check_target(Path(out), folder=fmt == "csv", force=force, sources=sources)
+    run = with_twist(run)
     if fmt == "csv":
         with atomic_folder(out) as tmp:
             write_run(run, tmp)
@@ -167,7 +189,7 @@ def export_campaign(campaign: Campaign, fmt: str, out: Path | None = None, *,
             arrow = arrow.replace_schema_metadata({"campaign.json": _meta_json(campaign.meta)})
             pq.write_table(arrow, tmp)
         elif fmt == "mat":
-            names = matlab_names(list(table.columns))
+            names = matlab_names(list(table.columns), CAMPAIGN_MAT_VARIABLES)
             variables: dict[str, Any] = {}
             for var, col in zip(names, table.columns, strict=True):
                 values = table[col]

@@ -93,6 +93,9 @@ def import_run(source: str | Path, map_path: str | Path, unit_path: str | Path,
                              "waveform timing)")
     data = read_source(src, mapping)
     refs = mapping.columns.model_dump(exclude_none=True)
+    for name in COLUMN_KINDS:  # a rig-run/1 column by its own name (a rig export): as mapped
+        if name not in refs and isinstance(data.extra.get(name), np.ndarray):
+            data.values[name] = data.extra.pop(name)
     columns: dict[str, np.ndarray] = {}
     for name in COLUMN_KINDS:
         if name in data.values:
@@ -111,9 +114,24 @@ def import_run(source: str | Path, map_path: str | Path, unit_path: str | Path,
             temperature_C=columns.get("temperature_C"),
             unit=unit, test=mapping.test_meta(), sensors=mapping.sensors or None,
             extra_meta={"source": source_meta},
+            extra_columns=_extra_columns(data),
         )
     except ValueError as exc:
         raise RunImportError(f"{src}: {exc}") from None
+
+
+def _extra_columns(data: SourceData) -> dict[str, np.ndarray | list[str]]:
+    """The file's unmapped columns, kept under their own names (rig-run/1 keeps extra
+    columns); one named like a run column the map fills from another column is kept as
+    ``<name>_file``. (An unmapped numeric column named like a run column the map does not
+    fill is that run column, in the run's unit: :func:`import_run`.)"""
+    out: dict[str, np.ndarray | list[str]] = {}
+    for name, values in data.extra.items():
+        key = name
+        while key in COLUMN_KINDS or key in out:
+            key = f"{key}_file"
+        out[key] = values
+    return out
 
 
 MIN_STEP_S = 1e-9

@@ -40,6 +40,10 @@ class SourceData:
     units: dict[str, str | None] = field(default_factory=dict)
     """Run column -> the unit the file itself gives (a catman header's ``[N*m]``, a TDMS
     channel's ``unit_string``), None where it gives none."""
+    extra: dict[str, np.ndarray | list[str]] = field(default_factory=dict)
+    """Every other column (channel) of the file, by its own name, in file order: float64
+    (blank = NaN) when every cell is a number, else the cells' texts as read. rig-run/1 keeps
+    extra columns on round trip, and ``rig analyse`` uses some (``torque_command_Nm``)."""
 
 
 def read_source(path: Path, mapping: ImportMap) -> SourceData:
@@ -115,13 +119,16 @@ def _read_delimited(path: Path, mapping: ImportMap) -> SourceData:
     header_line = mapping.skip_rows + 1
 
     def where(run_column: str, index: int | None) -> str:
-        name = wanted.get(run_column, wanted["torque_Nm"])
+        name = wanted.get(run_column) or (run_column if run_column in header
+                                          else wanted["torque_Nm"])
         col = header.index(name) + 1
         line = f"{header_line + 1 + index}:" if index is not None else f"{header_line}:"
         return f"{path}:{line}{col}: column {name!r} ({run_column})"
 
     names = list(dict.fromkeys(wanted.values()))
+    others = [c for c in header if c and c not in names and header.count(c) == 1]
     chunks: dict[str, list[np.ndarray]] = {run_column: [] for run_column in wanted}
+    other_chunks: dict[str, list[pa.Array]] = {name: [] for name in others}
     offset = 0
     try:
         reader = pacsv.open_csv(
@@ -131,7 +138,8 @@ def _read_delimited(path: Path, mapping: ImportMap) -> SourceData:
                                            block_size=BLOCK_BYTES),
             parse_options=pacsv.ParseOptions(delimiter=mapping.delimiter),
             convert_options=pacsv.ConvertOptions(
-                include_columns=names, column_types={name: pa.string() for name in names},
+                include_columns=names + others,
+                column_types={name: pa.string() for name in names + others},
                 strings_can_be_null=False, quoted_strings_can_be_null=False),
         )
         for batch in reader:
@@ -139,15 +147,37 @@ def _read_delimited(path: Path, mapping: ImportMap) -> SourceData:
                 texts = batch.column(batch.schema.get_field_index(name))
                 chunks[run_column].append(
                     _numbers(texts, mapping.decimal, run_column, where, offset))
+            for name in others:
+                other_chunks[name].append(batch.column(batch.schema.get_field_index(name)))
             offset += batch.num_rows
     except (pa.ArrowInvalid, OSError, LookupError, UnicodeError) as exc:
         text = " ".join(str(exc).split())
         raise RunImportError(f"{path}: {text}") from None
-    values = {run_column: np.concatenate(parts) if parts else np.empty(0)
-              for run_column, parts in chunks.items()}
-    del chunks
+    values: dict[str, np.ndarray] = {}
+    for run_column in wanted:  # one column at a time: its blocks are freed as it is joined
+        parts = chunks.pop(run_column)
+        values[run_column] = np.concatenate(parts) if parts else np.empty(0)
+        del parts
+    extra = {name: _extra_column(other_chunks.pop(name), mapping.decimal) for name in others}
     units = {run_column: _header_unit(name) for run_column, name in wanted.items()}
-    return SourceData(values, where, "csv", units)
+    return SourceData(values, where, "csv", units, extra)
+
+
+def _extra_column(parts: list[pa.Array], decimal: str) -> np.ndarray | list[str]:
+    """An unmapped column's cells: float64 when every cell is a number or blank (blank =
+    NaN), else the texts as read."""
+    texts = pa.chunked_array(parts, type=pa.string()).combine_chunks()
+    cells = pc.utf8_trim_whitespace(texts)
+    if decimal == ",":
+        if pc.any(pc.match_substring(cells, ".")).as_py():
+            return texts.to_pylist()
+        cells = pc.replace_substring(cells, ",", ".")
+    blank = pc.equal(cells, "")
+    ok = pc.or_(blank, pc.match_substring_regex(cells, NUMBER, ignore_case=True))
+    if len(cells) and not pc.all(ok).as_py():
+        return texts.to_pylist()
+    numbers = pc.if_else(blank, pa.scalar(None, pa.string()), cells).cast(pa.float64())
+    return numbers.fill_null(np.nan).to_numpy()
 
 
 def _header_unit(name: str) -> str | None:
@@ -219,7 +249,8 @@ def _tdms_columns(path: Path, mapping: ImportMap, tdms: Any) -> SourceData:
                                           f"channel of group {group_name!r}"))
 
     def where(run_column: str, index: int | None) -> str:
-        name = wanted.get(run_column, wanted["torque_Nm"])
+        name = wanted.get(run_column) or (run_column if run_column in have
+                                          else wanted["torque_Nm"])
         sample = f" sample {index + 1}" if index is not None else ""
         return f"{path}: group {group_name!r} channel {name!r} ({run_column}){sample}"
 
@@ -247,4 +278,14 @@ def _tdms_columns(path: Path, mapping: ImportMap, tdms: Any) -> SourceData:
         if len(data) != n:
             raise RunImportError(f"{where(run_column, None)}: {len(data)} samples, but the "
                                  f"torque channel has {n}")
-    return SourceData(values, where, "tdms", units)
+    extra: dict[str, np.ndarray | list[str]] = {}
+    for name in have:  # the group's other channels of the same length
+        if name in wanted.values() or not name or have.count(name) > 1:
+            continue
+        channel = group[name]
+        if len(channel) != n:
+            continue
+        data = np.asarray(channel[:])
+        extra[name] = data.astype(np.float64, copy=False) if data.dtype.kind in "fiub" \
+            else [str(v) for v in data]
+    return SourceData(values, where, "tdms", units, extra)

@@ -928,7 +928,7 @@ def acquisition_meta(io: RigIO) -> dict[str, Any]:
         if io.has_input_encoder else "not recorded",
         "temperature_C": "housing temperature, latest value (polled every ~1 s)"
         if io.has_climate else "not recorded",
-        "torque_command_Nm": "setpoint in force when the row was merged",
+        "torque_command_Nm": "setpoint in force when the row was measured",
         "step": "1-based index of the plan step being executed",
         "sample_window": "1 inside a Sample step (settled measurement point)",
         "cross_check": "Modbus torque sensor, polled, compared (result.crosscheck_max_diff_Nm)",

@@ -75,6 +75,7 @@ def _accuracy_pass(device_priority: int) -> Iterator[dict[str, Any]]:
            "value": None if error is None else round(error, 3), "unit": "%",
            "target": "< 0.5", "true_arcmin": round(figures["load_lost_motion_true_arcmin"], 4),
            "completed": figures["load_lost_motion_completed"],
+           "runs_without_a_value": figures["load_lost_motion_missing"],
            "device_priority": device_priority or None, "realtime_priority": realtime,
            "runs": figures["load_lost_motion_runs"],
            "aborted_by_the_load": figures["load_lost_motion_aborted"]}

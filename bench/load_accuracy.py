@@ -6,8 +6,10 @@ that a loaded CI machine put 1.9 % off (equal twist steps, and constant rate), m
 ``rig measure --simulated``'s code path (the simulated rig in its own process, the engine in
 this one) while ``busy`` processes spin on the CPU (bench/load_scenario.py's load). The figure
 ``load_lost_motion_error_pct`` is the largest |measured - true| / true of the runs, in %;
-target under 0.5 %. ``device_priority``: SCHED_FIFO for the simulated devices (they stand in
-for hardware; None: the normal scheduler, as the test suite runs them);
+target under 0.5 %; ``load_lost_motion_missing`` counts the runs that gave no lost motion
+(each with its reason: never hidden in the figure). ``device_priority``: SCHED_FIFO for the
+simulated devices (they stand in for hardware; None: the normal scheduler, as the test suite
+runs them);
 ``realtime_priority``: SCHED_FIFO for them and, through the rig configuration they write
 (``[rig] realtime_priority``), for this measuring process.
 """
@@ -94,7 +96,9 @@ def run_lost_motion_under_load(*, busy: int = 3, repeats: int = 2,
                         "lost_motion_arcmin": value,
                         "u_arcmin": (out.get("uncertainty") or {}).get("lost_motion_arcmin"),
                         "error_pct": None if value is None else 100.0 * (value - truth) / truth,
-                        "outcome": out.get("outcome")})
+                        "outcome": out.get("outcome"),
+                        "why_no_value": None if value is not None else
+                        (out.get("errors") or {}).get("lost_motion_arcmin") or out.get("reason")})
     finally:
         for p in procs:
             with contextlib.suppress(ProcessLookupError):
@@ -108,4 +112,5 @@ def run_lost_motion_under_load(*, busy: int = 3, repeats: int = 2,
     return {"load_lost_motion_error_pct": max(errors) if errors else None,
             "load_lost_motion_true_arcmin": truth, "load_lost_motion_runs": runs,
             "load_lost_motion_completed": sum(r["state"] == "completed" for r in runs),
+            "load_lost_motion_missing": sum(r["lost_motion_arcmin"] is None for r in runs),
             "load_lost_motion_aborted": aborted}

@@ -26,6 +26,13 @@ preview endpoint (127.0.0.1, bounded to 300 s) beside 2 busy processes, then the
 pressed 5 times under the flood: ``load_preview_flood_completed`` (target 1) and
 ``load_preview_flood_estop_s`` (the slowest E-stop answer, target under 0.1 s).
 ``BENCH_LOAD_FLOOD=0`` skips it; ``BENCH_LOAD_FLOOD=only`` runs only it.
+
+Then the measured value under load (issue 21 item 11, ``bench.load_accuracy``): the lost
+motion of both quasi-static loading modes, 2 runs each, measured while 3 busy processes spin,
+against the plant's truth: ``load_lost_motion_error_pct`` (the worst run, target under
+0.5 %), with the measuring process and the devices at SCHED_FIFO 20 (``BENCH_LOAD_RT=0``:
+the devices at ``BENCH_LOAD_DEVICE_PRIORITY``, the measuring process on the normal
+scheduler). ``BENCH_LOAD_ACCURACY=0`` skips it; ``BENCH_LOAD_ACCURACY=only`` runs only it.
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ import os
 from collections.abc import Iterator
 from typing import Any
 
+from bench.load_accuracy import run_lost_motion_under_load
 from bench.load_scenario import ROOT, run_load_scenario, run_preview_flood
 
 UNITS = {"load_campaign_completed": "1/0", "load_samples_lost": "samples",
@@ -45,11 +53,32 @@ EXAMPLE_CAMPAIGN = ROOT / "examples" / "campaigns" / "seed000-pair1.toml"
 
 def run() -> Iterator[dict[str, Any]]:
     flood = os.environ.get("BENCH_LOAD_FLOOD", "1")
+    accuracy = os.environ.get("BENCH_LOAD_ACCURACY", "1")
     device_priority = int(os.environ.get("BENCH_LOAD_DEVICE_PRIORITY", str(RT_PRIORITY)))
+    if accuracy == "only":
+        yield from _accuracy_pass(device_priority)
+        return
     if flood != "only":
         yield from _load_passes(device_priority)
     if flood != "0":
         yield from _flood_pass(device_priority)
+    if accuracy != "0" and flood != "only":
+        yield from _accuracy_pass(device_priority)
+
+
+def _accuracy_pass(device_priority: int) -> Iterator[dict[str, Any]]:
+    realtime = RT_PRIORITY if os.environ.get("BENCH_LOAD_RT", "1") != "0" else None
+    figures = run_lost_motion_under_load(device_priority=device_priority or None,
+                                         realtime_priority=realtime)
+    error = figures["load_lost_motion_error_pct"]
+    yield {"name": "load_lost_motion_error_pct",
+           "value": None if error is None else round(error, 3), "unit": "%",
+           "target": "< 0.5", "true_arcmin": round(figures["load_lost_motion_true_arcmin"], 4),
+           "completed": figures["load_lost_motion_completed"],
+           "runs_without_a_value": figures["load_lost_motion_missing"],
+           "device_priority": device_priority or None, "realtime_priority": realtime,
+           "runs": figures["load_lost_motion_runs"],
+           "aborted_by_the_load": figures["load_lost_motion_aborted"]}
 
 
 def _flood_pass(device_priority: int) -> Iterator[dict[str, Any]]:

@@ -22,6 +22,10 @@ class MonotonicClock:
     def now_s(self) -> float:
         return time.monotonic() - self._t0
 
+    def at_monotonic(self, t_mono_s: float) -> float:
+        """This clock's time (s) at host ``time.monotonic()`` time ``t_mono_s`` (s)."""
+        return t_mono_s - self._t0
+
 
 class ManualClock:
     """A clock that moves only when told to: deterministic tests of the plant."""

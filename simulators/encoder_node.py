@@ -189,13 +189,18 @@ class EncoderNode:
             return snapshot.output_angle_deg
         return snapshot.input_angle_deg
 
-    def position_counts(self) -> int:
-        """Position value 0x6004 now: quantised angle + preset offset, modulo 0x6002."""
+    def position_counts(self, at_monotonic_s: float | None = None) -> int:
+        """Position value 0x6004: quantised angle + preset offset, modulo 0x6002; now, or
+        at host ``time.monotonic()`` time ``at_monotonic_s`` (s) when the plant can tell
+        (``snapshot_at_monotonic``)."""
         stuck = self.backdoor.stuck_counts
         if stuck is not None:
             return stuck
         self._refresh_config()
-        raw = math.floor(self.angle_deg(self.plant.snapshot()) * self._cpr / 360.0)
+        at = getattr(self.plant, "snapshot_at_monotonic", None)
+        snap = (self.plant.snapshot() if at is None or at_monotonic_s is None
+                else at(at_monotonic_s))
+        raw = math.floor(self.angle_deg(snap) * self._cpr / 360.0)
         return (raw + self._preset_offset) % self._range
 
     @property
@@ -264,13 +269,17 @@ class EncoderNode:
         return self.local is not None and self.local.nmt.state == "OPERATIONAL"
 
     def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        """A SYNC: the position is sampled when it reached the node, as a hardware encoder
+        latches it on the SYNC (CiA 301 synchronous TPDO) however late this thread runs:
+        ``timestamp`` (s, ``time.time()`` scale) is the frame's arrival on the bus (the SLCAN
+        adapter gives the kernel's receive time of its bytes)."""
         self.syncs_seen += 1
         self._refresh_config()
         if not 1 <= self._trans_type <= 240 or not self._operational():
             return
         self._sync_count += 1
         if self._sync_count % self._trans_type == 0:
-            self._send_position()
+            self._send_position(_sync_monotonic(timestamp))
 
     def _cyclic_loop(self) -> None:
         deadline = time.monotonic()
@@ -289,13 +298,15 @@ class EncoderNode:
             elif pause < -10 * period_s:  # fell far behind (machine stalled): do not burst
                 deadline = time.monotonic()
 
-    def _send_position(self) -> None:
+    def _send_position(self, sampled_at_monotonic_s: float | None = None) -> None:
+        """Sample (at ``sampled_at_monotonic_s``, host monotonic s; None: now) and send the
+        position TPDO; the backdoor's delay holds the frame back after sampling."""
         backdoor = self.backdoor
         if backdoor.silent or self.local is None or self.network is None:
             return
+        counts = self.position_counts(sampled_at_monotonic_s)
         if backdoor.delay_s > 0:
             time.sleep(backdoor.delay_s)
-        counts = self.position_counts()
         with self._lock:
             tpdo = self.local.tpdo[1]
             position = next((v for v in tpdo.map if v.index == POSITION_INDEX), None)
@@ -311,6 +322,23 @@ class EncoderNode:
         except (can.CanError, RuntimeError):
             return  # the bus went away under us (stop() racing a SYNC): nothing to send to
         self.tpdos_sent += 1
+
+
+SYNC_STAMP_MAX_AGE_S = 2.0
+"""A SYNC's bus time older than this (s), or in the future, is not believed (a clock step):
+the position is then sampled when the node gets to it."""
+
+
+def _sync_monotonic(timestamp: float) -> float | None:
+    """Host ``time.monotonic()`` time (s) of a frame stamped ``timestamp`` (s,
+    ``time.time()`` scale); None when the stamp is missing or not believable."""
+    if not timestamp or not math.isfinite(timestamp):
+        return None
+    now_wall, now_mono = time.time(), time.monotonic()
+    age = now_wall - timestamp
+    if not 0.0 <= age <= SYNC_STAMP_MAX_AGE_S:
+        return None
+    return now_mono - age
 
 
 class SweepPlant:
@@ -343,7 +371,17 @@ class SweepPlant:
         self._lock = threading.Lock()
 
     def snapshot(self) -> PlantSnapshot:
-        t = self._clock.now_s()
+        return self._snapshot(self._clock.now_s())
+
+    def snapshot_at_monotonic(self, t_mono_s: float) -> PlantSnapshot:
+        """The view at host monotonic time ``t_mono_s`` (s), never after now (a clock that
+        is not the host's: now). The sweep is a closed form: any past instant is exact."""
+        now = self._clock.now_s()
+        at_monotonic = getattr(self._clock, "at_monotonic", None)
+        return self._snapshot(now if at_monotonic is None else min(now,
+                                                                   at_monotonic(t_mono_s)))
+
+    def _snapshot(self, t: float) -> PlantSnapshot:
         with self._lock:
             torque = self._command if self._enabled else 0.0
             out = self._amplitude_deg * math.sin(2 * math.pi * t / self._period_s)

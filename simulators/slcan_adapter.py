@@ -24,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import socket
 import string
+import struct
 import threading
 import time
 from dataclasses import dataclass
@@ -316,7 +317,8 @@ class SlcanAdapter:
         return f"socket://{self.host}:{self.port}"
 
     def start(self) -> str:
-        self._bus = can.Bus(interface="virtual", channel=self.channel)
+        # the frames keep the kernel's receive time (a node samples on SYNC at that time)
+        self._bus = can.Bus(interface="virtual", channel=self.channel, preserve_timestamps=True)
         server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         server.bind((self.host, self.port))
@@ -380,9 +382,10 @@ class SlcanAdapter:
 
     def _client_loop(self, conn: socket.socket, session: SlcanSession) -> None:
         conn.settimeout(0.2)
+        kernel_stamps = _receive_timestamps(conn)
         while not self._stop.is_set() and self._client is conn:
             try:
-                data = conn.recv(4096)
+                data, received = _recv_stamped(conn, kernel_stamps)
             except TimeoutError:
                 continue
             except OSError:
@@ -390,6 +393,8 @@ class SlcanAdapter:
             if not data:
                 break
             replies, frames = session.feed(data)
+            for frame in frames:
+                frame.timestamp = received
             if replies and not self._send(conn, replies):
                 break
             bus = self._bus
@@ -426,3 +431,33 @@ class SlcanAdapter:
             line = self.backdoor.apply(format_frame(msg, stamp))
             if self._send(conn, line):
                 self.frames_to_client += 1
+
+
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux's value
+RECV_CHUNK = 32
+"""Bytes read at a time from the client: a few frames (a SYNC is 6 bytes), so that each
+frame's receive time is that of the bytes around it, not of a long backlog's end."""
+
+
+def _receive_timestamps(conn: socket.socket) -> bool:
+    """Ask the kernel to stamp received bytes (Linux ``SO_TIMESTAMPNS``); False where it
+    cannot (the read's own time is used then)."""
+    try:
+        conn.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+    except OSError:
+        return False
+    return True
+
+
+def _recv_stamped(conn: socket.socket, kernel: bool) -> tuple[bytes, float]:
+    """Up to :data:`RECV_CHUNK` bytes and the time (s, ``time.time()`` scale) they reached
+    this host: the kernel's stamp when there is one, else now. A starved simulator thread
+    reads late; the stamp is when the bytes came, as a bus device would see them."""
+    if not kernel:
+        return conn.recv(RECV_CHUNK), time.time()
+    data, ancillary, _, _ = conn.recvmsg(RECV_CHUNK, socket.CMSG_SPACE(16))
+    for level, kind, payload in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(payload) >= 16:
+            seconds, nanoseconds = struct.unpack("qq", payload[:16])
+            return data, seconds + nanoseconds * 1e-9
+    return data, time.time()

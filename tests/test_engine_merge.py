@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from rig.engine.merge import ChannelMerger
+from rig.engine.merge import ChannelMerger, ControlLog, ControlState
 from rig.engine.safety import (
     PlanRejected,
     TorqueLimitExceeded,
@@ -74,3 +74,24 @@ def test_preflight_names_each_bad_step() -> None:
     assert "step 3" in text and "step 4" in text and "no input motor" in text
     assert "no climate chamber" in text
     preflight(steps[:1], 10.0, has_input_motor=False, has_climate=False)
+
+
+def test_a_row_merged_late_gets_the_control_state_of_its_measurement() -> None:
+    """Issue 21 item 11: a busy PC merges rows late; each row still gets the setpoint, step
+    and sample window in force when it was measured, not when it was merged."""
+    log = ControlLog()
+    assert log.at(5.0) is None
+    log.set(1.0, ControlState(0.0, 1, 0))
+    log.set(2.0, ControlState(2.5, 2, 0))
+    log.set(2.0, ControlState(2.5, 2, 0))  # no change: nothing logged
+    log.set(3.0, ControlState(2.5, 3, 1))
+    log.set(2.9, ControlState(-1.0, 4, 0))  # a time that went back holds from the last one
+    assert log.at(0.5) == ControlState(0.0, 1, 0)  # before the log: its earliest state
+    assert log.at(1.99) == ControlState(0.0, 1, 0)
+    assert log.at(2.0) == ControlState(2.5, 2, 0)
+    assert log.at(2.95) == ControlState(2.5, 2, 0)
+    assert log.at(3.0) == ControlState(-1.0, 4, 0)
+    old = ControlLog(keep_s=10.0)
+    for k in range(100):
+        old.set(float(k), ControlState(float(k), k + 1, 0))
+    assert old.at(95.5).setpoint_Nm == 95.0 and old.at(0.0).setpoint_Nm >= 88.0

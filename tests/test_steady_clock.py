@@ -98,3 +98,22 @@ def test_sync_clock_stamps_each_pdo_with_the_send_time_of_its_sync():
     assert np.array_equal(stamps_arr[250:], answered[250:])  # exact after the first window
     assert np.abs(stamps_arr - answered).max() < 0.05
     assert (arrival - answered).max() > 0.035  # the arrivals were that late
+
+
+def test_a_stall_of_seconds_is_removed_too():
+    """Issue 21 item 11: a loaded CI machine read no transducer line in time for seconds (the
+    receive thread, or the transport behind it, stalled 0.3 s for 2.5 s). A floor over the
+    last second then moved by the whole stall and put torque 0.3 s out of step with the
+    twist; the drift-bounded floor moves by at most 0.4 ms per second of stall."""
+    t_true = 20.0 + PERIOD * np.arange(5000)  # 10 s of a 500 Hz stream
+    arrival = t_true + 0.0003
+    stalled = (t_true >= 24.0) & (t_true < 26.5)
+    arrival[stalled] += 0.3 + 0.01 * np.sin(np.arange(stalled.sum()))
+    arrival = np.maximum.accumulate(arrival)
+    clock = SteadyClock()
+    stamps = np.array([clock.stamp(t - 7.5, a) for t, a in zip(t_true, arrival, strict=True)])
+    error = stamps - t_true
+    assert np.all(stamps <= arrival + 1e-12)
+    assert error.min() >= 0.0003 - 1e-9 and error.max() < 0.0003 + 2 * 2e-4 * 2.5 + 1e-9, (
+        error.min(), error.max())
+    assert abs(error[-1] - 0.0003) < 1e-9  # back on the floor once lines come in time

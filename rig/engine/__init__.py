@@ -33,7 +33,7 @@ from drivers.errors import DeviceError, DeviceTimeout
 from rig.engine.events import EventHub, ProgressEvent
 from rig.engine.frozen import FrozenTwistWatch
 from rig.engine.io import RigIO
-from rig.engine.merge import ChannelMerger, MergedRow
+from rig.engine.merge import ChannelMerger, ControlLog, ControlState, MergedRow
 from rig.engine.record import OpenRun, RunOutcome
 from rig.engine.safety import check_command, check_measured, preflight
 from rig.errors import RigError
@@ -146,6 +146,9 @@ class Engine:
         self._setpoint = 0.0
         self._sample_window = 0
         self._step_index = 0
+        self._control = ControlLog()
+        """The setpoint, step and sample window over time: a row gets those of the instant it
+        was measured (rig.engine.merge.ControlLog)."""
         self._temperature: float | None = None
         self._crosscheck_max_diff = 0.0
         self._cross_pending: deque[tuple[float, float, float]] = deque(maxlen=200)
@@ -272,6 +275,7 @@ class Engine:
                 self.io.enable_drive()
             for i, step in enumerate(steps):
                 self._step_index = i
+                self._note_control()
                 self._check_stopping()
                 self._publish("step", message=describe(step))
                 self._execute(step)
@@ -495,11 +499,12 @@ class Engine:
             while recent and recent[0].t_mono_s < horizon:
                 recent.popleft()
             if self._open is not None:
-                self._open.append(rows, self._setpoint, self._step_index + 1,
-                                  self._sample_window)
+                for group, state in self._by_control_state(rows):
+                    self._open.append(group, state.setpoint_Nm, state.step,
+                                      state.sample_window)
             elif self._moved:
-                self._unrecorded.extend((r, self._setpoint, self._step_index + 1)
-                                        for r in rows)
+                for group, state in self._by_control_state(rows):
+                    self._unrecorded.extend((r, state.setpoint_Nm, state.step) for r in group)
             mismatch = self._compare_crosscheck()
             watch = self._frozen if self._open is not None else None
             frozen = None if watch is None else watch.update(
@@ -508,6 +513,24 @@ class Engine:
             self._trip(frozen)
         if mismatch is not None:
             self._trip(mismatch)
+
+    def _note_control(self) -> None:
+        """Log the control state in force from now (setpoint, step, sample window)."""
+        self._control.set(time.monotonic(), ControlState(
+            self._setpoint, self._step_index + 1, self._sample_window))
+
+    def _by_control_state(self, rows: list[MergedRow]
+                          ) -> list[tuple[list[MergedRow], ControlState]]:
+        """``rows`` in runs of one control state: the state when each row was measured."""
+        now = ControlState(self._setpoint, self._step_index + 1, self._sample_window)
+        out: list[tuple[list[MergedRow], ControlState]] = []
+        for row in rows:
+            state = self._control.at(row.t_mono_s) or now
+            if out and out[-1][1] == state:
+                out[-1][0].append(row)
+            else:
+                out.append(([row], state))
+        return out
 
     def _wait_first_rows(self) -> None:
         deadline = time.monotonic() + max(2.0, self.options.stale_timeout_s)
@@ -542,6 +565,7 @@ class Engine:
             self._check_stopping()
             self.io.set_torque(value)
             self._setpoint = value
+            self._note_control()
             if value != 0.0:
                 self._moved = True
 
@@ -570,10 +594,12 @@ class Engine:
                 self._sleep_until(time.monotonic() + s)
             case Sample(window_s=w):
                 self._sample_window = 1
+                self._note_control()
                 try:
                     self._sleep_until(time.monotonic() + w)
                 finally:
                     self._sample_window = 0
+                    self._note_control()
             case StepTwist():
                 self._step_twist(step)
             case ReadTorqueZero():
@@ -829,6 +855,7 @@ class Engine:
             self._check_stopping()
             self.io.safe_state()
             self._setpoint = 0.0
+            self._note_control()
         self.state = "paused"
         self._publish("paused", message=message)
         while True:
@@ -903,7 +930,7 @@ def acquisition_meta(io: RigIO) -> dict[str, Any]:
         if io.has_input_encoder else "not recorded",
         "temperature_C": "housing temperature, latest value (polled every ~1 s)"
         if io.has_climate else "not recorded",
-        "torque_command_Nm": "setpoint in force when the row was merged",
+        "torque_command_Nm": "setpoint in force when the row was measured",
         "step": "1-based index of the plan step being executed",
         "sample_window": "1 inside a Sample step (settled measurement point)",
         "cross_check": "Modbus torque sensor, polled, compared (result.crosscheck_max_diff_Nm)",

@@ -124,3 +124,44 @@ class ChannelMerger:
             self._torque.trim_before(rows[-1].t_mono_s)
             self._input.trim_before(rows[-1].t_mono_s)
         return rows
+
+
+@dataclass(frozen=True)
+class ControlState:
+    """What the engine was doing at an instant: torque setpoint (N*m), 1-based plan step,
+    and 1 inside a Sample step (else 0)."""
+
+    setpoint_Nm: float
+    step: int
+    sample_window: int
+
+
+class ControlLog:
+    """The engine's control state over time (host monotonic s), so that each merged row gets
+    the state in force when it was *measured*, not when a busy PC got round to merging it
+    (a row merged 0.5 s late was given the setpoint of 0.5 s later: the loop's branches,
+    split on the command, then began and ended at other samples; issue 21 item 11)."""
+
+    def __init__(self, keep_s: float = 60.0) -> None:
+        self.keep_s = float(keep_s)
+        self._t: deque[float] = deque()
+        self._states: deque[ControlState] = deque()
+
+    def set(self, t_s: float, state: ControlState) -> None:
+        """``state`` holds from ``t_s`` (host monotonic s; times never go back)."""
+        if self._states and self._states[-1] == state:
+            return
+        if self._t and t_s < self._t[-1]:
+            t_s = self._t[-1]
+        self._t.append(t_s)
+        self._states.append(state)
+        while len(self._t) > 1 and self._t[1] < t_s - self.keep_s:
+            self._t.popleft()
+            self._states.popleft()
+
+    def at(self, t_s: float) -> ControlState | None:
+        """The state in force at ``t_s`` (the earliest kept before the log; None if empty)."""
+        if not self._t:
+            return None
+        i = bisect.bisect_right(self._t, t_s) - 1
+        return self._states[max(i, 0)]

@@ -7,14 +7,20 @@ step on a loaded PC (the lag check then made a healthy run incomplete). The devi
 does not wait: the transducer stamps each line (device time, s), and the output encoder
 answers every SYNC of a steady SYNC producer (sample number x SYNC period).
 
-:class:`SteadyClock` maps device times onto the host clock as
-``t = t_dev + min(arrival - t_dev)`` over the last ``window_s`` of device time: a sample can
-arrive late, never early, so the smallest delay seen is the transport's and the rest is the
-PC's, which is removed. A constant lag (a device whose stream is behind) is kept: it is part
-of the smallest delay, and the analysis's lag check still sees it. The window follows a slow
-drift of the device clock against the host's (50 ppm is 50 us per second) and recovers from a
-lost sample or a step within ``window_s``. A device time that goes backwards (a device
-restart) or jumps further than ``reset_s`` from what the arrivals say starts afresh.
+:class:`SteadyClock` maps device times onto the host clock as ``t = t_dev + f`` with ``f``
+the transport's delay floor: a sample can arrive late, never early, so every sample's delay
+``d_i = arrival_i - t_dev_i`` bounds the floor from above, and with the two clocks drifting
+apart by at most ``drift`` (200 ppm: two crystals of +-100 ppm) the floor now is at most
+``d_i + drift * (t_dev - t_dev_i)``. The smallest of those bounds over the last ``window_s``
+(30 s) of device time is the estimate: the rest of a delay is the PC's, and is removed. A PC
+busy for seconds (no sample read in time for a whole second, which moved a 1 s minimum by
+the whole stall, 0.3-0.4 s on a loaded CI machine, and put torque and twist out of step)
+now shifts the times by at most ``2 * drift`` per second of stall (0.4 ms/s). A constant lag
+(a device whose stream is behind from the start) is kept: it is part of the floor, and the
+analysis's lag check and the cross-check sensor still see it. The bound follows a drift of
+the device clock against the host's and a lost sample or a step down of the delay at once;
+a device time that goes backwards (a device restart) or jumps further than ``reset_s`` from
+what the arrivals say starts afresh.
 
 An encoder that answers the SYNC this program produces sampled when that SYNC went out, and
 the SYNC producer (a thread of this program) can itself be late on a busy PC, so a grid of
@@ -39,33 +45,44 @@ class SteadyClock:
     """Host times (s) of samples from a device with a steady clock; see the module doc.
 
     ``modulo_s``: the device clock wraps at this many seconds (None: it never wraps).
+    ``drift``: the largest rate difference of the device clock against the host's (s/s).
     """
 
-    def __init__(self, window_s: float = 1.0, reset_s: float = 5.0,
-                 modulo_s: float | None = None) -> None:
+    def __init__(self, window_s: float = 30.0, reset_s: float = 5.0,
+                 modulo_s: float | None = None, drift: float = 2e-4) -> None:
         self.window_s = float(window_s)
         self.reset_s = float(reset_s)
         self.modulo_s = modulo_s
-        self._delays: deque[tuple[float, float]] = deque()  # (t_dev, arrival - t_dev)
+        self.drift = float(drift)
+        # (t_dev, d - drift * t_dev): the bound of each sample, without the part that grows
+        # with the time since (the same for every sample), smallest first
+        self._bounds: deque[tuple[float, float]] = deque()
         self._wraps = 0.0
         self._last_raw = -math.inf
         self.restarts = 0
+
+    def floor_s(self, t_dev_s: float) -> float:
+        """The transport's delay floor (s) at device time ``t_dev_s`` (unwrapped), as
+        bounded by the samples so far; inf before the first."""
+        q = self._bounds
+        return q[0][1] + self.drift * t_dev_s if q else math.inf
 
     def stamp(self, t_dev_s: float, arrival_s: float) -> float:
         """The host time (s) at which the device took the sample stamped ``t_dev_s`` (s,
         device clock) that arrived at ``arrival_s`` (s, host clock); never after arrival."""
         t_dev = self._unwrap(float(t_dev_s))
         delay = float(arrival_s) - t_dev
-        q = self._delays
-        if q and (t_dev < q[-1][0] or abs(delay - q[0][1]) > self.reset_s):
+        q = self._bounds
+        if q and (t_dev < q[-1][0] or abs(delay - self.floor_s(t_dev)) > self.reset_s):
             q.clear()  # the device clock went back or jumped: a restart, start afresh
             self.restarts += 1
-        while q and q[-1][1] >= delay:
+        key = delay - self.drift * t_dev
+        while q and q[-1][1] >= key:
             q.pop()
-        q.append((t_dev, delay))
+        q.append((t_dev, key))
         while q[0][0] < t_dev - self.window_s:
             q.popleft()
-        return t_dev + q[0][1]
+        return t_dev + self.floor_s(t_dev)
 
     def _unwrap(self, raw: float) -> float:
         m = self.modulo_s

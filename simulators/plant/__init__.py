@@ -12,9 +12,11 @@ the eccentric shaft: ``output_angle_deg = offset - input_angle_deg / ratio + twi
 
 from __future__ import annotations
 
+import bisect
 import copy
 import math
 import threading
+from collections import deque
 
 import numpy as np
 
@@ -25,6 +27,9 @@ from simulators.plant.geometry import ARCMIN_PER_RAD
 from simulators.plant.model import PlantModel
 
 _FAST_FORWARD_MIN_STEPS = 16
+HISTORY_S = 4.0
+"""How far back (s) :meth:`GearPlant.snapshot_at_monotonic` can look: a simulated device
+starved of the CPU this long still samples at the moment it was asked to."""
 
 
 class GearPlant:
@@ -54,6 +59,10 @@ class GearPlant:
         self._adc_lsb = (2.0 * meas.torque_adc_full_scale_Nm / 2.0 ** meas.torque_adc_bits
                          if meas.torque_adc_bits else 0.0)
         self._prev = self._current = self._state()
+        # (time s, state) of the grid points stepped, newest last: the past a device that
+        # samples on a trigger (an encoder on SYNC) reads when it was starved of the CPU
+        self._history: deque[tuple[float, tuple[float, ...]]] = deque(
+            [(0.0, self._current)], maxlen=max(16, int(HISTORY_S / self._model.dt)))
 
     # -- time ------------------------------------------------------------------------------
     def _state(self) -> tuple[float, ...]:
@@ -76,6 +85,7 @@ class GearPlant:
                 self._model.step(dt)
                 self._n += 1
             self._current = self._state()
+            self._history.append((self._n * dt, self._current))
         return now
 
     def _interpolated(self, now: float) -> tuple[float, ...]:
@@ -91,25 +101,55 @@ class GearPlant:
         """Advance to the clock's time and return the sensors' view (noise included)."""
         with self._lock:
             now = self._advance()
-            out_deg, in_deg, true_Nm, temp, sensed_Nm = self._interpolated(now)
-            m = self._model
-            torque = m.sensor_torque_Nm(sensed_Nm) + self._torque_zero(now)
-            if self._twist_noise_deg or self._torque_noise:
-                noise_twist, noise_torque = self._rng.standard_normal(2).tolist()
-                out_deg += noise_twist * self._twist_noise_deg
-                torque += noise_torque * self._torque_noise
-            if self._adc_lsb:
-                torque = round(torque / self._adc_lsb) * self._adc_lsb
-            return PlantSnapshot(
-                t_s=now,
-                output_angle_deg=out_deg,
-                input_angle_deg=in_deg,
-                torque_Nm=torque,
-                true_torque_Nm=true_Nm,
-                temperature_C=temp,
-                torque_command_Nm=m.command_Nm,
-                drive_enabled=m.enabled,
-            )
+            return self._sensed(now, self._interpolated(now))
+
+    def snapshot_at_monotonic(self, t_mono_s: float) -> PlantSnapshot:
+        """The sensors' view at host ``time.monotonic()`` time ``t_mono_s`` (s), at most
+        :data:`HISTORY_S` back (and never after now): what a device that samples on a
+        trigger (an encoder on the SYNC it received at ``t_mono_s``) measured, however late
+        its thread got the CPU. With a clock that is not the host's (a ManualClock): now."""
+        at_monotonic = getattr(self.clock, "at_monotonic", None)
+        if at_monotonic is None:
+            return self.snapshot()
+        t = at_monotonic(float(t_mono_s))
+        with self._lock:
+            now = self._advance()
+            if not t < now:
+                return self._sensed(now, self._interpolated(now))
+            history = self._history
+            i = bisect.bisect_right(history, t, key=lambda h: h[0])
+            if i == 0:  # older than the history: its oldest point
+                t, state = history[0]
+            elif i == len(history):
+                state = history[-1][1]
+            else:
+                (t0, s0), (t1, s1) = history[i - 1], history[i]
+                w = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
+                state = tuple(a + w * (b - a) for a, b in zip(s0, s1, strict=True))
+            return self._sensed(t, state)
+
+    def _sensed(self, now: float, state: tuple[float, ...]) -> PlantSnapshot:
+        """The sensors' view (noise, zero error, ADC grid) of the model ``state`` at time
+        ``now`` (s). Called holding the lock."""
+        out_deg, in_deg, true_Nm, temp, sensed_Nm = state
+        m = self._model
+        torque = m.sensor_torque_Nm(sensed_Nm) + self._torque_zero(now)
+        if self._twist_noise_deg or self._torque_noise:
+            noise_twist, noise_torque = self._rng.standard_normal(2).tolist()
+            out_deg += noise_twist * self._twist_noise_deg
+            torque += noise_torque * self._torque_noise
+        if self._adc_lsb:
+            torque = round(torque / self._adc_lsb) * self._adc_lsb
+        return PlantSnapshot(
+            t_s=now,
+            output_angle_deg=out_deg,
+            input_angle_deg=in_deg,
+            torque_Nm=torque,
+            true_torque_Nm=true_Nm,
+            temperature_C=temp,
+            torque_command_Nm=m.command_Nm,
+            drive_enabled=m.enabled,
+        )
 
     def command_torque(self, torque_Nm: float) -> None:
         """Set the drive's torque setpoint (N*m); the drive clips it to its torque limit."""

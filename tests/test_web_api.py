@@ -291,17 +291,17 @@ def test_campaign_files_by_name_or_upload_never_a_path(client: TestClient):
     for bad in ("..%2F..%2Fpyproject", "%2Fetc%2Fpasswd", "seed000-pair1.toml", "nope"):
         assert client.get(f"/api/campaign-files/{bad}").status_code in (404, 422), bad
     text = (REPO / "examples" / "campaigns" / "seed000-pair3.toml").read_text()
-    up = client.post("/api/campaign-files/parse", json={"file_name": "../x/p3.toml",
+    up = client.post("/api/campaign-upload", json={"file_name": "../x/p3.toml",
                                                         "text": text}).json()
     assert up["source"] == "p3.toml" and up["request"]["unit"]["center_distance_mm"] > 2.5
     secret = text.replace("../../rig/examples/units/seed000-pair3.json", "/etc/passwd")
-    up = client.post("/api/campaign-files/parse", json={"file_name": "s.toml", "text": secret})
+    up = client.post("/api/campaign-upload", json={"file_name": "s.toml", "text": secret})
     assert up.status_code == 200 and up.json()["request"]["unit"] is None
     assert "not read from an uploaded file" in " ".join(up.json()["notes"])
-    bad = client.post("/api/campaign-files/parse", json={"file_name": "b.toml",
+    bad = client.post("/api/campaign-upload", json={"file_name": "b.toml",
                                                          "text": "name = 'b'\n[plan\n"})
     assert bad.status_code == 400 and bad.json()["detail"].startswith("b.toml:2:")
-    bad = client.post("/api/campaign-files/parse", json={
+    bad = client.post("/api/campaign-upload", json={
         "file_name": "c.toml", "text": text.replace("rated_torque_Nm = 10.0",
                                                     "rated_torque_Nm = -1")})
     assert bad.status_code == 400

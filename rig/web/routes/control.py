@@ -195,7 +195,7 @@ def campaign_file(name: Annotated[str, PathParam(pattern=NAME_PATTERN, max_lengt
     return setup
 
 
-@router.post("/campaign-files/parse", response_model=CampaignSetup,
+@router.post("/campaign-upload", response_model=CampaignSetup,
              responses={**BAD_FILE, **BAD_BODY},
              summary="A campaign file the operator uploads, as the page's set-up (nothing is "
                      "stored or run)")

@@ -1027,7 +1027,7 @@ function wire() {
   $("campaign-upload").addEventListener("change", (e) => {
     const file = e.target.files && e.target.files[0];
     if (file) run("campaign file", async () => fillFromCampaign(await api("POST",
-      "/api/campaign-files/parse", { file_name: file.name, text: await file.text() })));
+      "/api/campaign-upload", { file_name: file.name, text: await file.text() })));
   });
   $("pause").addEventListener("click", () => run("pause", () => api("POST", "/api/control/pause")));
   $("resume").addEventListener("click", () => run("resume", () => api("POST", "/api/control/resume")));

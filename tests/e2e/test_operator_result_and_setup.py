@@ -152,14 +152,14 @@ def check_history_links(page, served, *, all_clicks: bool) -> None:
         for text in ("html", "json"):  # a download attribute: the download starts (a
             with page.expect_download(timeout=60_000):  # one-position campaign's diagnosis
                 camp.get_by_role("link", name=text, exact=True).click()  # is a 409)
+    if all_clicks:  # (target _blank: a page of its own)
+        with page.context.expect_page(timeout=30_000) as popup:
+            camp.get_by_role("link", name="diagnosis", exact=True).click()
+        popup.value.close()
     for row, text, path in worker:
         with page.expect_request(lambda r, path=path: r.url.endswith(path), timeout=10_000):
             row.get_by_role("link", name=text, exact=True).click()
         page.evaluate("window.stop()")  # the page stays: the next link is clicked on it
-    if all_clicks:
-        with page.context.expect_page(timeout=30_000) as popup:
-            camp.get_by_role("link", name="diagnosis", exact=True).click()
-        popup.value.close()
 
 
 def check_stored_numbers(page, served) -> None:

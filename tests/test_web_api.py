@@ -276,3 +276,34 @@ def test_faults_in_plain_words_keep_the_device_message():
         assert title in fault.title, (reason, fault)
         assert fault.detail == reason and fault.action  # the device's own words are kept
     assert explain(None) is None
+
+
+def test_campaign_files_by_name_or_upload_never_a_path(client: TestClient):
+    """Issue 21 item 17: the rig's example campaigns by name; an upload parsed from its text
+    (its unit file never opened, unless it names an example unit); names that try a path,
+    unknown names and broken files refused in one line."""
+    names = [c["name"] for c in client.get("/api/campaign-files").json()]
+    assert "seed000-pair1" in names
+    setup = client.get("/api/campaign-files/seed000-pair1").json()
+    assert setup["request"]["axes"]["positions_deg"] == [0.0, 90.0, 180.0, 270.0]
+    assert setup["request"]["limits"]["lost_motion_arcmin_max"] == 3.0
+    assert setup["request"]["unit"]["z_internal"] == UNIT["z_internal"]
+    for bad in ("..%2F..%2Fpyproject", "%2Fetc%2Fpasswd", "seed000-pair1.toml", "nope"):
+        assert client.get(f"/api/campaign-files/{bad}").status_code in (404, 422), bad
+    text = (REPO / "examples" / "campaigns" / "seed000-pair3.toml").read_text()
+    up = client.post("/api/campaign-upload", json={"file_name": "../x/p3.toml",
+                                                        "text": text}).json()
+    assert up["source"] == "p3.toml" and up["request"]["unit"]["center_distance_mm"] > 2.5
+    secret = text.replace("../../rig/examples/units/seed000-pair3.json", "/etc/passwd")
+    up = client.post("/api/campaign-upload", json={"file_name": "s.toml", "text": secret})
+    assert up.status_code == 200 and up.json()["request"]["unit"] is None
+    assert "not read from an uploaded file" in " ".join(up.json()["notes"])
+    bad = client.post("/api/campaign-upload", json={"file_name": "b.toml",
+                                                         "text": "name = 'b'\n[plan\n"})
+    assert bad.status_code == 400 and bad.json()["detail"].startswith("b.toml:2:")
+    bad = client.post("/api/campaign-upload", json={
+        "file_name": "c.toml", "text": text.replace("rated_torque_Nm = 10.0",
+                                                    "rated_torque_Nm = -1")})
+    assert bad.status_code == 400
+    assert bad.json()["detail"] == "c.toml: plan.rated_torque_Nm: Input should be greater " \
+                                   "than 0 (got -1)"

@@ -186,6 +186,8 @@ class RigController:
         self._fault_reason: str | None = None
         self._last_result: dict[str, Any] | None = None
         self._devices: list[dict[str, Any]] = []
+        self._idle_rows: list[dict[str, Any]] = []
+        """The device rows of the last pass while idle (kept during a measurement)."""
         self._live: dict[str, Any] = {}
         self._safe: bool | None = None
         self._lock_confirmed = False
@@ -305,10 +307,28 @@ class RigController:
                 rows.append({"name": "loading drive", "connected": False, "ok": False,
                              "detail": str(exc)})
         self._twist_from_angle(live, busy)
+        if busy:
+            rows = self._with_idle_rows(rows)
+        else:
+            self._idle_rows = json_safe(rows)
         with self._lock:
             self._devices = json_safe(rows)
             self._live = json_safe(live)
         self.hub.add_event({"type": "status"})
+
+    def _with_idle_rows(self, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        """The device rows during a measurement: every device of the last idle pass keeps its
+        row, in the same order (those the measurement owns are not polled meanwhile: said so,
+        with their health as last read), the rows read now replacing their idle ones."""
+        fresh = {r["name"]: r for r in rows}
+        out = []
+        for old in self._idle_rows:
+            new = fresh.pop(old["name"], None)
+            out.append(new if new is not None else {
+                **old, "heartbeat_age_s": None,
+                "detail": "in use by the measurement (not polled); before it: "
+                          + str(old.get("detail", ""))})
+        return out + list(fresh.values())
 
     def _twist_from_angle(self, live: dict[str, Any], busy: bool) -> None:
         """``live``: the raw output angle (``output_arcmin``) becomes ``output_angle_deg`` and

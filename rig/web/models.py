@@ -407,3 +407,32 @@ class OutcomeWord(BaseModel):
     """OK, NOT OK, INCOMPLETE or NO LIMITS."""
     meaning: str
     """What it means, in a few words."""
+
+
+class CampaignFileName(BaseModel):
+    """An example campaign of the rig (``examples/campaigns``), by name."""
+
+    name: str
+    description: str
+
+
+class CampaignUpload(BaseModel):
+    """A campaign file the operator chose: its name (shown in messages, never a path) and
+    its TOML text (at most 1 MB)."""
+
+    model_config = _strict
+
+    file_name: str = Field("uploaded file", max_length=255)
+    text: str = Field(max_length=1024 * 1024)
+
+
+class CampaignSetup(BaseModel):
+    """A campaign file as the page's set-up: ``request`` is a :class:`RunRequest` body (its
+    ``unit`` None when the file gives no complete unit); ``notes`` say what the page does not
+    take over from the file."""
+
+    source: str
+    name: str
+    description: str
+    request: dict[str, Any]
+    notes: list[str]

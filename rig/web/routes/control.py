@@ -11,14 +11,21 @@ import asyncio
 import json
 from concurrent.futures import ThreadPoolExecutor
 from importlib import resources
-from typing import Any
+from typing import Annotated, Any
 
 from fastapi import APIRouter, HTTPException, Request
+from fastapi import Path as PathParam
 
+from rig.campaign import CampaignError
 from rig.errors import RigError
+from rig.web import campaign_files
 from rig.web.auth import Operator, is_operator
 from rig.web.controller import ControlError, RigController, compute_preview
 from rig.web.models import (
+    NAME_PATTERN,
+    CampaignFileName,
+    CampaignSetup,
+    CampaignUpload,
     ErrorBody,
     InputLockRequest,
     Message,
@@ -161,3 +168,39 @@ def units() -> list[dict[str, Any]]:
             if data.get("kind", "internal_involute") == "internal_involute":
                 out.append({"name": item.name[:-5], "unit": data})
     return out
+
+
+BAD_FILE = {400: {"model": ErrorBody, "description": "Not a valid campaign file (the message "
+                                                    "names the file, line and column or key)."}}
+
+
+@router.get("/campaign-files", response_model=list[CampaignFileName],
+            summary="The rig's example campaigns (examples/campaigns), by name")
+def campaign_file_names() -> list[dict[str, str]]:
+    return campaign_files.example_list()
+
+
+@router.get("/campaign-files/{name}", response_model=CampaignSetup,
+            responses={404: {"model": ErrorBody, "description": "No such example campaign."},
+                       **BAD_FILE},
+            summary="An example campaign as the page's set-up (looked up by name, never a path)")
+def campaign_file(name: Annotated[str, PathParam(pattern=NAME_PATTERN, max_length=80)]
+                  ) -> dict[str, Any]:
+    try:
+        setup = campaign_files.example_setup(name)
+    except CampaignError as exc:
+        raise HTTPException(400, str(exc)) from exc
+    if setup is None:
+        raise HTTPException(404, f"no example campaign named {name!r}")
+    return setup
+
+
+@router.post("/campaign-upload", response_model=CampaignSetup,
+             responses={**BAD_FILE, **BAD_BODY},
+             summary="A campaign file the operator uploads, as the page's set-up (nothing is "
+                     "stored or run)")
+def campaign_file_upload(body: CampaignUpload) -> dict[str, Any]:
+    try:
+        return campaign_files.upload_setup(body.file_name, body.text)
+    except CampaignError as exc:
+        raise HTTPException(400, str(exc)) from exc

@@ -161,9 +161,16 @@ function addRows(msg) {
   } else scheduleDraw();
 }
 
+// Quantities that cannot be below zero: a negative figure is noise or a bad loop, never shown
+// as a measurement (issue 21 item 15)
+const NON_NEGATIVE = new Set(["lost_motion_arcmin", "loop_area_J"]);
+const BELOW_ZERO = " below zero: not a measurement";
+const measurable = (v) => v !== null && v !== undefined && isFinite(v) && Number(v) >= 0;
+
 function withU(m, key, digits = 3) {   // ["4.304", " ± 0.001"] (the uncertainty when known)
   const v = m ? m[key] : null;
   if (v === null || v === undefined || !isFinite(v)) return ["–", ""];
+  if (NON_NEGATIVE.has(key) && v < 0) return ["–", BELOW_ZERO];
   const u = m.uncertainty ? m.uncertainty[key] : null;
   return [fmt(v, digits), u !== null && u !== undefined && isFinite(u) ? " ± " + fmt(u, digits) : ""];
 }
@@ -174,15 +181,30 @@ function setupNumber(name, fallback) {
   return isFinite(v) && v > 0 ? v : fallback;
 }
 
-function showMetrics(m, model) {
+// What the metrics panel shows, and its title: the numbers of that run or campaign only
+const shown = { key: null };
+function titleMetrics(text) { $("metrics-title").textContent = text; }
+function clearResult(key, title) {
+  shown.key = key;
+  showMetrics(null, live.model);
+  $("m-verdict").innerHTML = '<span class="muted">–</span>';
+  $("result").textContent = "";
+  titleMetrics(title);
+}
+
+function showMetrics(m, model, partial = false) {
   showU("m-lost", withU(m, "lost_motion_arcmin"));
   showU("m-backlash", withU(m, "backlash_arcmin"));
   showU("m-stiffness", withU(m, "stiffness_Nm_per_arcmin", 2));
-  const mJ = m && m.loop_area_J !== undefined && m.loop_area_J !== null ? {
+  for (const el of $("metrics").querySelectorAll(".num"))
+    el.classList.toggle("partial", partial && !["m-model", "m-batch"].includes(el.id));
+  // a loop not closed yet has no area: the figure of half a loop is not shown
+  const mJ = partial ? null : m && m.loop_area_J !== undefined && m.loop_area_J !== null ? {
     loop_area_J: 1000 * m.loop_area_J,
     uncertainty: { loop_area_J: m.uncertainty && m.uncertainty.loop_area_J !== undefined
       && m.uncertainty.loop_area_J !== null ? 1000 * m.uncertainty.loop_area_J : null } } : null;
   showU("m-hysteresis", withU(mJ, "loop_area_J", 3));
+  if (partial) $("m-hysteresis-u").textContent = " (the loop is not closed yet)";
   const mm = (m && m.model) || model;
   $("m-model").textContent = fmt(mm && mm.lost_motion_arcmin);
   const band = live.batch && live.batch.band_95_arcmin;
@@ -222,7 +244,7 @@ function showCampaign(title, summary) {
   if (!pts.length) return;
   $("campaign-title").textContent = title;
   const x = pts.map((p) => p.input_angle_deg);
-  const y = pts.map((p) => p.lost_motion_arcmin);
+  const y = pts.map((p) => (measurable(p.lost_motion_arcmin) ? p.lost_motion_arcmin : null));
   // the runout signature (seed 000 eq. 4): mean + amplitude cos(theta - phase), over one turn
   const sig = summary.runout_signature;
   const xs = [], fit = [], meas = [];
@@ -311,7 +333,9 @@ function renderStatus(s) {
     title: "A fault is latched: nothing can start",
     action: "Remove its cause, then press Reset faults.",
     detail: "" } : null);
+  const faultWasHidden = $("fault").hidden;
   $("fault").hidden = !f;
+  if (f && faultWasHidden) reveal($("fault"));  // a fault comes into view, wherever one is
   if (f) {
     $("fault-title").textContent = f.title;
     const listed = latched.map((x) => x.device + ": " + x.detail).join("\n");
@@ -338,6 +362,10 @@ function renderStatus(s) {
   $("abort").disabled = !op || !busy;
   $("tare").disabled = !op || busy || !connected;
   $("lock").disabled = !op || busy || !connected;
+  // while measuring, the panel shows the run measured now or nothing (never the last result)
+  const nowRun = (s.current && s.current.run_id) || (p && p.run_id) || null;
+  if (busy && shown.key !== "live:" + nowRun)
+    clearResult("live:" + nowRun, nowRun ? `run ${nowRun}: measuring` : "measurement starting");
   // a stored run drawn from the history keeps its own numbers beside it
   if (s.last_result && !busy && !live.stored) renderResult(s.last_result);
 }
@@ -405,7 +433,7 @@ function renderCampaignNow(cur, busy) {
   const done = cur.finished || [];
   if (done.length) {
     html += "<ol class=\"finished\">" + done.map((r) => `<li>${esc(r.label || r.run_id)}: ` +
-      (r.lost_motion_arcmin !== null && r.lost_motion_arcmin !== undefined
+      (measurable(r.lost_motion_arcmin)
         ? `lost motion ${fmt(r.lost_motion_arcmin)}${r.lost_motion_u_arcmin ? " ± " + fmt(r.lost_motion_u_arcmin) : ""} arcmin`
         : esc((r.status || "") + (r.reason ? " (" + r.reason + ")" : ""))) +
       ` ${outcomeHtml(r.outcome)}</li>`).join("") + "</ol>";
@@ -415,7 +443,7 @@ function renderCampaignNow(cur, busy) {
   if (cur.kind === "campaign" && done.length) {   // the positions so far, on the plot
     const byPos = {};
     for (const r of done) {
-      if (r.lost_motion_arcmin === null || r.input_angle_deg === null) continue;
+      if (!measurable(r.lost_motion_arcmin) || r.input_angle_deg === null) continue;
       (byPos[r.input_angle_deg] = byPos[r.input_angle_deg] || []).push(r.lost_motion_arcmin);
     }
     const pts = Object.keys(byPos).map(Number).sort((a, b) => a - b).map((a) => ({
@@ -447,7 +475,8 @@ function renderResult(r) {
   if (r.failures && r.failures.length) html += "<br>" + r.failures.map(esc).join("<br>");
   if (r.lost_motion_by_position && r.lost_motion_by_position.length) {
     html += "<br>lost motion against position: " + r.lost_motion_by_position
-      .map((x) => `${fmt(x.input_angle_deg, 0)}°: ${fmt(x.lost_motion_arcmin)}`).join(", ");
+      .map((x) => `${fmt(x.input_angle_deg, 0)}°: ${measurable(x.lost_motion_arcmin)
+        ? fmt(x.lost_motion_arcmin) : "–"}`).join(", ");
   }
   if (r.batch) live.batch = r.batch;
   const band = r.batch && r.batch.band_95_arcmin;
@@ -456,9 +485,33 @@ function renderResult(r) {
       `${fmt(band[0])} .. ${fmt(band[1])} arcmin`;
   }
   el.innerHTML = html;
-  if (r.kind === "campaign") showCampaign(r.campaign_id || "", r);
-  const last = r.runs && r.runs.length ? r.runs[r.runs.length - 1] : null;
-  if (last && last.status === "completed") showMetrics(last, null);
+  const runs = r.runs || [];
+  if (r.kind === "campaign") {
+    showCampaign(r.campaign_id || "", r);
+    const worst = worstRun(runs);
+    showMetrics(worst, null);
+    titleMetrics(worst ? `campaign ${r.campaign_id || ""} ${r.status}: worst run ` +
+      `${worst.label || worst.run_id} (the largest lost motion of ${runs.length} run(s))`
+      : `campaign ${r.campaign_id || ""} ${r.status}: no run measured`);
+  } else {
+    const last = runs.length ? runs[runs.length - 1] : null;
+    showMetrics(last && last.status === "completed" ? last : null, null);
+    titleMetrics(last ? `run ${last.label || last.run_id} ${last.status || r.status}` : `run ${r.status}`);
+  }
+  shown.key = "result";
+  $("m-verdict").innerHTML = verdict;   // the verdict of what the title names
+}
+
+// The run of a campaign with the largest lost motion (completed runs; a figure below zero is
+// not a measurement); each run as the result or the history lists it
+function worstRun(runs) {
+  let worst = null;
+  for (const r of runs) {
+    const v = r.lost_motion_arcmin;
+    if ((r.status && r.status !== "completed") || !measurable(v)) continue;
+    if (!worst || v > worst.lost_motion_arcmin) worst = r;
+  }
+  return worst;
 }
 
 // Text as HTML, safe in element content and in quoted attribute values alike: & < > " '
@@ -484,16 +537,24 @@ function connectLive() {
   es.addEventListener("run_begin", (e) => {
     const m = JSON.parse(e.data);
     live.T = []; live.W = []; live.runId = m.run_id; live.stored = null;
-    showMetrics(null, live.model);
+    clearResult("live:" + m.run_id, `run ${m.run_id}: measuring`);
     scheduleDraw();
   });
   es.addEventListener("metrics", (e) => {
     const m = JSON.parse(e.data);
-    if (m.run_id === live.runId) showMetrics(m.metrics, live.model);
+    if (m.run_id !== live.runId || shown.key !== "live:" + m.run_id || live.finished === m.run_id) return;
+    showMetrics(m.metrics, live.model, m.partial !== false);
+    titleMetrics(`run ${m.run_id}: measuring, partial figures (the loop is not closed yet)`);
+    window.rigStats.partial = (window.rigStats.partial || 0) + 1;
   });
   es.addEventListener("progress", (e) => {
     const ev = JSON.parse(e.data);
-    if (ev.kind === "run_finished" && ev.data) showMetrics(ev.data, live.model);
+    if (ev.kind === "run_finished" && ev.data && shown.key === "live:" + ev.run_id) {
+      live.finished = ev.run_id;
+      showMetrics(ev.data, live.model);
+      $("m-verdict").innerHTML = outcomeHtml(ev.data.outcome);
+      titleMetrics(`run ${ev.run_label || ev.run_id} ${ev.data.status || "finished"}`);
+    }
     refreshStatus();
   });
   es.addEventListener("state", () => { refreshStatus(); refreshHistory(); });
@@ -545,7 +606,15 @@ function request() {
     body.calibration_override = f.override_reason.value.trim();
   if (kind === "campaign") {
     body.name = f.name.value || "web";
-    body.axes = { positions_deg: list(f.positions_deg.value) || [0], repeats: num(f.repeats.value) || 1 };
+    body.axes = { positions_deg: list(f.positions_deg.value) || [0], repeats: num(f.repeats.value) || 1,
+      amplitudes_pct: [body.plan.amplitude_pct] };
+    const fe = live.fileExtra;   // a campaign file's settings the form has no field for
+    if (fe) {
+      Object.assign(body.plan, fe.plan);
+      Object.assign(body.axes, fe.axes);
+      Object.assign(body.limits, fe.limits);
+      body.profile = fe.profile;
+    }
   }
   return body;
 }
@@ -574,6 +643,80 @@ async function previewPlan() {
   showMetrics(null, live.model);
   scheduleDraw();
   return p;
+}
+
+// Scroll so that el's top sits just under the sticky header, unless it is in view already
+// (a phone: the loop is far above the Start button, the fault box far above the history)
+function reveal(el) {
+  const header = document.querySelector("header").getBoundingClientRect().bottom;
+  const r = el.getBoundingClientRect();
+  if (r.top >= header && r.top < innerHeight - Math.min(r.height, innerHeight / 2)) return;
+  window.scrollTo({ top: Math.max(0, scrollY + r.top - header - 8), behavior: "instant" });
+}
+
+// ---------------------------------------------------------------- a campaign file as the set-up
+const PLAN_FIELDS = ["rated_torque_Nm", "mode", "rate_Nm_per_s", "cycles", "pre_cycles",
+  "steps_per_quarter", "dwell_s", "zero_band_Nm", "zero_rate_Nm_per_s"];
+const shownList = (v) => (Array.isArray(v) ? v.join(", ") : "");
+
+async function loadCampaignNames() {
+  try {
+    const names = await api("GET", "/api/campaign-files");
+    const sel = $("campaign-example");
+    for (const c of names) {
+      const o = document.createElement("option");
+      o.value = c.name; o.textContent = c.name; o.title = c.description;
+      sel.appendChild(o);
+    }
+  } catch (e) { notice("campaign files: " + e.message, true); }
+}
+
+// The set-up of a campaign file (GET /api/campaign-files/NAME or an upload): the form's fields,
+// and what the form has no field for kept with it (sent with the next start)
+function fillFromCampaign(c) {
+  const q = c.request, f = $("setup").elements;
+  f.kind.value = "campaign";
+  $("setup").className = "campaign";
+  f.name.value = q.name;
+  if (q.unit) {
+    fillUnit(q.unit);
+    if (q.unit.serial) f.serial.value = q.unit.serial;
+  }
+  for (const k of PLAN_FIELDS) {
+    const v = q.plan[k];
+    f[k].value = v === null || v === undefined ? "" : String(v);
+  }
+  f.extra_levels_pct.value = shownList(q.plan.extra_levels_pct);
+  const amps = q.axes.amplitudes_pct || [q.plan.amplitude_pct];
+  f.amplitude_pct.value = String(amps.length === 1 ? amps[0] : q.plan.amplitude_pct);
+  f.positions_deg.value = shownList(q.axes.positions_deg);
+  f.repeats.value = String(q.axes.repeats);
+  const lm = q.limits.lost_motion_arcmin_max;
+  f.lost_motion_arcmin_max.value = lm === null || lm === undefined ? "" : String(lm);
+  f.torque_limit_Nm.value = q.torque_limit_Nm === null ? "" : String(q.torque_limit_Nm);
+  if (q.operator) f.operator.value = q.operator;
+  if (q.calibration_override) { f.override.checked = true; f.override_reason.value = q.calibration_override; }
+  const extra = { plan: {}, axes: {}, limits: {}, profile: q.profile };
+  for (const k of ["twist_step_arcmin", "settle_rate_arcmin_per_s", "settle_hold_s", "settle_timeout_s", "sample_s"])
+    if (q.plan[k] !== undefined) extra.plan[k] = q.plan[k];
+  const more = [];
+  if (amps.length > 1) { extra.axes.amplitudes_pct = amps; more.push(`amplitudes ${amps.join(", ")} %`); }
+  if ((q.axes.temperatures_C || []).length) {
+    extra.axes.temperatures_C = q.axes.temperatures_C;
+    more.push(`housing temperatures ${q.axes.temperatures_C.join(", ")} °C`);
+  }
+  for (const k of ["backlash_arcmin_max", "stiffness_Nm_per_arcmin_min"])
+    if (q.limits[k] !== null && q.limits[k] !== undefined) { extra.limits[k] = q.limits[k]; more.push(`${k} ${q.limits[k]}`); }
+  if (q.profile !== "nabtesco") more.push(`profile ${q.profile}`);
+  live.fileExtra = extra;
+  const lines = [`opened ${c.source}` + (c.description ? `: ${c.description}` : "")];
+  if (more.length) lines.push("also from the file (no field here; sent with Start): " + more.join("; "));
+  if (!q.unit) lines.push("the file gives no complete unit: the unit fields are unchanged");
+  $("campaign-file-note").textContent = lines.concat(c.notes).join(" · ");
+  validateForm();
+  saveSetup();
+  previewPlan().catch((e) => notice("preview: " + e.message, true));
+  return { message: `campaign file ${c.source} opened: check the set-up, then Start` };
 }
 
 function operatorName() {
@@ -792,7 +935,8 @@ async function refreshHistory() {
       const causes = c.outcome === "not_ok" || c.outcome === "incomplete" ? (s.failures || []).slice(0, 3) : [];
       const verdict = outcomeHtml(c.outcome) + (causes.length ? " " + esc(causes.join("; ")) : "");
       const byPos = (s.lost_motion_by_position || [])
-        .map((x) => `${fmt(x.input_angle_deg, 0)}°: ${fmt(x.lost_motion_arcmin)}`).join(", ");
+        .map((x) => `${fmt(x.input_angle_deg, 0)}°: ${measurable(x.lost_motion_arcmin)
+          ? fmt(x.lost_motion_arcmin) : "–"}`).join(", ");
       const tr = document.createElement("tr");
       tr.innerHTML = `<td><a href="#" data-campaign="${esc(c.campaign_id)}">${esc(c.campaign_id)}</a></td><td>${esc(c.status)}</td><td class="verdict">${verdict}</td>` +
         `<td>${byPos}</td><td><a href="/api/campaigns/${id}/diagnosis.html" target="_blank">diagnosis</a>` +
@@ -810,19 +954,48 @@ function lostMotionText(metrics) {
   const m = metrics || {};
   const v = m.lost_motion_arcmin;
   if (v === null || v === undefined) return "–";
+  if (!measurable(v)) return "–" + BELOW_ZERO;
   const u = (m.uncertainty || {}).lost_motion_arcmin;
   return fmt(v) + (u !== null && u !== undefined && isFinite(u) ? " ± " + fmt(u) : "");
 }
 
-async function showStoredRun(runId) {
+// ctx (a campaign's worst run): {title, outcome, result} of the campaign instead of the run's
+async function showStoredRun(runId, ctx) {
   const d = await api("GET", `/api/runs/${encodeURIComponent(runId)}/loop?max_points=5000`);
   live.stored = { T: d.torque_Nm, W: d.twist_arcmin, M: d.model_twist_arcmin };
   live.bandNm = d.band_Nm;
   $("loop-title").textContent = "stored: " + runId + (d.analysis_error ? " (" + d.analysis_error + ")" : "");
   showMetrics(d.metrics, null);
-  $("m-verdict").innerHTML = outcomeHtml(d.outcome);
-  $("result").innerHTML = `stored run ${esc(runId)} ${esc(d.status || "")}: ${outcomeHtml(d.outcome)}`;
+  shown.key = "stored";
+  titleMetrics(ctx ? ctx.title : `stored run ${runId} ${d.status || ""}`);
+  $("m-verdict").innerHTML = outcomeHtml(ctx ? ctx.outcome : d.outcome);
+  $("result").innerHTML = ctx ? ctx.result
+    : `stored run ${esc(runId)} ${esc(d.status || "")}: ${outcomeHtml(d.outcome)}`;
   scheduleDraw();
+}
+
+// A campaign from History: its verdict, its plot, and its worst run's loop and figures
+async function showStoredCampaign(campaignId) {
+  const c = await api("GET", `/api/campaigns/${encodeURIComponent(campaignId)}`);
+  showCampaign(c.campaign_id, c.summary);
+  const s = c.summary || {};
+  const causes = (s.failures || []).slice(0, 5);
+  const result = `campaign ${esc(c.campaign_id)} ${esc(c.status)}: ${outcomeHtml(c.outcome)}` +
+    (causes.length ? "<br>" + causes.map(esc).join("<br>") : "");
+  const runs = (c.runs || []).map((r) => ({ ...(r.metrics || {}), run_id: r.run_id, status: r.status }));
+  const worst = worstRun(runs);
+  if (worst) {
+    await showStoredRun(worst.run_id, { outcome: c.outcome, result,
+      title: `campaign ${c.campaign_id} ${c.status}: worst run ${worst.run_id} ` +
+        `(the largest lost motion of ${runs.length} run(s))` });
+  } else {
+    live.stored = { T: [], W: [], M: null };
+    clearResult("stored", `campaign ${c.campaign_id} ${c.status}: no run measured`);
+    $("m-verdict").innerHTML = outcomeHtml(c.outcome);
+    $("result").innerHTML = result;
+    $("loop-title").textContent = "stored: " + c.campaign_id;
+    scheduleDraw();
+  }
 }
 
 // ---------------------------------------------------------------- wiring
@@ -841,9 +1014,23 @@ function wire() {
   $("preview").addEventListener("click", () => run("preview", previewPlan));
   $("start").addEventListener("click", () => run("start", async () => {
     await previewPlan();
-    live.T = []; live.W = []; live.stored = null;
-    return api("POST", "/api/control/start", request());
+    const answer = await api("POST", "/api/control/start", request());
+    live.T = []; live.W = []; live.stored = null; live.finished = null;
+    clearResult("starting", "measurement starting");
+    reveal($("loop-panel"));   // the progress and the loop, wherever the Start button was
+    return answer;
   }));
+  // the state badge: tapped, it shows the fault and Reset faults (else the loop)
+  $("state").addEventListener("click", () => reveal($("fault").hidden ? $("loop-panel") : $("fault")));
+  $("campaign-example").addEventListener("change", (e) => {
+    if (e.target.value) run("campaign", () => api("GET",
+      `/api/campaign-files/${encodeURIComponent(e.target.value)}`).then(fillFromCampaign));
+  });
+  $("campaign-upload").addEventListener("change", (e) => {
+    const file = e.target.files && e.target.files[0];
+    if (file) run("campaign file", async () => fillFromCampaign(await api("POST",
+      "/api/campaign-upload", { file_name: file.name, text: await file.text() })));
+  });
   $("pause").addEventListener("click", () => run("pause", () => api("POST", "/api/control/pause")));
   $("resume").addEventListener("click", () => run("resume", () => api("POST", "/api/control/resume")));
   $("abort").addEventListener("click", () => run("abort", () => api("POST", "/api/control/abort")));
@@ -869,10 +1056,7 @@ function wire() {
     const a = e.target.closest("a[data-campaign]");
     if (!a) return;
     e.preventDefault();
-    try {
-      const c = await api("GET", `/api/campaigns/${encodeURIComponent(a.dataset.campaign)}`);
-      showCampaign(c.campaign_id, c.summary);
-    } catch (err) { notice(err.message, true); }
+    try { await showStoredCampaign(a.dataset.campaign); } catch (err) { notice(err.message, true); }
   });
   $("runs").addEventListener("click", (e) => {
     const a = e.target.closest("a[data-run]");
@@ -913,6 +1097,7 @@ async function init() {
     if (units.length) fillUnit(units[0].unit);
   } catch (e) { notice("units: " + e.message, true); }
   await loadOutcomeWords();
+  await loadCampaignNames();
   restoreSetup();
   validateForm();
   connectLive();

@@ -63,8 +63,9 @@ def workspace(tmp_path_factory: pytest.TempPathFactory) -> Path:
     linked in), so that what the commands write stays out of the repository."""
     work = tmp_path_factory.mktemp("readme")
     (work / "examples").symlink_to(ROOT / "examples")
-    (work / "rig").mkdir()
-    (work / "rig" / "examples").symlink_to(ROOT / "rig" / "examples")
+    # the package itself, not a bare folder: a folder named rig in the working directory
+    # would shadow the installed package for every `python -c` the commands start
+    (work / "rig").symlink_to(ROOT / "rig")
     return work
 
 

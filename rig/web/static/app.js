@@ -924,7 +924,7 @@ async function refreshHistory() {
         `<td>${esc(r.started_at)}</td><td class="lost-motion">${lostMotionText(r.metrics)}</td>` +
         `<td><a href="/api/runs/${id}/run.zip">zip</a> · <a href="/api/runs/${id}/samples.csv">csv</a> · ` +
         `<a href="/api/runs/${id}/loop.png">png</a> · <a href="/api/runs/${id}/certificate.pdf">Certificate</a>` +
-        ` (<a href="/api/runs/${id}/certificate.html" target="_blank">html</a>)</td>`;
+        ` (<a href="/api/runs/${id}/certificate.html" target="_blank">as a page</a>)</td>`;
       tb.appendChild(tr);
     }
     const cb = $("campaigns").querySelector("tbody");
@@ -943,7 +943,7 @@ async function refreshHistory() {
         ` · <a href="/api/campaigns/${id}/diagnosis.html" download="${esc(c.campaign_id)}-diagnosis.html">html</a>` +
         ` · <a href="/api/campaigns/${id}/diagnosis.json" download>json</a>` +
         ` · <a href="/api/campaigns/${id}/certificate.pdf">Certificate</a>` +
-        ` (<a href="/api/campaigns/${id}/certificate.html" target="_blank">html</a>)</td>`;
+        ` (<a href="/api/campaigns/${id}/certificate.html" target="_blank">as a page</a>)</td>`;
       cb.appendChild(tr);
     }
   } catch (e) { notice("history: " + e.message, true); }

@@ -153,6 +153,20 @@ def test_small_validation_meets_the_targets(tmp_path) -> None:
     assert {k.split()[0] for k in summary["by_form"]} == {"form", "loading"}
 
 
+def test_nulls_adds_null_campaigns_of_their_own_draws(tmp_path) -> None:
+    """``--nulls N`` appends N null campaigns (cases n..n+N-1, their own draws) so that the
+    false-alarm rate is measured on 20 nulls, not on the few of the effect cycle."""
+    out = _rig("validate-diagnosis", "--cases", "1", "--nulls", "2", "--seed", "5",
+               "--no-artifacts", "--json", str(tmp_path / "s.json"))
+    assert out.returncode == 0, out.stderr
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert summary["cases"] == 3 and summary["nulls_added"] == 2
+    cases = [r["case"] for r in summary["results"]]
+    assert cases == ["case000", "case001", "case002"]
+    assert [r["truth"] for r in summary["results"][1:]] == ["none", "none"]
+    assert summary["none_cases"] == 2 + (summary["results"][0]["truth"] == "none")
+
+
 @pytest.mark.parametrize(("index", "kind", "form"), [
     (13, "runout", "2x"), (15, "thermal_expansion", "quadratic"),
     (1, "stiffness_nonlinearity", "exponential")])

@@ -63,16 +63,17 @@ def _print_graded(summary: dict[str, Any], verbose: bool) -> None:
     console.print(f"[bold]{summary_line(summary)}[/bold]", soft_wrap=True)
 
 
-def _ours(cases: int, seed: int, jobs: int, verbose: bool, artifacts: bool) -> dict[str, Any]:
+def _ours(cases: int, seed: int, jobs: int, verbose: bool, artifacts: bool,
+          nulls: int = 0) -> dict[str, Any]:
     from rig.validate import KINDS, graded_validation, meets_targets, summarise
 
     what = "with" if artifacts else "without"
     console.print(f"our generator, {what} a real rig's measuring-system artefacts")
     with Progress(console=console, transient=True) as progress:
-        task = progress.add_task("our generator: diagnosing campaigns", total=cases)
+        task = progress.add_task("our generator: diagnosing campaigns", total=cases + nulls)
         results, graded = graded_validation(cases, seed, jobs,
                                             progress=lambda _r: progress.advance(task),
-                                            artifacts=artifacts)
+                                            artifacts=artifacts, nulls=nulls)
     old = summarise(results)
     _print_graded(graded, verbose)
     by_form: dict[str, dict[str, int]] = {}
@@ -96,7 +97,8 @@ def _ours(cases: int, seed: int, jobs: int, verbose: bool, artifacts: bool) -> d
     missing = [k for k in KINDS if k not in old["confusion"]]
     if missing:
         console.print(f"(kinds not drawn at {cases} cases: {', '.join(missing)})")
-    return {**graded, "artifacts": artifacts, "seed": seed, "by_form": by_form, "figures": old}
+    return {**graded, "artifacts": artifacts, "seed": seed, "nulls_added": nulls,
+            "by_form": by_form, "figures": old}
 
 
 def _fmt_size(size: dict[str, Any] | None) -> str:
@@ -146,18 +148,18 @@ def _like(campaign: Path, cases: int, seed: int, jobs: int) -> dict[str, Any]:
 
 
 def _over_the_wire(cases: int, seed: int, jobs: int, keep: Path | None, short: bool,
-                   verbose: bool) -> dict[str, Any]:
+                   verbose: bool, nulls: int = 0) -> dict[str, Any]:
     """Record campaigns through the sequencer, drivers and simulated devices, then grade."""
     from rig.validate.wire import over_the_wire
 
     with Progress(console=console, transient=True) as progress:
-        rec = progress.add_task("over the wire: recording campaigns", total=cases)
-        grade = progress.add_task("over the wire: diagnosing", total=cases)
+        rec = progress.add_task("over the wire: recording campaigns", total=cases + nulls)
+        grade = progress.add_task("over the wire: diagnosing", total=cases + nulls)
 
         def advance(stage: str, _r: dict[str, Any]) -> None:
             progress.advance(rec if stage == "recorded" else grade)
 
-        summary = over_the_wire(cases, seed, jobs, keep, short, progress=advance)
+        summary = over_the_wire(cases, seed, jobs, keep, short, progress=advance, nulls=nulls)
     for r in summary["recordings"]:
         if r["status"] != "completed" or verbose:
             console.print(f"  recorded {r['case']}: {r['status']}, {r['runs']} runs, "
@@ -207,6 +209,10 @@ def register(app: typer.Typer) -> None:
         short: Annotated[bool, typer.Option(
             "--short", help="With --over-the-wire: half the positions per campaign.")
         ] = False,
+        nulls: Annotated[int, typer.Option(
+            min=0, help="Add N null campaigns (no withheld effect) to our generator's or the "
+            "over-the-wire cases: the false-alarm rate measured on its own (the target is at "
+            "most 1 in 20).")] = 0,
         jobs: Annotated[int, typer.Option(min=1, help="Worker processes (with "
                                           "--over-the-wire: simulated rigs at a time).")] = 1,
         verbose: Annotated[bool, typer.Option("--verbose", help="One line per case.")] = False,
@@ -237,9 +243,11 @@ def register(app: typer.Typer) -> None:
             raise RigError("--keep and --short go with --over-the-wire")
         summaries = []
         if over_the_wire:
-            summaries.append(_over_the_wire(cases or 12, seed, jobs, keep, short, verbose))
+            summaries.append(_over_the_wire(cases or 12, seed, jobs, keep, short, verbose,
+                                            nulls))
         if (not dirs and not over_the_wire) or with_generator:
-            summaries.append(_ours(cases or 33, seed, jobs, verbose, artifacts))
+            summaries.append(_ours(cases or 33, seed, jobs, verbose, artifacts,
+                                   0 if over_the_wire else nulls))
         for d, lab in zip(dirs, labs, strict=True):
             name = generator_name(d)
             with Progress(console=console, transient=True) as progress:

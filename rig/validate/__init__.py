@@ -494,9 +494,10 @@ class CaseResult:
 
 def run_validation(n_cases: int, seed: int = 0,
                    progress: Callable[[CaseResult], None] | None = None,
-                   jobs: int = 1, artifacts: bool = False) -> list[CaseResult]:
-    """Generate and blindly diagnose ``n_cases`` campaigns; returns one result per case."""
-    return list(iter_validation(n_cases, seed, progress, jobs, artifacts))
+                   jobs: int = 1, artifacts: bool = False, nulls: int = 0) -> list[CaseResult]:
+    """Generate and blindly diagnose ``n_cases`` campaigns (and ``nulls`` more null ones);
+    returns one result per case."""
+    return list(iter_validation(n_cases, seed, progress, jobs, artifacts, nulls))
 
 
 def draw_case(seed: int, index: int, kind: str, artifacts: bool = False) -> Case:
@@ -526,11 +527,14 @@ def validate_one(args: tuple[int, int, str] | tuple[int, int, str, bool]) -> Cas
 
 def iter_validation(n_cases: int, seed: int = 0,
                     progress: Callable[[CaseResult], None] | None = None,
-                    jobs: int = 1, artifacts: bool = False) -> Iterator[CaseResult]:
-    """:func:`validate_one` for cases 0..n-1 (kinds by :func:`case_kinds`), in order."""
+                    jobs: int = 1, artifacts: bool = False, nulls: int = 0
+                    ) -> Iterator[CaseResult]:
+    """:func:`validate_one` for cases 0..n-1 (kinds by :func:`case_kinds`), then ``nulls``
+    null cases n..n+nulls-1 (their own draws), in order."""
     from rig.validate.cases import parallel_map
 
-    args = [(seed, i, kind, artifacts) for i, kind in enumerate(case_kinds(n_cases))]
+    kinds = case_kinds(n_cases) + ["none"] * nulls
+    args = [(seed, i, kind, artifacts) for i, kind in enumerate(kinds)]
     for res in parallel_map(validate_one, args, jobs):
         if progress is not None:
             progress(res)
@@ -548,13 +552,13 @@ def case_label(case: Case) -> Label:
 
 def graded_validation(n_cases: int, seed: int = 0, jobs: int = 1,
                       progress: Callable[[CaseResult], None] | None = None,
-                      name: str = "ours", artifacts: bool = False
+                      name: str = "ours", artifacts: bool = False, nulls: int = 0
                       ) -> tuple[list[CaseResult], dict[str, Any]]:
     """Our generator graded exactly as a labelled folder (:func:`summarise_graded`); with
     ``artifacts`` each case measured through a real rig's measuring system."""
     from rig.validate.cases import record, summarise_graded
 
-    results = run_validation(n_cases, seed, progress, jobs, artifacts)
+    results = run_validation(n_cases, seed, progress, jobs, artifacts, nulls)
     records = []
     for r in results:
         rec = record(case_label(r.case), {**r.report, "seconds": r.seconds})

@@ -260,18 +260,21 @@ def _record_once(case: WireCase, cases_dir: str) -> dict[str, Any]:
 
 def over_the_wire(cases: int, seed: int = 0, jobs: int = 1, keep: str | Path | None = None,
                   short: bool = False, effects: list[str] | None = None,
-                  progress: Callable[[str, dict[str, Any]], None] | None = None
-                  ) -> dict[str, Any]:
+                  progress: Callable[[str, dict[str, Any]], None] | None = None,
+                  nulls: int = 0) -> dict[str, Any]:
     """Record ``cases`` campaigns over the wire (``jobs`` simulated rigs at a time), then
     diagnose them blind and grade them (:func:`rig.validate.cases.grade_folder`); returns
     the graded summary (:func:`rig.validate.cases.summarise_graded`) with ``recordings``
-    (per case: status, runs, record_seconds) and ``kept`` (the folder, or None)."""
+    (per case: status, runs, record_seconds) and ``kept`` (the folder, or None). ``nulls``
+    adds that many null campaigns (cases ``cases`` .. ``cases + nulls - 1``, no effect) to
+    measure the false-alarm rate on its own."""
     from rig.validate.cases import grade_folder, parallel_map, summarise_graded
 
     if cases < 1:
         raise RigError("--over-the-wire needs --cases of at least 1")
     specs = [make_case(k, seed, short, None if effects is None else effects[k % len(effects)])
              for k in range(cases)]
+    specs += [make_case(k, seed, short, "none") for k in range(cases, cases + nulls)]
     with _cases_root(keep) as root:
         cases_dir = root / "cases"
         cases_dir.mkdir(parents=True, exist_ok=True)

@@ -265,6 +265,35 @@ def test_a_campaign_with_only_the_rigs_artefacts_is_none(seed: int) -> None:
     assert report["calibration"]["alpha"] == 0.01
 
 
+def test_a_torque_gain_that_depends_on_the_sign_is_unexplained_not_none() -> None:
+    """The torque channel reads the negative flank's torque 12 % low (a gain that depends on
+    the sign): the two flanks' slopes differ by 13 %, which no effect of the vocabulary makes.
+    Small against the noise of a coarse encoder, yet consistent over the runs: a real gap,
+    ``unexplained``; the same campaign with one gain has symmetric flanks."""
+    rng = np.random.default_rng(31)
+    params = LoopParams(NOM.play_arcmin, NOM.stiffness_Nm_per_arcmin, friction_Nm=0.02)
+
+    def runs(gain_negative: float) -> list[RunInput]:
+        out = []
+        for i in range(6):
+            r = _run(i, params, rng, angle=60.0 * i, white_arcsec=2.5, lag_s=0.003)
+            torque = np.where(r.torque_Nm < 0, gain_negative * r.torque_Nm, r.torque_Nm)
+            out.append(RunInput(r.run_id, r.t_s, torque, r.twist_arcmin, r.rated_torque_Nm,
+                                r.unit, r.input_angle_deg, r.temperature_C))
+        return out
+
+    report = diagnose(runs(0.88)).to_dict()
+    flanks = report["flank_asymmetry"]
+    assert report["verdict"] == "unexplained", (report["verdict"], report["reason"])
+    assert "differs between the flanks" in report["reason"]
+    truth = (1 / 0.88 - 1) / ((1 / 0.88 + 1) / 2)
+    assert flanks["relative_compliance_difference"] == pytest.approx(truth, abs=0.03)
+    assert flanks["p_value"] < 1e-3
+    same = diagnose(runs(1.0)).to_dict()
+    assert same["verdict"] == "none", (same["verdict"], same["reason"])
+    assert abs(same["flank_asymmetry"]["relative_compliance_difference"]) < 0.03
+
+
 def test_an_effect_among_the_artefacts_is_found_with_a_tiny_false_alarm_probability() -> None:
     rng = np.random.default_rng(13)
     params = LoopParams(NOM.play_arcmin, NOM.stiffness_Nm_per_arcmin, friction_Nm=0.4)

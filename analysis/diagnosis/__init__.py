@@ -54,6 +54,7 @@ from analysis.diagnosis.fit import (
     teeth_of,
     temperatures_known,
 )
+from analysis.diagnosis.flanks import flank_asymmetry
 from analysis.diagnosis.report_measurement import measurement_report
 from analysis.diagnosis.where import gap_map, lack_of_fit, per_run_play, play_fourier
 from analysis.effects import CANDIDATES, arcmin_to_um, bearing_play_arcmin, tooth_pair_phase
@@ -779,7 +780,22 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
                    for n, c in models.items())
     any_effect = min(fap.values(), default=1.0) <= alpha
     attribute = not ((sys0 <= threshold and not material) or not (any_effect or systematic))
-    if not attribute:
+    flanks = flank_asymmetry(stack, base)
+    if not attribute and flanks is not None and flanks.finding(alpha, STIFFNESS_TOLERANCE,
+                                                                threshold):
+        # the two flanks' loaded slopes differ beyond chance across the runs and beyond the
+        # stiffness tolerance: no effect of the vocabulary makes a flank-dependent slope
+        # (analysis.diagnosis.flanks), so this is a real gap, not the model within the noise
+        verdict = "unexplained"
+        reason = (f"the loaded stiffness differs between the flanks: "
+                  f"{flanks.stiffness_positive_Nm_per_arcmin:.3g} N*m/arcmin positive, "
+                  f"{flanks.stiffness_negative_Nm_per_arcmin:.3g} negative "
+                  f"({flanks.relative:+.0%} compliance, p = {flanks.p_value:.2g} over "
+                  f"{flanks.runs} runs, {flanks.size_arcmin * ARCSEC:.2f} arcsec at the "
+                  "amplitude); no effect of the vocabulary makes the slope depend on the flank "
+                  "(a torque channel whose gain depends on the sign, or flanks of unequal "
+                  "contact)")
+    elif not attribute:
         if stiff_dev < -STIFFNESS_TOLERANCE:
             # the loaded stiffness is below seed 004 eq. (8) beyond its tolerance: a compliance
             # in series with the mesh (the shaft, a coupling) is the unmodelled effect; a
@@ -965,6 +981,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
     report["free_play_fourier"] = fourier
     report["lack_of_fit"] = lack_of_fit(plays, {r.run_id: cond[r.run_id] for r in stack.runs})
     report["localization"] = _localize(gm, fourier, varied)
+    report["flank_asymmetry"] = _clean(flanks.to_dict()) if flanks is not None else None
     report["calibration"] = {
         "alpha": alpha, "replicates": replicates, "seed": seed,
         "method": "moving-block bootstrap of the null model's residuals, run by run; "

@@ -44,12 +44,18 @@ def run_input(run: Run) -> RunInput:
         temperature = np.full(run.n_samples, float(test["temperature_C"]))
     start = test.get("start_flank", -1)
     full_scale = run.sensors.get("torque_full_scale_Nm")
+    zeros = (run.meta.get("result") or {}).get("torque_zero") or {}
+    if not isinstance(zeros, dict):
+        zeros = {}
+    readings = [zeros.get("before", test.get("torque_zero_before_Nm")), zeros.get("after")]
     return RunInput(
         run_id=run.run_id, t_s=run.t_s, torque_Nm=run.torque_Nm, twist_arcmin=twist,
         rated_torque_Nm=float(rated), unit=dict(run.unit),
         input_angle_deg=None if angle is None else float(angle),
         temperature_C=temperature, start_flank=1 if start == 1 else -1,
         torque_full_scale_Nm=None if full_scale is None else float(full_scale),
+        zero_readings_Nm=tuple(float(z) for z in readings
+                               if isinstance(z, (int, float)) and not isinstance(z, bool)),
     )
 
 

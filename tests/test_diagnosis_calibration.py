@@ -243,6 +243,43 @@ def test_a_common_torque_zero_within_the_retare_allowance_is_no_offset() -> None
     assert beyond["treated_as"].startswith("common offset left for the diagnosis")
 
 
+def _walking_zero_campaign(offset_Nm: float, seed: int) -> list[RunInput]:
+    """Six runs measured one after the other without a re-tare between them: the torque
+    zero starts near zero at the first run and random-walks on through the campaign (about
+    0.6 % of rated by the last run), plus a constant sensor offset ``offset_Nm``. The rig
+    reads the channel at zero command before and after each loop (``zero_readings_Nm``)."""
+    rng = np.random.default_rng(seed)
+    params = LoopParams(NOM.play_arcmin, NOM.stiffness_Nm_per_arcmin, friction_Nm=0.02)
+    n, zero, runs = 3000, 0.001, []
+    for i in range(6):
+        r = _run(i, params, rng, angle=60.0 * i, n=n, white_arcsec=0.3)
+        walk = zero + np.cumsum(rng.normal(0.0, 0.009 / math.sqrt(RATE), n))
+        walk += np.linspace(0.0, 0.012, n)  # drifting one way over the campaign
+        torque = r.torque_Nm + walk + offset_Nm
+        runs.append(RunInput(r.run_id, r.t_s, torque, r.twist_arcmin, r.rated_torque_Nm,
+                             r.unit, r.input_angle_deg, r.temperature_C,
+                             zero_readings_Nm=(walk[0] + offset_Nm, walk[-1] + offset_Nm)))
+        zero = float(walk[-1]) + float(rng.normal(0.0, 0.003))
+    return runs
+
+
+def test_a_zero_that_wanders_over_a_campaign_without_re_tare_is_no_offset() -> None:
+    """The zero wanders to 0.4-0.8 % of rated over the campaign, beyond the re-tare allowance
+    at the crossings; the rig read it within the allowance at zero command before the first
+    run, which a constant sensor offset would not allow: the wandering zero is the measuring
+    system's, taken out run by run through the readings and the crossings, and the verdict
+    is none. The same campaign with a 2 % sensor offset (in every reading too) finds it."""
+    runs = _walking_zero_campaign(0.0, 41)
+    assert max(abs(z) for r in runs for z in r.zero_readings_Nm) > 0.025
+    report = diagnose(runs).to_dict()
+    zero = report["measurement"]["torque_zero"]
+    assert report["verdict"] == "none", (report["verdict"], report["reason"])
+    assert abs(zero["read_at_zero_command_Nm"]) < 0.025
+    assert len(zero["from_zero_readings"]) >= 4
+    offset = diagnose(_walking_zero_campaign(0.2, 41)).to_dict()
+    assert offset["verdict"] == "torque_sensor_offset", (offset["verdict"], offset["reason"])
+
+
 @pytest.mark.parametrize("seed", [11, 12])
 def test_a_campaign_with_only_the_rigs_artefacts_is_none(seed: int) -> None:
     """No effect of the unit; a re-tared torque zero that wanders, a 6 ms sensor filter, red

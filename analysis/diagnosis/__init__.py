@@ -35,6 +35,7 @@ from analysis.diagnosis.data import (
     RunInput,
     prepare_run,
     remove_torque_zero,
+    smallest_zero_reading,
 )
 from analysis.diagnosis.evidence import calibrated_evidence
 from analysis.diagnosis.fit import (
@@ -614,6 +615,13 @@ def with_measurement_nuisance(prepared: list[PreparedRun], alpha: float
         veto = (f"the play crossings of {zero_report['runs_read']} runs put the torque zero "
                 f"at {zero_report['common_Nm']:+.4f} N*m, within their own scatter "
                 f"({zero_report['scatter_Nm']:.4f} N*m): no common sensor offset")
+    elif (read := smallest_zero_reading(prepared)) is not None and \
+            abs(read[0]) <= ZERO_ALLOWANCE * plain.rated_Nm:
+        # the rig read its torque channel at zero command: a constant sensor offset is in
+        # every such reading, and one within the re-tare allowance rules it out
+        veto = (f"the rig read the torque channel at {read[0]:+.4f} N*m at zero command "
+                f"(run {read[1]}), within what a re-tare leaves ({ZERO_ALLOWANCE:.2%} of "
+                "rated): a constant sensor offset would show in every zero reading")
     elif (zero_report.get("runs_read", 0) >= 3 and used
           and abs(zero_report["common_Nm"]) <= ZERO_ALLOWANCE * plain.rated_Nm):
         veto = (f"the play crossings put the common torque zero at "

@@ -60,6 +60,9 @@ class RunInput:
     temperature_C: np.ndarray | None = None
     start_flank: int = -1
     torque_full_scale_Nm: float | None = None
+    #: The torque the rig read at zero command before and after the loop (N*m; the run's
+    #: ``result.torque_zero``): the torque channel's zero as measured, when the rig read it.
+    zero_readings_Nm: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -408,6 +411,17 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
     )
 
 
+def smallest_zero_reading(runs: Sequence[PreparedRun]) -> tuple[float, str] | None:
+    """The zero reading (N*m) nearest zero among the runs' readings at zero command
+    (:attr:`RunInput.zero_readings_Nm`), with its run id; None when the rig read none."""
+    best: tuple[float, str] | None = None
+    for r in runs:
+        for z in r.raw.zero_readings_Nm:
+            if math.isfinite(z) and (best is None or abs(z) < abs(best[0])):
+                best = (float(z), r.run_id)
+    return best
+
+
 def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float, allowance_Nm: float = 0.0
                        ) -> tuple[list[PreparedRun], dict[str, Any]]:
     """Take each run's torque zero, read at its play crossings
@@ -422,7 +436,11 @@ def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float, allowance_Nm: 
     is left for the torque_sensor_offset candidate to find. With one or two runs read, only
     the departures. A common zero within ``allowance_Nm`` (what a re-tare and the zero's
     drift over a campaign leave on a sound transducer) is the measuring system's too, and is
-    taken out whole. Returns the runs and the report's ``torque_zero`` entry."""
+    taken out whole. So is a common zero when the rig itself read the torque channel within
+    the allowance at zero command (before or after a run's loop, :func:`smallest_zero_reading`):
+    a sensor offset would show in every such reading, so what the crossings hold is the zero's
+    drift since the last re-tare (a campaign measured without re-taring between its runs).
+    Returns the runs and the report's ``torque_zero`` entry."""
     from scipy.stats import t as student_t
 
     est = [(i, r.crossing) for i, r in enumerate(runs) if r.crossing is not None]
@@ -440,9 +458,24 @@ def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float, allowance_Nm: 
         else:
             p_common = 0.0 if common != 0.0 else 1.0
         keep_common = p_common <= alpha and abs(common) > allowance_Nm
+    read = smallest_zero_reading(runs)
+    read_within = read is not None and abs(read[0]) <= allowance_Nm
+    if read_within:
+        keep_common = False
+    from_readings = []
     for i, c in est:
         r = runs[i]
         removed = c.zero_at(r.t_s) - (common if keep_common else 0.0)
+        if read_within and len(r.raw.zero_readings_Nm) == 2 and r.t_s.size > 1:
+            # the rig read this run's zero at zero command before and after its loop: the
+            # zero wanders from the one through the crossings' to the other (piecewise
+            # linear), where the crossings alone give one level for the whole run
+            z0, z1 = r.raw.zero_readings_Nm
+            t0, t1 = float(r.t_s[0]), float(r.t_s[-1])
+            tm = min(max(c.t_mid_s, t0), t1)
+            if t0 < tm < t1:
+                removed = np.interp(r.t_s, [t0, tm, t1], [z0, c.zero_Nm, z1])
+                from_readings.append(r.run_id)
         out[i] = replace(r, torque_Nm=r.torque_Nm - removed, zero_removed_Nm=removed)
     return out, {
         "runs_read": len(est),
@@ -453,8 +486,14 @@ def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float, allowance_Nm: 
         "scatter_Nm": float(np.std(zeros, ddof=1)) if len(est) > 1 else None,
         "common_false_alarm_probability": p_common,
         "allowance_Nm": allowance_Nm,
+        "read_at_zero_command_Nm": None if read is None else read[0],
+        "from_zero_readings": from_readings,
         "treated_as": ("common offset left for the diagnosis; run-to-run departures removed"
                        if keep_common else
+                       "drift of the zero since the last re-tare, removed (the rig read the "
+                       "torque channel within the zero allowance at zero command)"
+                       if read_within and p_common is not None and p_common <= alpha
+                       and abs(common) > allowance_Nm else
                        "re-tare residual of each run, removed (their common part is within "
                        "the zero allowance)" if p_common is not None and p_common <= alpha
                        else "re-tare residual of each run, removed"),

@@ -459,7 +459,9 @@ def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float, allowance_Nm: 
             p_common = 0.0 if common != 0.0 else 1.0
         keep_common = p_common <= alpha and abs(common) > allowance_Nm
     read = smallest_zero_reading(runs)
-    read_within = read is not None and abs(read[0]) <= allowance_Nm
+    # the readings overrule the crossings only where the crossings alone would leave a common
+    # offset: the zero then wandered beyond the allowance since the last re-tare
+    read_within = read is not None and abs(read[0]) <= allowance_Nm and keep_common
     if read_within:
         keep_common = False
     from_readings = []
@@ -492,8 +494,7 @@ def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float, allowance_Nm: 
                        if keep_common else
                        "drift of the zero since the last re-tare, removed (the rig read the "
                        "torque channel within the zero allowance at zero command)"
-                       if read_within and p_common is not None and p_common <= alpha
-                       and abs(common) > allowance_Nm else
+                       if read_within else
                        "re-tare residual of each run, removed (their common part is within "
                        "the zero allowance)" if p_common is not None and p_common <= alpha
                        else "re-tare residual of each run, removed"),

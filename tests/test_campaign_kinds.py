@@ -18,7 +18,10 @@ from pathlib import Path
 
 import pytest
 
+from analysis.models.by_kind import MODEL_NAMES
+from rig.certificate import resolve_subject, write_certificate
 from rig.runformat import read_campaign
+from tests.test_html_escaping import page_text
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -77,6 +80,19 @@ def test_example_campaign_of_each_kind(name, positions, exit_code, outcome, tmp_
         assert section, "the kind's injected deviations are recorded"
         assert run.meta["unit"]["kind"] == kind
     print("\n" + "\n".join(lines))
-    # the campaign names the kind, its model and its batch band
-    assert result["model"]["kind"] == kind if "kind" in result["model"] else True
-    assert result["batch"] is not None and result["batch"]["kind"] == kind
+    # the campaign's batch band is the kind's own (seed 002 / seed 001 budget), with advice
+    batch = result["batch"]
+    assert batch is not None and batch["kind"] == kind
+    low, high = batch["band_95_arcmin"]
+    assert 0.0 < low < high
+    # the certificate names the kind, its model and its band
+    write_certificate(resolve_subject(result["path"], tmp_path / "store"),
+                      pdf=tmp_path / "cert.pdf", html=tmp_path / "cert.html")
+    text = " ".join(page_text((tmp_path / "cert.html").read_text()).split())
+    model_name, band_source = MODEL_NAMES[kind]
+    assert f"Unit kind {kind}" in text
+    assert f"Nominal model ({model_name}): {result['model']['lost_motion_arcmin']:.3f}" in text
+    assert f"({band_source}, worst position, 95 %): {low:.3f} .. {high:.3f} arcmin" in text
+    assert "Compensation advice:" in text
+    assert ("NOT OK" if outcome == "not_ok" else "OK") in text
+    assert (tmp_path / "cert.pdf").stat().st_size > 1000

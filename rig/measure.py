@@ -253,6 +253,11 @@ def run_campaign(camp: CampaignFile, session: RigSession, store: Store, *,
     summary = summarise(runs, camp.limits)
     summary["batch"] = batch_band(unit, camp.plan.rated_torque_Nm,
                                   PROFILES.get(camp.profile, 3.0))
+    from analysis.models.by_kind import MODEL_NAMES
+
+    kind = str(unit.get("kind") or "internal_involute")
+    summary["unit_kind"] = kind
+    summary["model_name"] = MODEL_NAMES.get(kind, (kind, ""))[0]
     status = "completed" if engine.state == "completed" else "aborted"
     reason = engine.stopping_reason
     summary["outcome"] = campaign_outcome([r["outcome"] for r in runs], status)

@@ -248,7 +248,9 @@ def register(app: typer.Typer) -> None:
 
             options = EngineOptions(profile=profile, stale_timeout_s=session.stale_timeout_s,
                                     limits=limits.model_dump(),
-                                    run_meta=simulated_truth(session, PROFILES.get(profile, 3.0)))
+                                    run_meta=simulated_truth(
+                                        session, PROFILES.get(profile, 3.0), rated_torque,
+                                        [position if position is not None else 0.0]))
             meta = run_meta(unit_data, session, operator and operator.strip(),
                             calibration_override)
             try:

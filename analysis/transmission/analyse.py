@@ -84,6 +84,7 @@ class TEResult:
     encoder_eccentricity: dict[str, Any]
     grid_points: int
     output_teeth: int | None
+    resolution_arcsec: float = 0.0
     notes: list[str] = field(default_factory=list)
     errors: dict[str, str] = field(default_factory=dict)
 
@@ -219,4 +220,4 @@ def analyse_te(
             fitted.append((code, f))
     return TEResult(curves=curves, metrics=metrics, uncertainty=unc, orders=fitted,
                     encoder_eccentricity=ecc_record, grid_points=n, output_teeth=teeth,
-                    notes=notes, errors=errors)
+                    resolution_arcsec=u_q * math.sqrt(12.0), notes=notes, errors=errors)

@@ -30,7 +30,7 @@ from analysis.transmission.analyse import Kinematics
 from analysis.transmission.orders import Order, standard_orders
 
 BAND_PERCENTILES = (0.5, 99.5)
-BAND_SAMPLES = 2000
+BAND_SAMPLES = 1000
 
 
 @dataclass
@@ -85,12 +85,11 @@ def _order_basis(orders: list[Order], out_deg: np.ndarray, in_deg: np.ndarray,
     return np.column_stack(cols)
 
 
-def _orders_of(curves: np.ndarray, orders: list[Order], out_deg: np.ndarray,
-               in_deg: np.ndarray, kin: Kinematics) -> tuple[np.ndarray, np.ndarray]:
-    """Amplitudes and phases (deg) of ``orders`` in each row of ``curves`` (least squares,
-    the measurement's convention ``A sin(k phi + p)``)."""
-    x = _order_basis(orders, out_deg, in_deg, kin)
-    beta, *_ = np.linalg.lstsq(x, np.atleast_2d(curves).T, rcond=None)
+def _orders_of(curves: np.ndarray, solver: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Amplitudes and phases (deg) of the orders in each row of ``curves`` (least squares,
+    the measurement's convention ``A sin(k phi + p)``); ``solver``: the pseudo-inverse of the
+    orders' basis (:func:`_order_basis`)."""
+    beta = solver @ np.atleast_2d(curves).T
     a, b = beta[1::2], beta[2::2]
     return np.hypot(a, b).T, np.degrees(np.arctan2(b, a)).T
 
@@ -108,22 +107,24 @@ def _summarise(name: str, kin: Kinematics, grid_out_deg: np.ndarray, grid_in_deg
 
     def figures(curves: dict[int, np.ndarray]) -> dict[str, np.ndarray]:
         pp = {s: np.ptp(np.atleast_2d(c), axis=1) for s, c in curves.items()}
+        same = curves[1] is curves[-1]
         fig = {"te_pp_forward_arcsec": pp[1], "te_pp_reverse_arcsec": pp[-1],
                "te_pp_arcsec": np.maximum(pp[1], pp[-1]),
                "te_total_Fi_arcsec": np.maximum(pp[1], pp[-1])}
         if width:
-            fig["te_tooth_fi_arcsec"] = np.maximum(
-                _sliding_range(np.atleast_2d(curves[1]), width),
-                _sliding_range(np.atleast_2d(curves[-1]), width))
+            fwd = _sliding_range(np.atleast_2d(curves[1]), width)
+            fig["te_tooth_fi_arcsec"] = fwd if same else np.maximum(
+                fwd, _sliding_range(np.atleast_2d(curves[-1]), width))
         return fig
 
+    solver = np.linalg.pinv(_order_basis(orders, grid_out_deg, grid_in_deg, kin))
     nom = figures(nominal)
     metrics: dict[str, float | None] = {k: float(v[0]) for k, v in nom.items()}
     metrics.setdefault("te_tooth_fi_arcsec", None)
     metrics["te_hysteresis_arcmin"] = hysteresis_arcmin
     order_list = []
     for s in (1, -1):
-        amp, ph = _orders_of(nominal[s], orders, grid_out_deg, grid_in_deg, kin)
+        amp, ph = _orders_of(nominal[s], solver)
         for j, o in enumerate(orders):
             order_list.append({"order": o.order, "per": o.per,
                                "frequency_per_output_rev": o.frequency,
@@ -139,8 +140,8 @@ def _summarise(name: str, kin: Kinematics, grid_out_deg: np.ndarray, grid_in_deg
         lo, hi = BAND_PERCENTILES
         pred.band = {k: [float(np.percentile(v, lo)), float(np.percentile(v, hi))]
                      for k, v in fig.items()}
-        amps = np.vstack([_orders_of(batch[s], orders, grid_out_deg, grid_in_deg, kin)[0]
-                          for s in (1, -1)])
+        same = batch[1] is batch[-1]
+        amps = np.vstack([_orders_of(batch[s], solver)[0] for s in ((1,) if same else (1, -1))])
         pred.order_band = {o.frequency: [0.0, float(np.percentile(amps[:, j], hi))]
                            for j, o in enumerate(orders)}
         pred.samples = int(np.atleast_2d(batch[1]).shape[0])

@@ -129,7 +129,7 @@ def geometry_from_unit(unit: Mapping[str, Any]) -> InternalGeometry:
     return InternalGeometry(z1, z2, m, alpha, a)
 
 
-def input_angles_deg(geo: InternalGeometry, per_mesh: int = 8) -> np.ndarray:
+def input_angles_deg(geo: InternalGeometry, per_mesh: int = 4) -> np.ndarray:
     """Input angles (deg) over one output revolution, ``per_mesh`` points per mesh cycle, each
     in the middle of its slot (never on a tooth change)."""
     n = int(round(abs(geo.ratio) * geo.z_internal)) * per_mesh

@@ -12,24 +12,25 @@ seed 000 pair), because the output is the pinion.
 
 TE at the output for flank ``s`` (+1 forward, -1 reverse), arcsec::
 
-    TE_s(theta) = 60 K [ p_ring(n) - p_pinion(n) + s tan(alpha) (|AB|(theta) - a) ]
+    TE_s(theta) = 60 K [ p_ring(n) - p_pinion(n) + e_t(theta) - s tan(alpha) (|AB|(theta) - a) ]
 
 - ``K = 6.876 / (m z_internal)`` arcmin/um, seed 000 eq. (1) (circumferential um on the
   ring's reference circle to output arcmin);
 - ``p``: each tooth's position (pitch) deviation, um, from the cumulative sum of single pitch
   deviations ``f_pt`` (the tooth spacing error);
-- ``|AB|(theta)``: seed 000 eq. (4), the center distance over the eccentric-shaft angle with the
-  eccentricities ``|AO1| = F_r,internal / 2`` and ``|BO2| = F_r,external / 2`` (eq. 7), with the
-  ring's eccentricity at phase ``internal_phase`` (eq. 4 as printed: 0); a longer center
-  distance moves each flank by ``tan(alpha)`` per um (eq. 3, half of the play change to each
-  flank). Seed 000 gives only this radial term; the eccentricities' tangential effect is not
-  in the seed and not modelled.
+- ``e_t``: the tangential part, across the crank line, of eq. (4)'s eccentricity vectors
+  ``|AO1| = F_r,internal / 2`` (the ring's, fixed at phase ``internal_phase``) and
+  ``|BO2| = F_r,external / 2`` (the pinion's, turning with it against the crank, phase
+  ``beta``): ``e_t = |AO1| sin(phase_int - theta) + |BO2| sin(psi + beta - theta)`` with
+  ``psi = -(z1 - z2) theta / z2``: orders ``|i|`` (8, once per crank turn) and ``|i| + 1``
+  (9) per output revolution; it moves both flanks alike;
+- ``|AB|(theta)``: eq. (4) as printed, the center distance; a longer center distance opens the
+  play by ``2 tan(alpha)`` per um (eq. 3), half on each flank, so the two directions' curves
+  move apart and together (orders 8 and, with eq. 4's printed ``+`` phase of B, 7). Under the
+  brake the forward direction rests on the flank of positive torque, ``+play / 2``.
 
-Eq. (4) as printed turns B's phase by ``(z_internal - z_external) / z_external`` per crank
-turn, so the pinion's eccentricity beats with the crank at ``|i| (1 - (z1 - z2) / z2)`` cycles
-per output revolution (7 for 45/40); the ring's eccentricity is once per crank turn (8 per
-output revolution); the pinion's tooth pattern repeats every ``z_external`` meshes
-(``z_internal / z_external`` per input revolution, 9 per output revolution).
+These are the conventions of the simulated plant (simulators/plant/geometry.py), so that a
+run of the simulated rig is compared with the model that made it.
 
 The batch band (:func:`internal_band`): Monte Carlo over seed 000 Table 1 (runouts F_r
 grade 7 ring 23 um, grade 6 pinion 16 um, as eccentricities ``F_r / 2`` Rayleigh truncated at
@@ -160,6 +161,8 @@ def te_curves_arcsec(
     x = a * np.cos(theta) + e2 * np.cos(phase) + e1 * np.cos(p1)
     y = a * np.sin(theta) + e2 * np.sin(phase) + e1 * np.sin(p1)
     delta_a = np.hypot(x, y) - a  # um, eq. (4)
+    psi = -(geo.z_internal - geo.z_external) * theta / geo.z_external
+    e_t = e1 * np.sin(p1 - theta) + e2 * np.sin(psi + col(beta_rad) - theta)
     n = np.floor(np.asarray(theta_in_deg, dtype=float) * geo.z_internal / 360.0 + 1e-9)
     n = n.astype(np.int64)
     pint = np.atleast_2d(np.asarray(pitch_internal_um, dtype=float))
@@ -169,7 +172,7 @@ def te_curves_arcsec(
     tan_a = math.tan(geo.alpha_rad)
     out = {}
     for s in (1, -1):
-        te = k * (pitch + s * tan_a * delta_a)
+        te = k * (pitch + e_t - s * tan_a * delta_a)
         out[s] = te - te.mean(axis=1, keepdims=True)
     return out
 

@@ -135,6 +135,30 @@ class TERunAnalysis:
                              "te_reverse_arcsec": rev.mean_arcsec})
 
 
+TE_COLUMN = "te_arcsec"
+"""The per-sample TE column of an exported TE run (``rig export``)."""
+
+
+def sample_te_arcsec(run: Run) -> np.ndarray:
+    """Each sample's TE (arcsec): ``3600 (output - input / ratio) - c_d`` with ``c_d`` its
+    direction's mean over the output-angle grid (run-format.md); NaN on the rows of no
+    direction (stopping, turning round)."""
+    item = analyse_te_run(run, with_model=False)
+    out, inp, direction, _ = _columns(run)
+    if direction is None:
+        from analysis.transmission.analyse import directions_from_input
+        direction = directions_from_input(inp)
+    te = 3600.0 * (out - inp / float(run.test["ratio"]))
+    ecc = encoder_eccentricity_of(run)
+    if ecc is not None:
+        te = te - ecc.arcsec(out)
+    values = np.full(te.shape, np.nan)
+    for code, curve in item.result.curves.items():
+        m = direction == code
+        values[m] = te[m] - curve.offset_arcsec
+    return values
+
+
 def _columns(run: Run) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, list[str]]:
     notes = []
     if run.input_angle_deg is None:

@@ -91,3 +91,32 @@ def truth_pp_arcsec(unit: dict[str, Any] | None = None) -> float:
 
 
 __all__ = ["SEED000_UNIT", "te_run", "truth_pp_arcsec", "write_te_run", "math"]
+
+
+def store_te_unit(store: Any, serial: str, *, scale: float = 1.0, design: str = "TE-DESIGN",
+                  limits: dict[str, Any] | None = None, seed: int = 0) -> str:
+    """One unit's TE test recorded in ``store`` as the rig records it: a campaign of one run,
+    the samples appended, ``result`` the TE analysis (:func:`rig.te.analyse_te_run`), the
+    outcome against ``limits``; returns the campaign id."""
+    from rig.outcome import LIMIT_KEYS, campaign_outcome, run_outcome
+    from rig.te import analyse_te_run
+
+    run = te_run(f"{serial}-te", scale=scale, samples_per_output_rev=4000, seed=seed)
+    unit = {**run.unit, "serial": serial, "design": design}
+    in_force = {k: (limits or {}).get(k) for k in LIMIT_KEYS}
+    campaign_id = store.create_campaign(f"{design}-{serial}", {"unit": unit,
+                                                               "limits": limits or {}})
+    meta = {"unit": unit, "test": run.test, "sensors": run.sensors, "limits": in_force,
+            "operator": "tests"}
+    with store.begin_run(meta, list(run.columns), campaign_id=campaign_id) as rec:
+        for row in np.column_stack([run.data[c] for c in run.columns]).tolist():
+            rec.append(row)
+        record = analyse_te_run(run, model_samples=200).result_record()
+        outcome, causes, _ = run_outcome({"status": "completed", "test": run.test,
+                                          "result": record}, in_force)
+        rec.finish(result=record, extra={"outcome": outcome})
+    store.finish_campaign(campaign_id, "completed",
+                          {"n_runs": 1, "limits": in_force, "outcome": outcome,
+                           "failures": causes},
+                          extra={"outcome": campaign_outcome([outcome], "completed")})
+    return campaign_id

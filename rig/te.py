@@ -19,6 +19,7 @@ import pandas as pd
 from analysis.errors import AnalysisError
 from analysis.transmission import METRIC_KEYS, TEResult, analyse_te
 from analysis.transmission.compare import compare
+from analysis.transmission.curve import direction_curve
 from analysis.transmission.eccentricity import EncoderEccentricity, reversal
 from analysis.transmission.model import TEPrediction, kinematics_for_unit, predict
 from analysis.transmission.orders import fit_orders, standard_orders
@@ -239,8 +240,12 @@ def reversal_calibration(run_a: Run, run_b: Run) -> dict[str, float]:
         order1 = [o for o in standard_orders(ratio, crank_per_input=None, mesh_per_input=None)
                   if o.per == "output_rev"]
         for code in (1, -1):
-            m = d == code
-            te = 3600.0 * (out[m] - inp[m] / ratio)
+            mask = d == code
+            te_all = 3600.0 * (out - inp / ratio)
+            curve = direction_curve(out[mask], te_all[mask], code, 3600)
+            lo, hi = curve.span_deg
+            m = mask & (out >= lo) & (out < hi)  # whole revolutions: no leakage
+            te = te_all[m]
             f, _ = fit_orders(out[m], inp[m], te, order1, ratio=ratio)
             fits.append(f[0])
         z = np.mean([f.phasor() for f in fits])

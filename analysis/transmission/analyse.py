@@ -17,7 +17,9 @@ Standard uncertainties (arcsec unless named):
 - encoder mounting eccentricity (:mod:`analysis.transmission.eccentricity`): the uncertainty
   ``u_e`` of the removed term (or, when none was removed, a declared bound ``b`` as ``b/sqrt(3)``)
   adds ``sqrt(2) u_e`` to the peak-to-peak figures and ``u_e`` to the output order 1;
-- orders: the least-squares covariance scaled by the residual variance.
+- orders: the least-squares covariance scaled by the residual variance; fitted on the
+  complete output revolutions of each direction (the span of the grid), so that the orders of
+  the output revolution are orthogonal and content the fit does not name does not leak in.
 """
 
 from __future__ import annotations
@@ -207,7 +209,9 @@ def analyse_te(
                              extra=kinematics.extra_orders)
     fitted: list[tuple[int, OrderFit]] = []
     for code in (1, -1):
-        m = masks[code]
+        # whole revolutions only: every order of the output is then orthogonal to the others
+        lo, hi = curves[code].span_deg
+        m = masks[code] & (out >= lo) & (out < hi)
         fits, _ = fit_orders(out[m], inp[m], te[m], orders, ratio=ratio,
                              crank_per_input=kinematics.crank_per_input,
                              mesh_per_input=kinematics.mesh_per_input)

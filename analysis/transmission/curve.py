@@ -54,6 +54,8 @@ class DirectionCurve:
     samples_per_bin: float
     revolutions: int
     n_samples: int
+    span_deg: tuple[float, float] = (-np.inf, np.inf)
+    """The output angles (deg, absolute) of the complete revolutions used."""
 
     @property
     def name(self) -> str:
@@ -119,7 +121,8 @@ def direction_curve(output_angle_deg: np.ndarray, te_raw_arcsec: np.ndarray, dir
         direction=direction, grid_deg=grid, mean_arcsec=revs.mean(axis=0), revs_arcsec=revs,
         offset_arcsec=offset, residual_std_arcsec=residual_std,
         samples_per_bin=float(counts[filled].mean()), revolutions=int(revolutions),
-        n_samples=int(te_k.size))
+        n_samples=int(te_k.size),
+        span_deg=(start * step, (start + revolutions * n_grid) * step))
 
 
 def grid_size(mesh_order_per_output_rev: float | None, samples_per_rev: float) -> int:

@@ -37,8 +37,9 @@ def test_sinusoids_of_known_order_amplitude_and_phase_are_recovered_on_a_non_int
                 + 2.5 * np.sin(45.0 * np.radians(inp) + math.radians(75.0)))
 
     _, r = _run(te, revolutions=1.0, margin=0.37, samples_per_output_rev=40_000)
-    for per, order, amp, phase in (("output_rev", 1, 25.0, 40.0), ("input_rev", 1, 8.0, -110.0),
-                                   ("mesh", 1, 2.5, 75.0)):
+    # A sin(x + p) = A cos(x + p - 90): the phases of the cosine convention
+    for per, order, amp, phase in (("output_rev", 1, 25.0, -50.0), ("input_rev", 1, 8.0, -200.0),
+                                   ("mesh", 1, 2.5, -15.0)):
         for d in (1, -1):
             f = _order(r, per, order, d)
             assert f.amplitude_arcsec == pytest.approx(amp, abs=0.02), (per, d)
@@ -97,7 +98,7 @@ def test_encoder_eccentricity_is_separated_by_the_reversal_and_removed_from_late
         15 * np.exp(1j * np.radians(30)) + 20 * np.exp(1j * np.radians(-70))), abs=0.1)
     ecc, unit = reversal(fa.phasor(), fa.amplitude_u_arcsec, fb.phasor(), fb.amplitude_u_arcsec)
     assert ecc.amplitude_arcsec == pytest.approx(20.0, abs=0.1)
-    assert ecc.phase_deg == pytest.approx(-70.0, abs=0.5)
+    assert ecc.phase_deg == pytest.approx(-160.0, abs=0.5)  # sin(x - 70) = cos(x - 160)
     assert abs(unit) == pytest.approx(unit_amp, abs=0.1)
     s = synthetic_te(te, seed=2, **kw)
     c = analyse_te(s.output_angle_deg, s.input_angle_deg, s.direction, KIN,
@@ -105,7 +106,7 @@ def test_encoder_eccentricity_is_separated_by_the_reversal_and_removed_from_late
                    encoder_eccentricity=ecc)
     fc = _order(c, "output_rev", 1)
     assert fc.amplitude_arcsec == pytest.approx(unit_amp, abs=0.15)
-    assert fc.phase_deg == pytest.approx(unit_phase, abs=1.0)
+    assert fc.phase_deg == pytest.approx(unit_phase - 90.0, abs=1.0)
     assert c.metrics["te_pp_arcsec"] == pytest.approx(2 * unit_amp, abs=1.0)
     assert c.encoder_eccentricity["removed"] is True
     assert c.encoder_eccentricity["amplitude_arcsec"] == pytest.approx(20.0, abs=0.1)

@@ -185,7 +185,7 @@ def test_encoder_eccentricity_calibrated_by_reversal_is_removed(tmp_path: Path) 
     cal = reversal_calibration(te_run("a", index_deg=0.0, **ecc),
                                te_run("b", index_deg=180.0, seed=1, **ecc))
     assert cal["eccentricity_arcsec"] == pytest.approx(20.0, abs=0.3)
-    assert cal["eccentricity_phase_deg"] == pytest.approx(50.0, abs=1.0)
+    assert cal["eccentricity_phase_deg"] == pytest.approx(-40.0, abs=1.0)  # cos(x - 40)
     entry = CalibrationEntry(id="ENC-1", certificate="reversal 2026-11-26", date="2026-11-26",
                              due="2027-11-26", uncertainty="0.2 arcsec",
                              **{k: cal[k] for k in ("eccentricity_arcsec",

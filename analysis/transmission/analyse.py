@@ -145,7 +145,7 @@ def analyse_te(
         te = te - encoder_eccentricity.arcsec(out)
         u_ecc = encoder_eccentricity.u_arcsec
         ecc_record = {"removed": True, "method": "reversal (coupling indexed by 180 deg), "
-                      "subtracted as A sin(theta_out + p)", **encoder_eccentricity.to_dict()}
+                      "subtracted as A cos(theta_out + p)", **encoder_eccentricity.to_dict()}
     else:
         ecc_record = {"removed": False, "method": "none: no calibrated encoder eccentricity; "
                       "the once-per-output-turn order holds the encoder's term too"}

@@ -14,8 +14,8 @@ flips sign, so with the fitted order-1 phasors ``Z_A = E + U`` and ``Z_B = E - U
 each with standard uncertainty ``sqrt(u_A^2 + u_B^2) / 2``. ``E`` is stored with the output
 encoder's calibration (rig configuration ``[calibration.encoder]`` ``eccentricity_arcsec``,
 ``eccentricity_phase_deg``, ``eccentricity_u_arcsec``) and subtracted from every later run:
-``TE - E_A sin(theta_enc + E_p)``. Phasors follow :mod:`analysis.transmission.orders`
-(``A sin(phi + p)``, ``A exp(i p)``).
+``TE - E_A cos(theta_enc + E_p)``. Phasors follow :mod:`analysis.transmission.orders`
+(``A cos(phi + p)``, ``A exp(i p)``).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import numpy as np
 
 @dataclass(frozen=True)
 class EncoderEccentricity:
-    """The encoder's once-per-turn error ``amplitude_arcsec sin(theta_enc + phase_deg)`` and
+    """The encoder's once-per-turn error ``amplitude_arcsec cos(theta_enc + phase_deg)`` and
     the standard uncertainty of its amplitude (arcsec, each phasor component)."""
 
     amplitude_arcsec: float
@@ -39,7 +39,7 @@ class EncoderEccentricity:
 
     def arcsec(self, output_angle_deg: np.ndarray) -> np.ndarray:
         """The encoder's error (arcsec) at its reading ``output_angle_deg``."""
-        return self.amplitude_arcsec * np.sin(np.radians(output_angle_deg)
+        return self.amplitude_arcsec * np.cos(np.radians(output_angle_deg)
                                               + math.radians(self.phase_deg))
 
     def to_dict(self) -> dict[str, Any]:

@@ -87,11 +87,11 @@ def _order_basis(orders: list[Order], out_deg: np.ndarray, in_deg: np.ndarray,
 
 def _orders_of(curves: np.ndarray, solver: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Amplitudes and phases (deg) of the orders in each row of ``curves`` (least squares,
-    the measurement's convention ``A sin(k phi + p)``); ``solver``: the pseudo-inverse of the
+    the measurement's convention ``A cos(k phi + p)``); ``solver``: the pseudo-inverse of the
     orders' basis (:func:`_order_basis`)."""
     beta = solver @ np.atleast_2d(curves).T
     a, b = beta[1::2], beta[2::2]
-    return np.hypot(a, b).T, np.degrees(np.arctan2(b, a)).T
+    return np.hypot(a, b).T, np.degrees(np.arctan2(-a, b)).T
 
 
 def _summarise(name: str, kin: Kinematics, grid_out_deg: np.ndarray, grid_in_deg: np.ndarray,

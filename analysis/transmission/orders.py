@@ -3,10 +3,11 @@
 An order ``k`` ``per`` a member is ``k`` cycles per revolution of that member: ``output_rev``
 (the output angle), ``input_rev`` (the input angle), ``crank`` (the crank shaft, turning
 ``crank_per_input`` times per input revolution) and ``mesh`` (the tooth mesh, ``mesh_per_input``
-engagements per input revolution). Each term is ``A sin(k phi + p)`` with ``phi`` the member's
-own angle from its encoder (``phi_input = input angle``, ``phi_output = output angle``,
-``phi_crank = crank_per_input * input``, ``phi_mesh = mesh_per_input * input``), as seed 003
-writes its sources (``Im(W exp(i (nu psi + p)))``). Fitted on the samples themselves (not on a
+engagements per input revolution). Each term is ``A cos(k phi + p)`` (the Fourier convention
+of the simulated plant's truth) with ``phi`` the member's own angle from its encoder
+(``phi_input = input angle``, ``phi_output = output angle``, ``phi_crank = crank_per_input *
+input``, ``phi_mesh = mesh_per_input * input``); seed 003's ``Im(W exp(i (nu psi + p)))`` is
+the same term 90 deg later. Fitted on the samples themselves (not on a
 folded grid), so an order that does not repeat once per output revolution (a non-integer
 ratio) and a record that is not a whole number of revolutions are fitted without leakage,
 unlike a raw FFT; the normal equations are accumulated by chunks (1M samples in bounded
@@ -39,7 +40,7 @@ class Order:
 
 @dataclass(frozen=True)
 class OrderFit:
-    """Fitted ``A sin(k phi + p)``: amplitude (arcsec) and phase (deg) with standard
+    """Fitted ``A cos(k phi + p)``: amplitude (arcsec) and phase (deg) with standard
     uncertainties from the least-squares covariance."""
 
     order: Order
@@ -135,9 +136,9 @@ def fit_orders(output_deg: np.ndarray, input_deg: np.ndarray, te_arcsec: np.ndar
     cov = cov_unscaled * sigma**2
     fits = []
     for j, o in enumerate(orders):
-        a, b = beta[1 + 2 * j], beta[2 + 2 * j]  # a sin + b cos = A sin(phi + p)
+        a, b = beta[1 + 2 * j], beta[2 + 2 * j]  # a sin + b cos = A cos(phi + p)
         amp = float(np.hypot(a, b))
-        phase = float(np.degrees(np.arctan2(b, a)))
+        phase = float(np.degrees(np.arctan2(-a, b)))
         c = cov[1 + 2 * j: 3 + 2 * j, 1 + 2 * j: 3 + 2 * j]
         u_amp = float(np.sqrt(max(c[0, 0] + c[1, 1], 0.0) / 2.0))
         u_phase = float(np.degrees(u_amp / amp)) if amp > 0 else 180.0

@@ -149,9 +149,8 @@ class InputMotorModel:
             elif command == InputMotorCommand.STOP:
                 self.turning = False
                 stop = getattr(self.plant, "stop_input", None)
-                if stop is not None:
-                    stop()
-                self.commanded_deg = self.target_deg = self.plant.snapshot().input_angle_deg
+                held = stop() if stop is not None else self.plant.snapshot().input_angle_deg
+                self.commanded_deg = self.target_deg = float(held)
             elif command != InputMotorCommand.NONE:
                 return ExcCodes.ILLEGAL_VALUE
         return None

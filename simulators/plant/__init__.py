@@ -190,9 +190,10 @@ class GearPlant:
             self._model.input_speed_deg_s = self.config.rig.input_speed_deg_per_s
             self._model.input_target_deg = value
 
-    def turn_input(self, speed_deg_per_s: float) -> None:
+    def turn_input(self, speed_deg_per_s: float) -> float:
         """Turn the eccentric shaft (input) at a constant speed (deg/s; the sign is the
-        direction, + forward) until :meth:`stop_input` or :meth:`lock_input_at`."""
+        direction, + forward) until :meth:`stop_input` or :meth:`lock_input_at`; 0 stops
+        it. Returns the input angle (deg) at the command."""
         value = float(speed_deg_per_s)
         if not math.isfinite(value):
             raise ValueError(f"input speed must be a finite number of deg/s, got "
@@ -202,13 +203,14 @@ class GearPlant:
             m = self._model
             if value == 0.0:
                 m.input_target_deg = m.input_deg
-                return
-            m.input_speed_deg_s = abs(value)
-            m.input_target_deg = math.copysign(math.inf, value)
+            else:
+                m.input_speed_deg_s = abs(value)
+                m.input_target_deg = math.copysign(math.inf, value)
+            return m.input_deg
 
-    def stop_input(self) -> None:
-        """Stop the input where it is (and hold it there)."""
-        self.turn_input(0.0)
+    def stop_input(self) -> float:
+        """Stop the input where it is and hold it there; returns that angle (deg)."""
+        return self.turn_input(0.0)
 
     def input_speed_deg_per_s(self) -> float:
         """The input's speed now (deg/s, signed; 0 when it stands or is locked)."""

@@ -161,6 +161,9 @@ class ToothSpacingErrorConfig(_Effect):
     thickness_error_um_rms: float = Field(2.0, ge=0)
     pitch_error_um_rms: float = Field(3.0, ge=0)
     seed: int = 7
+    transition_fraction: float = Field(0.0, ge=0, le=1)
+    """Share of each tooth pitch over which the load passes linearly to the next tooth pair
+    (the double contact of a contact ratio above 1); 0: a step at the pitch boundary."""
     thickness_internal_um: list[float] | None = None
     thickness_external_um: list[float] | None = None
     pitch_internal_um: list[float] | None = None

@@ -150,6 +150,7 @@ class MeshGeometry:
     bearing_play_um: float
     thermal_um_per_K: float
     thermal_reference_C: float
+    spacing_transition: float = 0.0
     kinematic_on: bool = False
     kinematic_internal_um: float = 0.0
     kinematic_external_um: float = 0.0
@@ -209,6 +210,7 @@ class MeshGeometry:
             pitch_external_um=pitch_ext, bearing_play_um=bearing_um,
             thermal_um_per_K=th.coefficient_um_per_K if th.enabled else 0.0,
             thermal_reference_C=th.reference_C,
+            spacing_transition=sp.transition_fraction if sp.enabled else 0.0,
             kinematic_on=ke.enabled, kinematic_internal_um=ke_int,
             kinematic_external_um=ke_ext,
             kinematic_internal_phase_rad=math.radians(ke.internal_phase_deg),
@@ -248,19 +250,38 @@ class MeshGeometry:
         n = math.floor(input_angle_deg * self.z_internal / 360.0 + 1e-9)
         return n, n % self.z_internal, n % self.z_external
 
+    def _handover(self, input_angle_deg: float) -> tuple[int, int, int, int, float]:
+        """(ring tooth, pinion tooth, next ring tooth, next pinion tooth, weight of the next
+        pair): over the last ``spacing_transition`` of each tooth pitch the load passes
+        linearly to the next pair (0: a step at the pitch boundary)."""
+        n, i, j = self.tooth_pair(input_angle_deg)
+        w = 0.0
+        tr = self.spacing_transition
+        if tr > 0.0:
+            frac = input_angle_deg * self.z_internal / 360.0 + 1e-9 - n
+            w = min(max((frac - (1.0 - tr)) / tr, 0.0), 1.0)
+        return i, j, (n + 1) % self.z_internal, (n + 1) % self.z_external, w
+
     def spacing_play_um(self, input_angle_deg: float) -> float:
         """Play change (um) of the tooth pair in mesh: sum of the two thickness deviations."""
         if not self.spacing_on:
             return 0.0
-        _, i, j = self.tooth_pair(input_angle_deg)
-        return float(self.thickness_internal_um[i] + self.thickness_external_um[j])
+        i, j, i2, j2, w = self._handover(input_angle_deg)
+        value = self.thickness_internal_um[i] + self.thickness_external_um[j]
+        if w:
+            value += w * (self.thickness_internal_um[i2] + self.thickness_external_um[j2]
+                          - value)
+        return float(value)
 
     def pitch_offset_um(self, input_angle_deg: float) -> float:
         """Shift of both flanks (um on the reference circle) of the tooth pair in mesh."""
         if not self.spacing_on:
             return 0.0
-        _, i, j = self.tooth_pair(input_angle_deg)
-        return float(self.pitch_internal_um[i] - self.pitch_external_um[j])
+        i, j, i2, j2, w = self._handover(input_angle_deg)
+        value = self.pitch_internal_um[i] - self.pitch_external_um[j]
+        if w:
+            value += w * (self.pitch_internal_um[i2] - self.pitch_external_um[j2] - value)
+        return float(value)
 
     @property
     def ratio(self) -> float:

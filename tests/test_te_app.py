@@ -39,6 +39,7 @@ def test_rig_analyse_json_of_a_te_run(te_folder: Path, tmp_path: Path) -> None:
     res = _rig("analyse", str(te_folder), "--json", str(out), "--plot", str(tmp_path / "te.png"))
     assert res.returncode == 0, res.stderr
     assert "Transmission error" in res.stdout and "F'i (ISO 1328)" in res.stdout
+    assert "…" not in res.stdout and max(map(len, res.stdout.splitlines())) <= 80
     d = json.loads(out.read_text())
     assert d["test_kind"] == "transmission_error"
     m = d["metrics"]
@@ -149,6 +150,10 @@ def test_spc_charts_te_peak_to_peak(tmp_path: Path) -> None:
     assert [p["verdict"] for p in te["points"]][3] == "NOT OK"
     assert te["chart"]["individuals"]["centre"] == pytest.approx(np.mean(values))
     assert d["metrics"]["lost_motion_arcmin"]["points"] == []
+    from rig.spc.html import render_html
+
+    page = render_html(spc_report(st))
+    assert 'data-metric="te_pp_arcsec"' in page and page.count("data:image/png;base64,") == 1
 
 
 def test_export_of_a_te_run_round_trips(te_folder: Path, tmp_path: Path) -> None:
@@ -182,8 +187,13 @@ def test_encoder_eccentricity_calibrated_by_reversal_is_removed(tmp_path: Path) 
     from rig.calibration import CalibrationEntry
 
     ecc = {"ecc_arcsec": 20.0, "ecc_phase_deg": 50.0}
-    cal = reversal_calibration(te_run("a", index_deg=0.0, **ecc),
-                               te_run("b", index_deg=180.0, seed=1, **ecc))
+    write_run(te_run("a", index_deg=0.0, **ecc), tmp_path / "a")
+    write_run(te_run("b", index_deg=180.0, seed=1, **ecc), tmp_path / "b")
+    res = _rig("te-calibrate", str(tmp_path / "a"), str(tmp_path / "b"), "--json", "-")
+    assert res.returncode == 0, res.stderr
+    cal = json.loads(res.stdout)
+    assert "[calibration.encoder]" in res.stderr and "eccentricity_arcsec = 20.0" in res.stderr
+    assert cal == reversal_calibration(read_run(tmp_path / "a"), read_run(tmp_path / "b"))
     assert cal["eccentricity_arcsec"] == pytest.approx(20.0, abs=0.3)
     assert cal["eccentricity_phase_deg"] == pytest.approx(-40.0, abs=1.0)  # cos(x - 40)
     entry = CalibrationEntry(id="ENC-1", certificate="reversal 2026-11-26", date="2026-11-26",

@@ -217,3 +217,19 @@ def test_encoder_eccentricity_calibrated_by_reversal_is_removed(tmp_path: Path) 
     assert fixed.result.metrics["te_pp_arcsec"] == pytest.approx(truth_pp_arcsec(), rel=0.02)
     removed = raw.te_frame()["te_forward_arcsec"] - fixed.te_frame()["te_forward_arcsec"]
     assert np.ptp(removed) == pytest.approx(40.0, abs=1.0)  # the 20 arcsec sinusoid
+
+
+def test_reanalyse_of_a_stored_te_run(tmp_path: Path) -> None:
+    from rig.reanalyse import plan, run_job
+    from rig.store import Store
+
+    st = Store(tmp_path / "store")
+    store_te_unit(st, "R-1", limits={"te_pp_max_arcsec": 400.0})
+    jobs, _ = plan(st)
+    (job,) = [j for j in jobs if j.kind == "run"]
+    out = run_job(job)
+    assert out["status"] == "ok", out["error"]
+    recorded = st.list_runs()[0]
+    assert out["metrics"]["te_pp_arcsec"] == pytest.approx(
+        recorded.metrics["te_pp_arcsec"])
+    assert out["metrics"]["encoder_eccentricity"]["removed"] is False

@@ -45,7 +45,13 @@ from analysis.transmission.figures import (
     tooth_to_tooth_arcsec,
     total_composite_arcsec,
 )
-from analysis.transmission.orders import Order, OrderFit, fit_orders, standard_orders
+from analysis.transmission.orders import (
+    Order,
+    OrderFit,
+    fit_orders,
+    order_number,
+    standard_orders,
+)
 
 ARCSEC_PER_REV = 1_296_000.0
 METRIC_KEYS = ("te_pp_arcsec", "te_pp_forward_arcsec", "te_pp_reverse_arcsec",
@@ -92,7 +98,7 @@ class TEResult:
 
     def orders_list(self) -> list[dict[str, Any]]:
         """``te_orders`` of run-format.md (one entry per order and direction)."""
-        return [{"order": f.order.order, "per": f.order.per,
+        return [{"order": order_number(f.order.order), "per": f.order.per,
                  "frequency_per_output_rev": f.order.frequency,
                  "amplitude_arcsec": f.amplitude_arcsec, "phase_deg": f.phase_deg,
                  "direction": DIRECTIONS[d], "source": f.order.source}
@@ -100,7 +106,7 @@ class TEResult:
 
     def orders_u_list(self) -> list[dict[str, Any]]:
         """``te_orders_u``: the standard uncertainties, entry by entry."""
-        return [{"order": f.order.order, "per": f.order.per,
+        return [{"order": order_number(f.order.order), "per": f.order.per,
                  "amplitude_arcsec": f.amplitude_u_arcsec, "phase_deg": f.phase_u_deg,
                  "direction": DIRECTIONS[d]} for d, f in self.orders]
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from analysis.errors import AnalysisError
 from analysis.transmission.analyse import Kinematics
-from analysis.transmission.orders import Order, standard_orders
+from analysis.transmission.orders import Order, order_number, standard_orders
 
 BAND_PERCENTILES = (0.5, 99.5)
 BAND_SAMPLES = 1000
@@ -126,7 +126,7 @@ def _summarise(name: str, kin: Kinematics, grid_out_deg: np.ndarray, grid_in_deg
     for s in (1, -1):
         amp, ph = _orders_of(nominal[s], solver)
         for j, o in enumerate(orders):
-            order_list.append({"order": o.order, "per": o.per,
+            order_list.append({"order": order_number(o.order), "per": o.per,
                                "frequency_per_output_rev": o.frequency,
                                "amplitude_arcsec": float(amp[0, j]),
                                "phase_deg": float(ph[0, j]) if phases_known else None,

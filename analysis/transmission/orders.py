@@ -27,6 +27,11 @@ PERS = ("output_rev", "input_rev", "crank", "mesh")
 CHUNK = 131_072
 
 
+def order_number(order: float) -> int | float:
+    """An order as JSON shows it: a whole number as an int (9, not 9.0)."""
+    return int(order) if float(order).is_integer() else float(order)
+
+
 @dataclass(frozen=True)
 class Order:
     """An order to fit: ``order`` cycles per revolution of ``per``; ``frequency`` in cycles per

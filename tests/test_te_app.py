@@ -233,3 +233,21 @@ def test_reanalyse_of_a_stored_te_run(tmp_path: Path) -> None:
     assert out["metrics"]["te_pp_arcsec"] == pytest.approx(
         recorded.metrics["te_pp_arcsec"])
     assert out["metrics"]["encoder_eccentricity"]["removed"] is False
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    (lambda run: run.meta["test"].pop("ratio"), "test.ratio missing"),
+    (lambda run: run.meta["test"].update(output_revolutions=0.5), None),
+])
+def test_bad_te_runs_are_one_line_errors(tmp_path: Path, change, message) -> None:
+    run = te_run("bad", samples_per_output_rev=3000)
+    change(run)
+    if message is None:  # scaled to 0.44 output revolutions each way: too short a TE run
+        run.data["input_angle_deg"] = run.data["input_angle_deg"] * 0.4
+        run.data["output_angle_deg"] = run.data["output_angle_deg"] * 0.4
+        message = "full output revolution"
+    folder = write_run(run, tmp_path / "bad")
+    res = _rig("analyse", str(folder))
+    assert res.returncode == 2
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0] and "bad" in lines[0], res.stderr

@@ -87,7 +87,7 @@ FAST = PARAMS.model_copy(update={"input_speed_rpm": 240.0, "output_revolutions":
 Inject = Any
 FAULTS: dict[str, tuple[Inject, tuple[str, ...], str]] = {
     "input stall": (lambda s: s.modbus_server.input_motor.stall(), ("input motor",), "stall"),
-    "input overspeed": (lambda s: s.modbus_server.input_motor.overspeed(1.6),
+    "input overspeed": (lambda s: s.modbus_server.input_motor.overspeed(2.2),
                         ("input motor",), "overspeed"),
     "output encoder count jump": (lambda s: s.backdoors["encoder"].jump(40_000),
                                   ("output encoder",), "count jump"),

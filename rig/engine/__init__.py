@@ -66,8 +66,10 @@ UNRECORDED_MAX_ROWS = 500_000
 """Rows kept of a run's preparation (pre-cycles, preload) before its recording begins: the
 newest ~33 min at 250 Hz, kept in an aborted run if the plan stops before the recording."""
 JUMP_GAP_S = 0.03
-"""Two rows of a transmission error run further apart than this (s) are not compared for an
-encoder count jump (a gap: rows left out unpaired, or a stalled PC)."""
+JUMP_GAP_TOLERANCE_DEG = 0.5
+"""Two rows of a transmission error run further apart than ``JUMP_GAP_S`` (s: rows left out
+unpaired, or a stalled PC) are a count jump only beyond this much more TE change (output
+deg): the unit's own TE may have moved meanwhile, by far less."""
 STORE_RETRY_PERIOD_S = 1.0
 """While the store's database is away, the engine (paused, drive disabled) tries it this
 often (s)."""
@@ -802,22 +804,23 @@ class Engine:
         either encoder is the whole jump). The encoder named is the one whose change is
         further from the motion expected at the set speed."""
         dt = row.t_mono_s - prev.t_mono_s
-        if dt > JUMP_GAP_S:  # a gap in the rows (left out, or a stalled PC): not judged
-            return
         d_out = row.output_angle_deg - prev.output_angle_deg
         d_in = row.input_angle_deg - prev.input_angle_deg
         d_te = d_out - d_in / step.ratio
         # the tolerance, plus 1.5 samples of output motion: a sample the PC paired with its
-        # neighbour's SYNC (a loaded PC) is not a jump
-        if not abs(d_te) > step.jump_tolerance_deg + 1.5 * abs(out_rate) * dt:
+        # neighbour's SYNC (a loaded PC) is not a jump; across a gap in the rows (left out,
+        # or a stalled PC) the unit's own TE may have moved: only a gross change counts
+        tolerance = step.jump_tolerance_deg + 1.5 * abs(out_rate) * min(dt, JUMP_GAP_S)
+        if dt > JUMP_GAP_S:
+            tolerance += JUMP_GAP_TOLERANCE_DEG
+        if not abs(d_te) > tolerance:
             return
         off_out = abs(d_out - out_rate * dt)
         off_in = abs(d_in - in_rate * dt) / abs(step.ratio)
         name, change = (("output encoder", d_out) if off_out >= off_in
                         else ("input encoder", d_in))
         raise DeviceFault(name, f"the output to follow the input within "
-                          f"{step.jump_tolerance_deg + 1.5 * abs(out_rate) * dt:.3g} deg "
-                          "between two samples "
+                          f"{tolerance:.3g} deg between two samples "
                           f"{dt * 1000:.1f} ms apart", f"a change of {d_te:+.4g} deg of the "
                           f"transmission error ({name} {change:+.4g} deg): an encoder count "
                           "jump")
@@ -834,6 +837,10 @@ class Engine:
         moved_out = abs(last.output_angle_deg - first.output_angle_deg)
         want_in, want_out = abs(in_rate) * span, abs(out_rate) * span
         rpm = moved_in / span / 6.0
+        if len(window) >= 5:  # the least-squares speed: one misplaced time does not count
+            t = np.array([r.t_mono_s for r in window])
+            a = np.array([r.input_angle_deg for r in window])
+            rpm = abs(float(np.polyfit(t - t[0], a, 1)[0])) / 6.0
         if moved_in < step.stall_share * want_in:
             raise DeviceFault("input motor", f"the input turning at {step.speed_rpm:g} rpm",
                               f"{rpm:.3g} rpm over {span:.2f} s (input encoder): a stall")
@@ -842,7 +849,7 @@ class Engine:
                               f"{step.speed_rpm / abs(step.ratio):.3g} rpm",
                               f"{moved_out / span / 6.0:.3g} rpm over {span:.2f} s while the "
                               "input turns: a frozen output encoder or a broken unit")
-        if moved_in > step.overspeed_factor * want_in:
+        if rpm > step.overspeed_factor * step.speed_rpm:
             raise DeviceFault("input motor", f"at most {step.overspeed_factor:g} x "
                               f"{step.speed_rpm:g} rpm", f"{rpm:.4g} rpm over {span:.2f} s "
                               "(input encoder): an overspeed")

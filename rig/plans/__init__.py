@@ -348,7 +348,7 @@ class TEParams(BaseModel):
     lead_in_output_deg: float = Field(10.0, ge=0, le=360)
     brake_rate_Nm_per_s: float = Field(20.0, gt=0)
     stall_s: float = Field(0.5, gt=0)
-    overspeed_factor: float = Field(1.25, gt=1)
+    overspeed_factor: float = Field(1.5, gt=1)
     jump_tolerance_deg: float = Field(0.1, gt=0)
     zero_window_s: float = Field(0.2, gt=0)
 
@@ -396,6 +396,20 @@ class TEParams(BaseModel):
                          jump_tolerance_deg=self.jump_tolerance_deg)
 
 
+def unit_ratio(unit: dict[str, Any]) -> float | None:
+    """The signed reduction ratio of docs/run-format.md from a run.json ``unit``: for an
+    internal involute pair whose output is the external gear, ``-z_external / (z_internal -
+    z_external)`` (-8 for 45/40); ``unit.ratio`` when given; else None."""
+    given = unit.get("ratio")
+    if isinstance(given, int | float) and not isinstance(given, bool) and given:
+        return float(given)
+    z1, z2 = unit.get("z_internal"), unit.get("z_external")
+    if (unit.get("kind", "internal_involute") == "internal_involute"
+            and isinstance(z1, int) and isinstance(z2, int) and z1 > z2 > 0):
+        return -z2 / (z1 - z2)
+    return None
+
+
 def te_label(p: TEParams, repeat: int = 0, temperature_C: float | None = None) -> str:
     """``[T25C-]te-s120-b20-r0``: speed (rpm), brake (% of rated), repeat."""
     temp = "" if temperature_C is None else f"T{_num(temperature_C, 0)}C-"
@@ -424,3 +438,23 @@ def te_plan(p: TEParams, repeats: int = 1) -> Plan:
             yield from te_run(p, te_label(p, k), {"repeat": k})
 
     return Plan(TE_KIND, {"te": p.model_dump(), "repeats": repeats}, build)
+
+
+def te_campaign_plan(p: TEParams, axes: CampaignAxes) -> Plan:
+    """A campaign of transmission error runs: temperatures (outer) x repeats."""
+
+    def build() -> Iterator[Step]:
+        temps: list[float | None] = list(axes.temperatures_C) or [None]
+        for temp in temps:
+            if temp is not None:
+                yield SetAmbient(temp)
+                yield WaitTemperature(temp, axes.temperature_tolerance_C,
+                                      axes.temperature_timeout_s)
+            for k in range(axes.repeats):
+                test: dict[str, Any] = {"repeat": k}
+                if temp is not None:
+                    test["temperature_setpoint_C"] = temp
+                yield from te_run(p, te_label(p, k, temp), test)
+
+    return Plan(f"{TE_KIND}-campaign", {"te": p.model_dump(), "axes": axes.model_dump()},
+                build)

@@ -163,7 +163,7 @@ class TurnInput:
     brake_rate_Nm_per_s: float = 20.0
     stall_s: float = 0.5
     stall_share: float = 0.2
-    overspeed_factor: float = 1.25
+    overspeed_factor: float = 1.5
     jump_tolerance_deg: float = 0.1
     timeout_factor: float = 3.0
 

@@ -44,13 +44,16 @@ class CampaignError(RigError):
 
 class Limits(BaseModel):
     """Pass/fail limits; None = not checked. Lost motion and backlash in arcmin (at most),
-    stiffness in N*m/arcmin (at least)."""
+    stiffness in N*m/arcmin (at least); a transmission error run's peak-to-peak TE in arcsec
+    and its two-direction hysteresis in arcmin (at most)."""
 
     model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 
     lost_motion_arcmin_max: float | None = Field(None, gt=0)
     backlash_arcmin_max: float | None = Field(None, gt=0)
     stiffness_Nm_per_arcmin_min: float | None = Field(None, gt=0)
+    te_pp_max_arcsec: float | None = Field(None, gt=0)
+    te_hysteresis_max_arcmin: float | None = Field(None, gt=0)
 
     def check(self, run: dict[str, Any]) -> list[str]:
         """The causes of failure of one run's metrics (empty: passed; a metric the run's

@@ -66,6 +66,7 @@ UNRECORDED_MAX_ROWS = 500_000
 """Rows kept of a run's preparation (pre-cycles, preload) before its recording begins: the
 newest ~33 min at 250 Hz, kept in an aborted run if the plan stops before the recording."""
 JUMP_GAP_S = 0.03
+JUMP_MIN_DT_S = 5e-4
 JUMP_GAP_TOLERANCE_DEG = 0.5
 """Two rows of a transmission error run further apart than ``JUMP_GAP_S`` (s: rows left out
 unpaired, or a stalled PC) are a count jump only beyond this much more TE change (output
@@ -804,6 +805,8 @@ class Engine:
         either encoder is the whole jump). The encoder named is the one whose change is
         further from the motion expected at the set speed."""
         dt = row.t_mono_s - prev.t_mono_s
+        if dt < JUMP_MIN_DT_S:  # two samples given (nearly) one SYNC's time: not judged
+            return
         d_out = row.output_angle_deg - prev.output_angle_deg
         d_in = row.input_angle_deg - prev.input_angle_deg
         d_te = d_out - d_in / step.ratio

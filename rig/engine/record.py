@@ -182,7 +182,9 @@ class OpenRun:
 
     def _finish_te(self, result: dict[str, Any], test: dict[str, Any]) -> RunOutcome:
         """A transmission error run: the raw TE figures (rig/te_curve.py) under
-        ``result.te_raw``; closed as completed."""
+        ``result.te_raw``, and the analysis of rig/te.py (metrics, uncertainties, the model;
+        run-format.md's ``result``); closed as completed."""
+        from rig.te import analyse_te_run
         from rig.te_curve import te_summary
 
         analysis: dict[str, Any] = {}
@@ -190,10 +192,21 @@ class OpenRun:
             data = {c: np.asarray(v, dtype=float) for c, v in self.data.items()}
             if "direction" not in data or "input_angle_deg" not in data:
                 raise RigError("a transmission error run needs input_angle_deg and direction")
-            analysis = json_safe({"te_raw": te_summary(data, float(test["ratio"]))})
-            result["te_raw"] = analysis["te_raw"]
-        except (RigError, ValueError, KeyError) as exc:
+            raw = json_safe(te_summary(data, float(test["ratio"])))
+            result["te_raw"] = raw
+            analysis["te_raw"] = raw
+            item = analyse_te_run(self._run())
+            record = item.result_record()
+            result.update(record)
+            metrics = item.metrics_dict()
+            analysis.update(json_safe({**metrics, "uncertainty": record["uncertainty"],
+                                       "model": record["model"],
+                                       "comparison": item.comparison,
+                                       "encoder_eccentricity": record["encoder_eccentricity"],
+                                       "test_kind": "transmission_error"}))
+        except (AnalysisError, RigError, ValueError, KeyError) as exc:
             result["analysis_error"] = str(exc)
+            log.warning("run %s: not analysed: %s", self.recorder.run_id, exc)
         verdict = self._verdict("completed", None, result)
         self.recorder.finish("completed", result=json_safe(result), extra={"outcome": verdict})
         return self._outcome("completed", None, analysis, result, verdict)

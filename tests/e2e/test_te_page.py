@@ -17,11 +17,6 @@ from pathlib import Path
 
 import pytest
 from playwright.sync_api import expect, sync_playwright
-
-from rig.campaign import SimulationSection
-from rig.measure import plant_config_for, write_plant_toml
-from rig.simrig import SimulatedRig
-from simulators.plant.config import load_plant_config
 from test_control_page import (
     ARTIFACTS,
     CHROMIUM,
@@ -29,6 +24,11 @@ from test_control_page import (
     get_json,
     launch_browser,
 )
+
+from rig.campaign import SimulationSection
+from rig.measure import plant_config_for, write_plant_toml
+from rig.simrig import SimulatedRig
+from simulators.plant.config import load_plant_config
 
 pytestmark = [
     pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed"),
@@ -80,7 +80,7 @@ def test_operator_measures_the_transmission_error(tmp_path: Path):
         errors: list[str] = []
         page.on("pageerror", lambda exc: errors.append(str(exc)))
         page.goto(link)
-        expect(page.locator("#role")).to_have_text("operator")
+        expect(page.locator("#role")).to_have_text("operator", timeout=60_000)
         expect(page.locator("#state")).to_have_text("idle", timeout=90_000)
         expect(page.locator("#te-panel")).to_be_hidden()
 

@@ -1095,37 +1095,6 @@ async function logIn() {
   } else if (lastStatus) notice("logged in as operator", false);
 }
 
-async function init() {
-  plot = makePlot();
-  tePlot = makeTEPlot();
-  showTestFields();
-  window.rigPage = { plot, live, scheduleDraw, addRows };
-  wire();
-  try {
-    units = await api("GET", "/api/units");
-    const sel = $("unit-example");
-    for (const u of units) {
-      const o = document.createElement("option");
-      o.value = u.name; o.textContent = u.name;
-      sel.appendChild(o);
-    }
-    if (units.length) fillUnit(units[0].unit);
-  } catch (e) { notice("units: " + e.message, true); }
-  await loadOutcomeWords();
-  await loadCampaignNames();
-  restoreSetup();
-  validateForm();
-  connectLive();
-  await refreshStatus();
-  if (token() && lastStatus && !lastStatus.operator)
-    notice("wrong operator token: this page can only watch. Log out and use the token printed by rig serve", true);
-  refreshHistory();
-  setInterval(refreshStatus, STATUS_POLL_MS);
-  previewPlan().catch(() => {});
-}
-
-init();
-
 // ---------------------------------------------------------------- transmission error
 // The live TE plot: TE = 3600 (output - input / ratio) against the output angle modulo 360
 // (docs/run-format.md), each direction less its running mean (c_d); the rig sends the raw
@@ -1204,3 +1173,34 @@ function showTEResult(run, limits) {
     ? "the run's analysis (encoder eccentricity removed as documented); the plot: the raw TE"
     : "raw TE (docs/run-format.md), nothing removed";
 }
+
+async function init() {
+  plot = makePlot();
+  tePlot = makeTEPlot();
+  showTestFields();
+  window.rigPage = { plot, live, scheduleDraw, addRows };
+  wire();
+  try {
+    units = await api("GET", "/api/units");
+    const sel = $("unit-example");
+    for (const u of units) {
+      const o = document.createElement("option");
+      o.value = u.name; o.textContent = u.name;
+      sel.appendChild(o);
+    }
+    if (units.length) fillUnit(units[0].unit);
+  } catch (e) { notice("units: " + e.message, true); }
+  await loadOutcomeWords();
+  await loadCampaignNames();
+  restoreSetup();
+  validateForm();
+  connectLive();
+  await refreshStatus();
+  if (token() && lastStatus && !lastStatus.operator)
+    notice("wrong operator token: this page can only watch. Log out and use the token printed by rig serve", true);
+  refreshHistory();
+  setInterval(refreshStatus, STATUS_POLL_MS);
+  previewPlan().catch(() => {});
+}
+
+init();

@@ -1112,8 +1112,9 @@ function makeTEPlot() {
     axes: [axis("output angle (deg)"), axis("transmission error (arcsec)")],
     legend: { show: true, live: false },
     series: [{},
-      { label: "forward", stroke: "#1f5fbf", width: 1, paths: uPlot.paths.linear(), points: { show: false }, facets },
-      { label: "reverse", stroke: "#c0392b", width: 1, paths: uPlot.paths.linear(), points: { show: false }, facets }],
+      // points, not lines: the output angle wraps at 360 deg
+      { label: "forward", stroke: "#1f5fbf", fill: "#1f5fbf", paths: uPlot.paths.points(), points: { show: true, size: 3 }, facets },
+      { label: "reverse", stroke: "#c0392b", fill: "#c0392b", paths: uPlot.paths.points(), points: { show: true, size: 3 }, facets }],
   }, [null, [[], []], [[], []]], el);
 }
 

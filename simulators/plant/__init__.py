@@ -111,7 +111,7 @@ class GearPlant:
         at_monotonic = getattr(self.clock, "at_monotonic", None)
         if at_monotonic is None:
             return self.snapshot()
-        t = at_monotonic(float(t_mono_s))
+        t = at_monotonic(float(t_mono_s)) - self._t0  # the plant's time, as _advance's
         with self._lock:
             now = self._advance()
             if not t < now:

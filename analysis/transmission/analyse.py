@@ -166,7 +166,8 @@ def analyse_te(
 
     revs_seen = np.ptp(out[np.isfinite(out)]) / 360.0 if np.isfinite(out).any() else 0.0
     mesh_out = (kinematics.mesh_per_input * abs(ratio)) if kinematics.mesh_per_input else None
-    n = n_grid or grid_size(mesh_out, out.size / max(revs_seen, 1e-9))
+    per_direction = max(int(np.count_nonzero(d != 0)) / 2.0, 1.0)  # samples of one direction
+    n = n_grid or grid_size(mesh_out, per_direction / max(revs_seen, 1e-9))
     curves: dict[int, DirectionCurve] = {}
     masks: dict[int, np.ndarray] = {}
     for code in (1, -1):

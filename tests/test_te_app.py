@@ -134,6 +134,29 @@ def test_certificate_of_a_te_run_has_its_section_on_one_page(tmp_path: Path) -> 
     assert "Pages:           1" in info.stdout
 
 
+def test_certificate_of_a_te_campaign(tmp_path: Path) -> None:
+    from rig.runformat import Campaign, write_campaign
+
+    runs = [te_run("te-a", samples_per_output_rev=4000),
+            te_run("te-b", scale=1.6, samples_per_output_rev=4000, seed=1)]
+    folder = write_campaign(Campaign(meta={"name": "te-camp", "status": "completed",
+                                           "unit": runs[0].unit,
+                                           "limits": {"te_pp_max_arcsec": 350.0}},
+                                     runs=runs), tmp_path / "te-camp")
+    res = _rig("certificate", str(folder), "--pdf", str(tmp_path / "c.pdf"), "--html",
+               str(tmp_path / "c.html"))
+    assert res.returncode == 0, res.stderr
+    assert "NOT OK" in res.stdout  # te-b's eccentricities 1.6 times pair 1's: above 350
+    page = (tmp_path / "c.html").read_text()
+    assert "transmission error of a gear reducer, campaign of 2 runs" in page
+    assert "Transmission error against the output angle" in page
+    assert "Lost motion against input position" not in page
+    assert "te-a" in page and "te-b" in page and "limit ≤ 350 arcsec" in page
+    assert "not applicable" not in page
+    info = subprocess.run(["pdfinfo", str(tmp_path / "c.pdf")], capture_output=True, text=True)
+    assert "Pages:           1" in info.stdout
+
+
 def test_spc_charts_te_peak_to_peak(tmp_path: Path) -> None:
     from rig.spc import spc_report
     from rig.store import Store

@@ -62,6 +62,10 @@ TE_METRICS = (
     ("te_hysteresis_arcmin", "hysteresis (lost motion under the brake)", "arcmin", ".3f"),
 )
 """The metrics of a transmission error run's certificate (run-format.md)."""
+TE_CAMPAIGN_METRICS = tuple({m[0]: m for m in TE_METRICS}[k] for k in (
+    "te_pp_arcsec", "te_tooth_fi_arcsec", "te_hysteresis_arcmin", "te_pp_forward_arcsec",
+    "te_pp_reverse_arcsec", "te_total_Fi_arcsec"))
+"""The same, ordered for a campaign's table (its first three are its columns)."""
 LIMIT_OF_METRIC = {metric: (key, side) for key, (metric, side) in LIMIT_KEYS.items()}
 DIAGNOSIS_FORMAT = "rig-diagnosis/1"
 IN_HEADER = ("serial", "kind", "design")
@@ -473,7 +477,13 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
         summary = cmeta.get("summary") or {}
         ctx["header"] = header_fields(first, cmeta)
         limits = cmeta.get("limits") or summary.get("limits") or first.get("limits") or {}
-        run_outcomes = [_run_outcome(r.meta, limits) for r in runs]
+        te_camp = bool(runs) and all(is_te_record(r.meta) for r in runs)
+        metas = [r.meta for r in runs]
+        if te_camp:  # a transmission error campaign: each run's TE, the first one's curve
+            sections = [_te_section(r) for r in runs]
+            metas = [s.pop("meta") for s in sections]
+            ctx["te"] = sections[0]
+        run_outcomes = [_run_outcome(meta, limits) for meta in metas]
         outcome = recorded_campaign_outcome(
             cmeta.get("outcome") or summary.get("outcome"), limits,
             [o for o, _ in run_outcomes], str(cmeta.get("status") or "completed"))
@@ -487,13 +497,15 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
         ctx["runs"] = [{
             "label": r.meta.get("label") or r.run_id, "run_id": r.run_id,
             "position": _fmt((r.meta.get("test") or {}).get("input_angle_deg"), "g"),
-            "status": r.meta.get("status"), "metrics": {m["key"]: m for m in _metric_rows(r.meta)},
+            "status": r.meta.get("status"), "metrics": {m["key"]: m for m in _metric_rows(
+                meta, TE_CAMPAIGN_METRICS if te_camp else METRICS)},
             "outcome": OUTCOME_WORDS[o],
-        } for r, (o, _) in zip(runs, run_outcomes, strict=True)]
+        } for r, meta, (o, _) in zip(runs, metas, run_outcomes, strict=True)]
         for r in ctx["runs"]:
             r["below_any"] = any(m["below"] for m in r["metrics"].values())
         below = any(r["below_any"] for r in ctx["runs"])
-        ctx["position"] = _position_figure(campaign, runs, limits)
+        ctx["position"] = (_position_figure(campaign, runs, limits) if not te_camp
+                           else {"figure": None, "model": None, "band": None})
         lm = summary.get("lost_motion_arcmin") or {}
         ctx["lm_summary"] = {k: below_zero_text("lost_motion_arcmin", lm.get(k), None, "", "")
                              or _fmt(lm.get(k), ".3f") for k in ("mean", "min", "max", "std")}
@@ -528,7 +540,9 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
                             "limit": _limit_text(limits.get(LIMIT_OF_METRIC[k][0]),
                                                  LIMIT_OF_METRIC[k][1], u)
                             if k in LIMIT_OF_METRIC else None}
-                           for k, label, u, _ in (TE_METRICS if ctx["te"] else METRICS)]
+                           for k, label, u, _ in (
+                               (TE_CAMPAIGN_METRICS if is_camp else TE_METRICS) if ctx["te"]
+                               else METRICS)]
     ctx["limits"] = [h for h in ctx["metric_heads"] if h["limit"]]
     ctx["below_note"] = BELOW_NOTE if below else None
     ctx["outcome"] = outcome

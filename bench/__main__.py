@@ -1,7 +1,8 @@
 """Run the benchmarks and print JSON lines ``{"name", "value", "unit", ...}``.
 
 Usage: ``python -m bench`` (all) or ``python -m bench loop montecarlo`` (modules whose
-name contains any of the words).
+name contains any of the words; a word that is a module's whole name after ``bench_``
+selects that module alone: ``python -m bench te`` is bench_te, not also montecarlo).
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ def main(argv: list[str]) -> int:
         info.name for info in pkgutil.iter_modules([str(here)]) if info.name.startswith("bench_")
     )
     if argv:
-        names = [n for n in names if any(word in n for word in argv)]
+        names = [n for n in names if any(
+            n == f"bench_{word}" if f"bench_{word}" in names else word in n for word in argv)]
     failed = 0
     for name in names:
         module = importlib.import_module(f"bench.{name}")

@@ -9,8 +9,11 @@ addresses, float32 high word first). ``docs/rig-config.md`` documents them for a
 Input motor (default unit 3):
 
 - input registers: ``angle`` (deg, actual input angle), ``target_actual`` (deg), ``status``
-  (bit 0 LOCKED: at the target and holding, bit 1 MOVING, bit 2 FAULT);
-- holding registers: ``target`` (deg), ``command`` (1 = move to the target and lock).
+  (bit 0 LOCKED: at the target and holding, bit 1 MOVING, bit 2 FAULT, bit 3 TURNING: at
+  constant speed), ``speed_actual`` (rpm, signed, measured);
+- holding registers: ``target`` (deg), ``command`` (1 = move to the target and lock,
+  2 = turn at ``speed``, 3 = stop and hold), ``speed`` (rpm, signed: + forward, within the
+  motor's range) for the transmission error test's constant-speed turn.
 
 Climate chamber (default unit 4):
 
@@ -54,6 +57,7 @@ class InputMotorStatus(enum.IntFlag):
     LOCKED = 0x0001  # at the target and holding it (brake on)
     MOVING = 0x0002  # turning toward the target
     FAULT = 0x0004  # drive fault: the input cannot be positioned
+    TURNING = 0x0008  # turning at the commanded constant speed
 
 
 class InputMotorCommand(enum.IntEnum):
@@ -61,6 +65,8 @@ class InputMotorCommand(enum.IntEnum):
 
     NONE = 0
     LOCK_AT_TARGET = 1  # turn to ``target`` and lock there
+    TURN_AT_SPEED = 2  # turn at ``speed`` (rpm, signed) until STOP or LOCK_AT_TARGET
+    STOP = 3  # stop where it is and hold
 
 
 def _block(*registers: Register) -> dict[str, Register]:
@@ -73,7 +79,11 @@ INPUT_MOTOR_MAP: dict[str, Register] = _block(
     Register("status", "input", 4, "uint16", "r", "-", "status word, see InputMotorStatus"),
     Register("target", "holding", 0, "float32", "rw", "deg", "input angle to lock at"),
     Register("command", "holding", 2, "uint16", "rw", "-",
-             "write 1 = turn to target and lock (reads back 0)"),
+             "write 1 = turn to target and lock, 2 = turn at speed, 3 = stop (reads back 0)"),
+    Register("speed", "holding", 3, "float32", "rw", "rpm",
+             "constant input speed for command 2, signed (+ forward)"),
+    Register("speed_actual", "input", 5, "float32", "r", "rpm",
+             "measured input speed, signed"),
 )
 
 CLIMATE_MAP: dict[str, Register] = _block(
@@ -91,6 +101,7 @@ class InputMotorConfig(ModbusLinkConfig):
     device_id: int = Field(default=INPUT_MOTOR_DEVICE_ID, ge=1, le=247)
     lock_tolerance_deg: float = Field(default=0.01, gt=0)
     move_timeout_s: float = Field(default=30.0, gt=0)
+    max_speed_rpm: float = Field(default=3000.0, gt=0)
 
 
 class ClimateConfig(ModbusLinkConfig):
@@ -111,6 +122,8 @@ class InputState:
     locked: bool
     moving: bool
     fault: bool
+    turning: bool = False
+    speed_rpm: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -173,7 +186,25 @@ class InputMotor(_ModbusUnit):
         bits = decode_flags(int(values["status"]), InputMotorStatus, self.name, "status")
         return InputState(t_s, float(values["angle"]), float(values["target_actual"]),
                           InputMotorStatus.LOCKED in bits, InputMotorStatus.MOVING in bits,
-                          InputMotorStatus.FAULT in bits)
+                          InputMotorStatus.FAULT in bits, InputMotorStatus.TURNING in bits,
+                          float(values["speed_actual"]))
+
+    def turn_at(self, speed_rpm: float) -> None:
+        """Turn the input at a constant ``speed_rpm`` (rpm, signed: + forward): speed and
+        command in one FC16 request; does not wait. Beyond ``max_speed_rpm``:
+        DeviceOutOfRange, not sent."""
+        value = float(speed_rpm)
+        limit = self.config.max_speed_rpm
+        if not (math.isfinite(value) and abs(value) <= limit):
+            raise DeviceOutOfRange(self.name, f"an input speed within +-{limit:g} rpm",
+                                   f"{speed_rpm!r} rpm (refused, not sent)")
+        address = self.register_map["command"].address
+        self.link.write(self.name, self.config.device_id, address,
+                        [int(InputMotorCommand.TURN_AT_SPEED), *encode_float32(value)])
+
+    def stop(self) -> None:
+        """Stop the input where it is and hold it (command 3)."""
+        self._write("command", [int(InputMotorCommand.STOP)])
 
     def start_lock_at(self, angle_deg: float) -> None:
         """Send the target (deg) and the lock command in one FC16 request; do not wait."""

@@ -11,6 +11,10 @@ each run records of it, and the refusal to start with one past due.
     due = 2027-01-15              # next calibration due (same forms)
     uncertainty = "0.05 % of full scale"   # text, or a number
 
+The output encoder's table may add its mounting eccentricity found by the reversal of
+docs/transmission-error.md (``eccentricity_arcsec``, ``eccentricity_phase_deg``,
+``eccentricity_u_arcsec``; ``rig te-calibrate``), which every TE run then subtracts.
+
 A run records them in run.json as ``calibration``: a list of ``{"sensor", "id",
 "certificate", "date", "due", "uncertainty"}`` (dates ISO text; the store's index and the
 certificate read this shape). A calibration whose ``due`` date is before the day a
@@ -74,6 +78,11 @@ class CalibrationEntry(BaseModel):
     date: IsoDate
     due: IsoDate
     uncertainty: Annotated[str | float, BeforeValidator(_uncertainty)]
+    eccentricity_arcsec: float | None = Field(None, ge=0, allow_inf_nan=False)
+    """Output encoder only: its mounting eccentricity's once-per-turn error (arcsec), by the
+    reversal of docs/transmission-error.md; subtracted from every TE run."""
+    eccentricity_phase_deg: float | None = Field(None, allow_inf_nan=False)
+    eccentricity_u_arcsec: float | None = Field(None, ge=0, allow_inf_nan=False)
 
     @model_validator(mode="after")
     def _due_after_date(self) -> CalibrationEntry:
@@ -83,10 +92,15 @@ class CalibrationEntry(BaseModel):
         return self
 
     def record(self, sensor: str) -> dict[str, Any]:
-        """The run.json entry of this sensor (dates as ISO text)."""
-        return {"sensor": sensor, "id": self.id, "certificate": self.certificate,
-                "date": self.date.isoformat(), "due": self.due.isoformat(),
-                "uncertainty": self.uncertainty}
+        """The run.json entry of this sensor (dates as ISO text; the eccentricity keys only
+        when set)."""
+        out: dict[str, Any] = {"sensor": sensor, "id": self.id, "certificate": self.certificate,
+                               "date": self.date.isoformat(), "due": self.due.isoformat(),
+                               "uncertainty": self.uncertainty}
+        for key in ("eccentricity_arcsec", "eccentricity_phase_deg", "eccentricity_u_arcsec"):
+            if getattr(self, key) is not None:
+                out[key] = getattr(self, key)
+        return out
 
 
 Calibrations = dict[Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]{0,39}$")], CalibrationEntry]

@@ -19,7 +19,18 @@ from analysis.loop import PROFILES
 from rig.errors import RigError
 from rig.json_files import read_json_file
 from rig.outcome import campaign_outcome, run_outcome
-from rig.plans import CampaignAxes, LoopParams, Plan, campaign_plan, check_plan_size
+from rig.plans import (
+    TE_KIND,
+    CampaignAxes,
+    Direction,
+    LoopParams,
+    Plan,
+    TEParams,
+    campaign_plan,
+    check_plan_size,
+    te_campaign_plan,
+    unit_ratio,
+)
 from rig.run_meta_check import unit_problems
 from rig.toml_files import describe_validation_error, read_toml
 
@@ -33,13 +44,16 @@ class CampaignError(RigError):
 
 class Limits(BaseModel):
     """Pass/fail limits; None = not checked. Lost motion and backlash in arcmin (at most),
-    stiffness in N*m/arcmin (at least)."""
+    stiffness in N*m/arcmin (at least); a transmission error run's peak-to-peak TE in arcsec
+    and its two-direction hysteresis in arcmin (at most)."""
 
     model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 
     lost_motion_arcmin_max: float | None = Field(None, gt=0)
     backlash_arcmin_max: float | None = Field(None, gt=0)
     stiffness_Nm_per_arcmin_min: float | None = Field(None, gt=0)
+    te_pp_max_arcsec: float | None = Field(None, gt=0)
+    te_hysteresis_max_arcmin: float | None = Field(None, gt=0)
 
     def check(self, run: dict[str, Any]) -> list[str]:
         """The causes of failure of one run's metrics (empty: passed; a metric the run's
@@ -71,6 +85,21 @@ class SimulationSection(BaseModel):
     plant: dict[str, Any] = Field(default_factory=dict)
 
 
+class TESection(BaseModel):
+    """The transmission error test of a campaign (``test = "transmission_error"``): input
+    speed (rpm), brake torque (fraction of ``plan.rated_torque_Nm``), output revolutions per
+    direction, the directions, and the signed ratio (default: the unit's)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+    input_speed_rpm: float = Field(120.0, gt=0, le=6000)
+    brake_torque_fraction: float = Field(0.2, gt=0, le=1)
+    output_revolutions: float = Field(1.0, ge=1, le=100)
+    directions: list[Direction] = Field(default_factory=lambda: ["forward", "reverse"],
+                                        min_length=1, max_length=2)
+    ratio: float | None = None
+
+
 class CampaignFile(BaseModel):
     """A whole campaign file (validated). ``unit`` is the resolved unit mapping."""
 
@@ -84,6 +113,10 @@ class CampaignFile(BaseModel):
     profile: Literal[PROFILE_NAMES] = "nabtesco"  # type: ignore[valid-type]
     torque_limit_Nm: float | None = Field(None, gt=0, allow_inf_nan=False, strict=True)
     unit: UnitSection
+    test: Literal["lost_motion", "transmission_error"] = "lost_motion"
+    """Which test the campaign's runs are: the hysteresis loop (``plan``) or the
+    transmission error (``te``, with ``plan.rated_torque_Nm``)."""
+    te: TESection = Field(default_factory=TESection)
     plan: LoopParams
     axes: CampaignAxes = Field(default_factory=CampaignAxes)
     limits: Limits = Field(default_factory=Limits)
@@ -93,6 +126,12 @@ class CampaignFile(BaseModel):
     @model_validator(mode="after")
     def _small_enough(self) -> CampaignFile:
         a = self.axes
+        if self.test == TE_KIND:
+            if list(a.positions_deg) != [0.0] or list(a.amplitudes_pct) != [100.0]:
+                raise ValueError("axes.positions_deg / axes.amplitudes_pct: a "
+                                 "transmission_error campaign turns the input under the "
+                                 "brake torque; positions and amplitudes do not apply")
+            return self
         check_plan_size(self.plan, len(a.positions_deg) * len(a.amplitudes_pct)
                         * max(1, len(a.temperatures_C)) * a.repeats)
         return self
@@ -123,7 +162,25 @@ class CampaignFile(BaseModel):
             raise CampaignError(f"{self.source}: {problems[0]}")
         return data
 
+    def te_params(self) -> TEParams:
+        """The transmission error parameters (CampaignError without a ratio)."""
+        te = self.te
+        ratio = te.ratio if te.ratio is not None else unit_ratio(self.unit_data())
+        if ratio is None:
+            raise CampaignError(f"{self.source}: key te.ratio: missing (the unit does not give "
+                                "the reduction ratio)")
+        try:
+            return TEParams(rated_torque_Nm=self.plan.rated_torque_Nm, ratio=ratio,
+                            input_speed_rpm=te.input_speed_rpm,
+                            brake_torque_fraction=te.brake_torque_fraction,
+                            output_revolutions=te.output_revolutions,
+                            directions=list(te.directions))
+        except ValidationError as exc:
+            raise CampaignError(describe_validation_error(exc, self.source)) from exc
+
     def build_plan(self) -> Plan:
+        if self.test == TE_KIND:
+            return te_campaign_plan(self.te_params(), self.axes)
         return campaign_plan(self.plan, self.axes)
 
 
@@ -134,6 +191,8 @@ def campaign_from_mapping(data: dict[str, Any], source: str = "<memory>") -> Cam
     except ValidationError as exc:
         raise CampaignError(describe_validation_error(exc, source)) from exc
     camp.unit_data()  # a unit file that cannot be read is an error now, not mid-campaign
+    if camp.test == TE_KIND:
+        camp.te_params()  # and a missing ratio
     return camp
 
 

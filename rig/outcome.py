@@ -30,7 +30,7 @@ from typing import Any
 __all__ = ["OUTCOMES", "OUTCOME_WORDS", "OUTCOME_MEANINGS", "LIMIT_KEYS", "run_outcome",
            "campaign_outcome", "impossible_metrics", "not_applicable", "outcome_word",
            "parse_outcome", "limits_set", "finite_number", "metric_check", "recorded_outcome",
-           "recorded_campaign_outcome"]
+           "recorded_campaign_outcome", "is_te_record", "kind_applies"]
 
 OUTCOMES = ("ok", "not_ok", "incomplete", "no_limits")
 OUTCOME_WORDS = {"ok": "OK", "not_ok": "NOT OK", "incomplete": "INCOMPLETE",
@@ -45,8 +45,13 @@ LIMIT_KEYS = {
     "lost_motion_arcmin_max": ("lost_motion_arcmin", "above"),
     "backlash_arcmin_max": ("backlash_arcmin", "above"),
     "stiffness_Nm_per_arcmin_min": ("stiffness_Nm_per_arcmin", "below"),
+    "te_pp_max_arcsec": ("te_pp_arcsec", "above"),
+    "te_hysteresis_max_arcmin": ("te_hysteresis_arcmin", "above"),
 }
-"""Limit key -> (metric key, the side that fails)."""
+"""Limit key -> (metric key, the side that fails). The ``te_`` limits judge a transmission
+error run (run-format.md), the others a hysteresis run; a limit of the other test kind does
+not apply to a run (:func:`kind_applies`)."""
+TE_KIND = "transmission_error"
 
 
 def outcome_word(code: Any) -> str:
@@ -86,8 +91,28 @@ def finite_number(value: Any) -> bool:
             and math.isfinite(value))
 
 
+def is_te_record(run: dict[str, Any]) -> bool:
+    """Is this record (run.json or a flat one) a transmission error run: ``test.kind`` (or
+    ``test_kind``) says so, or, the kind unrecorded, it carries a ``te_`` metric?"""
+    test = run.get("test") if isinstance(run.get("test"), dict) else {}
+    kind = test.get("kind", run.get("test_kind"))
+    if kind is not None:
+        return kind == TE_KIND
+    metrics = {**run, **(run.get("result") or {})}
+    return any(k.startswith("te_") and metrics.get(k) is not None for k in metrics)
+
+
+def kind_applies(run: dict[str, Any], metric: str) -> bool:
+    """Does ``metric`` belong to this run's test kind (``te_`` metrics to a transmission
+    error run, the loop's to a hysteresis run)?"""
+    return metric.startswith("te_") == is_te_record(run)
+
+
 def not_applicable(run: dict[str, Any], metric: str) -> str | None:
     """Why ``metric`` does not apply to this run's design (None: it applies)."""
+    if not kind_applies(run, metric):
+        kind = "transmission error" if is_te_record(run) else "hysteresis"
+        return f"not applicable: a {kind} run does not measure it"
     if metric == "stiffness_Nm_per_arcmin":
         test = run.get("test") or {}
         amplitude = run.get("amplitude_pct", test.get("amplitude_pct"))
@@ -167,7 +192,9 @@ def run_outcome(run: dict[str, Any], limits: dict[str, Any] | None
     impossible = impossible_metrics(run)
     if impossible:
         return "incomplete", impossible, []
-    if not limits_set(limits):
+    if not limits_set(limits) or not any(
+            (limits or {}).get(k) is not None and kind_applies(run, m)
+            for k, (m, _) in LIMIT_KEYS.items()):
         return "no_limits", [], []
     failures: list[str] = []
     missing: list[str] = []

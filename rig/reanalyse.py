@@ -92,9 +92,11 @@ def run_job(job: Job) -> dict[str, Any]:
     try:
         if job.kind == "run":
             from rig.analyse import analyse_run
+            from rig.te import analyse_te_run, is_te_run
 
             profile = job.profile or data.meta.get("profile")
-            out["metrics"] = _finite(analyse_run(data, profile=profile).to_dict())
+            out["metrics"] = _finite(analyse_te_run(data).result_record() if is_te_run(data)
+                                     else analyse_run(data, profile=profile).to_dict())
         else:
             from rig.diagnose import diagnose_campaign, report_dict
 

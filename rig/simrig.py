@@ -227,7 +227,8 @@ class SimulatedRig:
         drive_limit = config.rig.drive_torque_limit_Nm
         self.modbus_server = RigModbusServer(
             plant, drive_limit, transport=self.modbus_transport, port=self._port("modbus"),
-            watchdog_s=self.watchdog_s, ambient_C=config.housing.ambient_C)
+            watchdog_s=self.watchdog_s, ambient_C=config.housing.ambient_C,
+            input_max_speed_rpm=config.rig.input_max_speed_rpm)
         modbus = self.modbus_server.start()
         self.transducer_sim = TransducerSimulator(
             plant, self.transducer_transport, port=self._port("transducer"),
@@ -281,7 +282,8 @@ class SimulatedRig:
         tables["torque_sensor"] = {**link, "device_id": server.sensor_id, **timeout}
         tables["drive"] = {**link, "device_id": server.drive_id, "torque_limit_Nm": limit,
                            "watchdog_s": self.watchdog_s, **timeout}
-        tables["input_motor"] = {**link, "device_id": server.input_motor_id, **timeout}
+        tables["input_motor"] = {**link, "device_id": server.input_motor_id,
+                                 "max_speed_rpm": config.rig.input_max_speed_rpm, **timeout}
         tables["climate"] = {**link, "device_id": server.climate_id, **timeout}
         return tables
 

@@ -52,7 +52,9 @@ class EncoderBackdoor:
     - :meth:`stick`: the position value freezes at its current count;
     - :meth:`wrong_dlc`: the next ``n`` TPDOs carry too few data bytes;
     - :meth:`lose_heartbeat`: the heartbeat producer stops (or resumes);
-    - :meth:`emergency`: an EMCY with ``code`` is sent and logged in 0x1001/0x1003.
+    - :meth:`emergency`: an EMCY with ``code`` is sent and logged in 0x1001/0x1003;
+    - :meth:`jump`: the position value jumps by ``counts`` (a lost or extra count burst, a
+      slipping disc) and goes on from there.
     """
 
     def __init__(self, node: EncoderNode) -> None:
@@ -81,6 +83,9 @@ class EncoderBackdoor:
 
     def emergency(self, code: int = 0x1000, register: int = 0x01) -> None:
         self._node.raise_emergency(code, register)
+
+    def jump(self, counts: int) -> None:
+        self._node._preset_offset += int(counts)
 
 
 class EncoderNode:

@@ -62,26 +62,61 @@ def _split_write(register_map: dict[str, Register], address: int, words: Sequenc
 
 
 class InputMotorModel:
-    """Positions the plant's input: a LOCK_AT_TARGET command turns it to ``target`` (deg)."""
+    """Positions the plant's input: a LOCK_AT_TARGET command turns it to ``target`` (deg);
+    TURN_AT_SPEED turns it at ``speed`` (rpm, signed) until STOP (the plant's
+    ``turn_input``/``stop_input``). Backdoor for tests: :meth:`stall` (the shaft stops while
+    the motor goes on reporting TURNING) and :meth:`overspeed` (it turns ``factor`` times
+    the commanded speed)."""
 
-    def __init__(self, plant: Plant) -> None:
+    def __init__(self, plant: Plant, max_speed_rpm: float = 3000.0) -> None:
         self.plant = plant
         self.target_deg = plant.snapshot().input_angle_deg
         self.commanded_deg = self.target_deg
         self.fault = False
+        self.max_speed_rpm = float(max_speed_rpm)
+        self.speed_rpm = 0.0
+        self.turning = False
+        self.stalled = False
+        self.speed_factor = 1.0
+
+    def stall(self, on: bool = True) -> None:
+        """Backdoor: the input shaft stops (a jammed unit or motor) while the motor goes on
+        reporting TURNING at its setpoint; off: it turns again if it was turning."""
+        self.stalled = bool(on)
+        self._apply()
+
+    def overspeed(self, factor: float = 1.5) -> None:
+        """Backdoor: the input turns ``factor`` times the commanded speed (a runaway)."""
+        self.speed_factor = float(factor)
+        self._apply()
+
+    def _apply(self) -> None:
+        turn = getattr(self.plant, "turn_input", None)
+        if turn is None or not self.turning:
+            return
+        turn(0.0 if self.stalled else 6.0 * self.speed_rpm * self.speed_factor)
+
+    def _actual_rpm(self) -> float:
+        speed = getattr(self.plant, "input_speed_deg_per_s", None)
+        return 0.0 if speed is None else speed() / 6.0
 
     def input_words(self) -> list[int]:
         angle = self.plant.snapshot().input_angle_deg
-        arrived = abs(angle - self.commanded_deg) <= ARRIVED_DEG
-        status = InputMotorStatus.LOCKED if arrived else InputMotorStatus.MOVING
+        if self.turning:
+            status = InputMotorStatus.TURNING | InputMotorStatus.MOVING
+        else:
+            arrived = abs(angle - self.commanded_deg) <= ARRIVED_DEG
+            status = InputMotorStatus.LOCKED if arrived else InputMotorStatus.MOVING
         if self.fault:
             status = InputMotorStatus.FAULT
         return register_image(INPUT_MOTOR_MAP, "input", {
-            "angle": angle, "target_actual": self.commanded_deg, "status": int(status)})
+            "angle": angle, "target_actual": self.commanded_deg, "status": int(status),
+            "speed_actual": self._actual_rpm()})
 
     def holding_words(self) -> list[int]:
         return register_image(INPUT_MOTOR_MAP, "holding", {
-            "target": self.target_deg, "command": int(InputMotorCommand.NONE)})
+            "target": self.target_deg, "command": int(InputMotorCommand.NONE),
+            "speed": self.speed_rpm})
 
     def write_holding(self, address: int, words: Sequence[int]) -> ExcCodes | None:
         parts = _split_write(INPUT_MOTOR_MAP, address, words)
@@ -92,13 +127,30 @@ class InputMotorModel:
             if not math.isfinite(value):
                 return ExcCodes.ILLEGAL_VALUE
             self.target_deg = value
+        if "speed" in parts:
+            speed = float_from_words(parts["speed"])
+            if not (math.isfinite(speed) and abs(speed) <= self.max_speed_rpm):
+                return ExcCodes.ILLEGAL_VALUE
+            self.speed_rpm = speed
         if "command" in parts:
             command = parts["command"][0]
+            if command in (InputMotorCommand.LOCK_AT_TARGET,
+                           InputMotorCommand.TURN_AT_SPEED) and self.fault:
+                return ExcCodes.DEVICE_FAILURE
             if command == InputMotorCommand.LOCK_AT_TARGET:
-                if self.fault:
-                    return ExcCodes.DEVICE_FAILURE
+                self.turning = False
                 self.commanded_deg = self.target_deg
                 self.plant.lock_input_at(self.target_deg)
+            elif command == InputMotorCommand.TURN_AT_SPEED:
+                if getattr(self.plant, "turn_input", None) is None:
+                    return ExcCodes.ILLEGAL_FUNCTION
+                self.turning = True
+                self._apply()
+            elif command == InputMotorCommand.STOP:
+                self.turning = False
+                stop = getattr(self.plant, "stop_input", None)
+                held = stop() if stop is not None else self.plant.snapshot().input_angle_deg
+                self.commanded_deg = self.target_deg = float(held)
             elif command != InputMotorCommand.NONE:
                 return ExcCodes.ILLEGAL_VALUE
         return None
@@ -150,7 +202,7 @@ class RigModbusServer(ModbusRigServer):
     def __init__(self, plant: ClimatePlant, torque_limit_Nm: float, *,
                  input_motor_id: int = INPUT_MOTOR_DEVICE_ID,
                  climate_id: int = CLIMATE_DEVICE_ID, ambient_C: float = 20.0,
-                 **options) -> None:
+                 input_max_speed_rpm: float = 3000.0, **options) -> None:
         super().__init__(plant, torque_limit_Nm, **options)
         ids = {self.sensor_id, self.drive_id, input_motor_id, climate_id}
         if len(ids) != 4:
@@ -158,7 +210,7 @@ class RigModbusServer(ModbusRigServer):
                              f"{self.sensor_id}, drive {self.drive_id}, input motor "
                              f"{input_motor_id}, climate {climate_id}")
         self.input_motor_id, self.climate_id = input_motor_id, climate_id
-        self.input_motor = InputMotorModel(plant)
+        self.input_motor = InputMotorModel(plant, input_max_speed_rpm)
         self.climate = ClimateModel(plant, ambient_C)
 
     def _devices(self) -> list[SimDevice]:

@@ -111,6 +111,15 @@ class Run:
         """The samples as a pandas DataFrame (columns of :meth:`to_arrow`)."""
         return self.to_arrow().to_pandas()
 
+    def te(self) -> pd.DataFrame:
+        """The transmission error of a TE run (``test.kind = "transmission_error"``) against
+        the output angle: columns ``output_angle_deg`` (deg, the grid over one revolution),
+        ``te_forward_arcsec`` and ``te_reverse_arcsec`` (arcsec, revolution-averaged, each
+        centred on its mean; docs/transmission-error.md)."""
+        from rig.te import analyse_te_run
+
+        return analyse_te_run(self.raw, with_model=False).te_frame()
+
     def analyse(self, **options: Any) -> Analysis:
         """``rig analyse`` of this run (:func:`rig.analyse`)."""
         return analyse(self, **options)

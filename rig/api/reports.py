@@ -85,7 +85,12 @@ class Analysis:
         figure if None); returns the axes."""
         from rig.api.plots import axes_or_new
         from rig.plots import draw_loops
+        from rig.te import TERunAnalysis
 
+        if isinstance(self.runs[0], TERunAnalysis):
+            from rig.te_plots import draw_te
+
+            return draw_te(axes_or_new(ax), self.runs[0])
         title = None if self.single else f"Hysteresis loops: campaign {self.campaign.name}"
         return draw_loops(axes_or_new(ax), self.runs, title=title)
 
@@ -141,10 +146,14 @@ class Model:
 
 def analyse(run_or_path: Any, **options: Any) -> Analysis:
     """Loop metrics of a run or campaign (a path, ``rig.open(...)``, or a rig.runformat
-    object), as ``rig analyse``. ``options``: ``profile`` ("nabtesco" ±3 %,
+    object), as ``rig analyse``; of a transmission error run, its TE analysis
+    (:class:`rig.te.TERunAnalysis`). ``options`` (hysteresis runs): ``profile`` ("nabtesco" ±3 %,
     "harmonic-drive" ±4 %), ``percent``, ``rated_torque_Nm``, ``hd_T1_Nm``, ``hd_T2_Nm``."""
+    from rig.te import analyse_te_run, is_te_run
+
     campaign, single = as_campaign(run_or_path)
-    return Analysis(campaign, [analyse_run(run, **options) for run in campaign.runs], single)
+    return Analysis(campaign, [analyse_te_run(run) if is_te_run(run) else
+                               analyse_run(run, **options) for run in campaign.runs], single)
 
 
 def diagnose(campaign_or_path: Any) -> Diagnosis:

@@ -79,6 +79,10 @@ def result_row(run: Run, analysis: RunAnalysis | None, *,
                error: str | None = None) -> dict[str, Any]:
     """One tidy row (see the module doc). ``analysis`` None: the run could not be analysed
     (``error`` says why); its metric columns are then missing (NaN in the table)."""
+    from rig.te import TERunAnalysis, is_te_run
+
+    if isinstance(analysis, TERunAnalysis) or (analysis is None and is_te_run(run)):
+        return te_result_row(run, analysis, campaign_meta=campaign_meta, error=error)
     row = _conditions(run)
     d = finite_for_json(analysis.to_dict()) if analysis is not None else {}
     uncertainty = d.get("uncertainty") or {}
@@ -110,7 +114,41 @@ def result_row(run: Run, analysis: RunAnalysis | None, *,
     return row
 
 
-TEXT_COLUMNS = ("run_id", "label", "profile", "status", "outcome", "verdict", "error", "path")
+def te_result_row(run: Run, analysis: Any, *, campaign_meta: dict[str, Any] | None = None,
+                  error: str | None = None) -> dict[str, Any]:
+    """The tidy row of a transmission error run: its TE metrics with ``_u``, the model's
+    (``model_<metric>``), the limits, the outcome (as :func:`result_row`)."""
+    from analysis.transmission import METRIC_KEYS as TE_KEYS
+
+    row = _conditions(run)
+    row["test_kind"] = "transmission_error"
+    d = analysis.to_dict() if analysis is not None else {}
+    metrics, model = d.get("metrics") or {}, d.get("model") or {}
+    for key in TE_KEYS:
+        row[key] = _number(metrics.get(key))
+        row[f"{key}_u"] = _number(metrics.get(f"{key}_u"))
+    for key in TE_KEYS:
+        row[f"model_{key}"] = _number(model.get(key))
+    row["n_samples"] = d.get("n_samples", run.n_samples)
+    limits = run_limits(run, campaign_meta)
+    row.update(limits)
+    row["status"] = run.meta.get("status")
+    if run.meta.get("outcome") is None and analysis is not None:
+        flat = {**{k: row[k] for k in TE_KEYS}, "test": run.test,
+                "status": run.meta.get("status", "completed"), "label": row["label"]}
+        outcome = run_outcome(flat, limits)[0]
+    else:
+        outcome = recorded_outcome(run.meta, limits)
+    row["outcome"] = outcome if isinstance(outcome, str) else None
+    row["verdict"] = None if row["outcome"] is None else outcome_word(row["outcome"])
+    problems = [f"{k}: {v}" for k, v in (d.get("errors") or {}).items()]
+    row["error"] = error or ("; ".join(problems) or None)
+    row["path"] = None if run.path is None else str(run.path)
+    return row
+
+
+TEXT_COLUMNS = ("run_id", "label", "test_kind", "profile", "status", "outcome", "verdict",
+                "error", "path")
 COUNT_COLUMNS = ("repeat", "n_samples", "n_cycles")
 
 
@@ -136,7 +174,10 @@ def results_frame(campaign: Campaign, **options: Any) -> pd.DataFrame:
     rows = []
     for run in campaign.runs:
         try:
-            analysis, error = analyse_run(run, **options), None
+            from rig.te import analyse_te_run, is_te_run
+
+            analysis, error = (analyse_te_run(run) if is_te_run(run)
+                               else analyse_run(run, **options)), None
         except RigError as exc:
             analysis, error = None, str(exc)
         rows.append(result_row(run, analysis, campaign_meta=campaign.meta, error=error))

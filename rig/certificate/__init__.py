@@ -25,6 +25,7 @@ from rig.outcome import (
     OUTCOME_MEANINGS,
     OUTCOME_WORDS,
     finite_number,
+    is_te_record,
     metric_check,
     recorded_campaign_outcome,
     recorded_outcome,
@@ -52,6 +53,19 @@ METRICS = (
     ("torque_offset_Nm", "torque offset", "N·m", ".4f"),
 )
 """(result key, label, unit, format) of the metrics on the certificate."""
+TE_METRICS = (
+    ("te_pp_arcsec", "transmission error, peak-to-peak (GB/T 35089)", "arcsec", ".1f"),
+    ("te_pp_forward_arcsec", "  forward", "arcsec", ".1f"),
+    ("te_pp_reverse_arcsec", "  reverse", "arcsec", ".1f"),
+    ("te_total_Fi_arcsec", "F'i, total single-flank composite (ISO 1328-1)", "arcsec", ".1f"),
+    ("te_tooth_fi_arcsec", "f'i, tooth-to-tooth (ISO 1328-1)", "arcsec", ".1f"),
+    ("te_hysteresis_arcmin", "hysteresis (lost motion under the brake)", "arcmin", ".3f"),
+)
+"""The metrics of a transmission error run's certificate (run-format.md)."""
+TE_CAMPAIGN_METRICS = tuple({m[0]: m for m in TE_METRICS}[k] for k in (
+    "te_pp_arcsec", "te_tooth_fi_arcsec", "te_hysteresis_arcmin", "te_pp_forward_arcsec",
+    "te_pp_reverse_arcsec", "te_total_Fi_arcsec"))
+"""The same, ordered for a campaign's table (its first three are its columns)."""
 LIMIT_OF_METRIC = {metric: (key, side) for key, (metric, side) in LIMIT_KEYS.items()}
 DIAGNOSIS_FORMAT = "rig-diagnosis/1"
 IN_HEADER = ("serial", "kind", "design")
@@ -185,7 +199,8 @@ def below_zero_text(key: str, value: Any, uncertainty: Any, spec: str, unit: str
     return "below zero: no measurement"
 
 
-def _metric_rows(meta: dict[str, Any]) -> list[dict[str, Any]]:
+def _metric_rows(meta: dict[str, Any], metrics: tuple[tuple[str, str, str, str], ...] = METRICS
+                 ) -> list[dict[str, Any]]:
     """One row per metric of a run.json: value ± uncertainty, nominal model, limit, verdict;
     ``below`` (with the unit) and ``below_short`` (without) for a metric that cannot be
     negative measured below zero (:func:`below_zero_text`), printed instead of the value."""
@@ -194,7 +209,7 @@ def _metric_rows(meta: dict[str, Any]) -> list[dict[str, Any]]:
     model = result.get("model") or {}
     limits = meta.get("limits") or {}
     rows = []
-    for key, label, unit, spec in METRICS:
+    for key, label, unit, spec in metrics:
         value = result.get(key)
         limit_key, side = LIMIT_OF_METRIC.get(key, (None, None))
         bound = limits.get(limit_key) if limit_key else None
@@ -311,6 +326,47 @@ def _loop_figure(runs: list[Run], title: str | None) -> tuple[str | None, list[s
     if not items:
         return None, notes
     return loop_svg(items, title=title), notes
+
+
+def _te_section(run: Run) -> dict[str, Any] | None:
+    """A transmission error run's section: its TE curve (SVG URI) with the peak-to-peak
+    limit, the largest orders, the encoder eccentricity removed, and ``meta`` with ``result``
+    (the record's own, or computed now when it has none)."""
+    from rig.certificate.plots import svg_uri
+    from rig.te import analyse_te_run
+    from rig.te_plots import plot_te
+
+    meta = dict(run.meta)
+    try:
+        item = analyse_te_run(run, with_model=False)
+    except Exception as exc:  # an aborted or short run has no curve to draw
+        return {"meta": meta, "figure": None, "orders": [], "eccentricity": None,
+                "notes": [f"no TE curve drawn ({exc})"]}
+    result = meta.get("result") or {}
+    if result.get("te_pp_arcsec") is None:
+        meta["result"] = {**item.result_record(), **result}
+        result = meta["result"]
+    limit = (meta.get("limits") or {}).get("te_pp_max_arcsec")
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = plot_te(item, Path(tmp) / "te.svg", title="",
+                       limit_arcsec=float(limit) if finite_number(limit) else None)
+        figure = svg_uri(path.read_bytes())
+    orders = sorted((o for o in result.get("te_orders") or []
+                     if o.get("direction") == "forward"),
+                    key=lambda o: -float(o.get("amplitude_arcsec") or 0.0))[:5]
+    ecc = result.get("encoder_eccentricity") or {}
+    test = meta.get("test") or {}
+    return {"meta": meta, "figure": figure, "notes": [],
+            "orders": [f"{o['order']:g}/{str(o['per']).replace('_', ' ')}: "
+                       f"{o['amplitude_arcsec']:.1f}″ at {o['phase_deg']:.0f}°" for o in orders],
+            "eccentricity": (f"encoder eccentricity {ecc['amplitude_arcsec']:.1f}″ removed "
+                             f"({ecc.get('source', 'calibration')})" if ecc.get("removed")
+                             else "encoder eccentricity not removed (no calibration)"),
+            "conditions": (f"input {test.get('input_speed_rpm', '?')} rpm, brake "
+                           f"{test.get('brake_torque_Nm', '?')} N·m, ratio "
+                           f"{test.get('ratio', '?')}")}
 
 
 # --------------------------------------------------------------------------- campaign
@@ -443,7 +499,13 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
         summary = cmeta.get("summary") or {}
         ctx["header"] = header_fields(first, cmeta)
         limits = cmeta.get("limits") or summary.get("limits") or first.get("limits") or {}
-        run_outcomes = [_run_outcome(r.meta, limits) for r in runs]
+        te_camp = bool(runs) and all(is_te_record(r.meta) for r in runs)
+        metas = [r.meta for r in runs]
+        if te_camp:  # a transmission error campaign: each run's TE, the first one's curve
+            sections = [_te_section(r) for r in runs]
+            metas = [s.pop("meta") for s in sections]
+            ctx["te"] = sections[0]
+        run_outcomes = [_run_outcome(meta, limits) for meta in metas]
         outcome = recorded_campaign_outcome(
             cmeta.get("outcome") or summary.get("outcome"), limits,
             [o for o, _ in run_outcomes], str(cmeta.get("status") or "completed"))
@@ -457,13 +519,15 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
         ctx["runs"] = [{
             "label": r.meta.get("label") or r.run_id, "run_id": r.run_id,
             "position": _fmt((r.meta.get("test") or {}).get("input_angle_deg"), "g"),
-            "status": r.meta.get("status"), "metrics": {m["key"]: m for m in _metric_rows(r.meta)},
+            "status": r.meta.get("status"), "metrics": {m["key"]: m for m in _metric_rows(
+                meta, TE_CAMPAIGN_METRICS if te_camp else METRICS)},
             "outcome": OUTCOME_WORDS[o],
-        } for r, (o, _) in zip(runs, run_outcomes, strict=True)]
+        } for r, meta, (o, _) in zip(runs, metas, run_outcomes, strict=True)]
         for r in ctx["runs"]:
             r["below_any"] = any(m["below"] for m in r["metrics"].values())
         below = any(r["below_any"] for r in ctx["runs"])
-        ctx["position"] = _position_figure(campaign, runs, limits)
+        ctx["position"] = (_position_figure(campaign, runs, limits) if not te_camp
+                           else {"figure": None, "model": None, "band": None})
         lm = summary.get("lost_motion_arcmin") or {}
         ctx["lm_summary"] = {k: below_zero_text("lost_motion_arcmin", lm.get(k), None, "", "")
                              or _fmt(lm.get(k), ".3f") for k in ("mean", "min", "max", "std")}
@@ -478,10 +542,14 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
         title = f"campaign {cmeta.get('name') or campaign.name}"
     else:
         meta = first
+        te = _te_section(runs[0]) if runs and is_te_record(meta) else None
+        if te is not None:
+            meta = te.pop("meta")
+        ctx["te"] = te
         ctx["header"] = header_fields(meta)
         limits = meta.get("limits") or {}
         outcome, causes = _run_outcome(meta)
-        ctx["metrics"] = _metric_rows(meta)
+        ctx["metrics"] = _metric_rows(meta, TE_METRICS if te is not None else METRICS)
         below = any(m["below"] for m in ctx["metrics"])
         ctx["run"] = {"label": meta.get("label"), "status": meta.get("status"),
                       "reason": meta.get("reason"),
@@ -489,11 +557,14 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
         ctx["diagnosis"] = None
         unit = meta.get("unit") or {}
         title = None
-    ctx["metric_heads"] = [{"key": k, "label": label, "unit": u,
+    ctx.setdefault("te", None)
+    ctx["metric_heads"] = [{"key": k, "label": label.strip(), "unit": u,
                             "limit": _limit_text(limits.get(LIMIT_OF_METRIC[k][0]),
                                                  LIMIT_OF_METRIC[k][1], u)
                             if k in LIMIT_OF_METRIC else None}
-                           for k, label, u, _ in METRICS]
+                           for k, label, u, _ in (
+                               (TE_CAMPAIGN_METRICS if is_camp else TE_METRICS) if ctx["te"]
+                               else METRICS)]
     ctx["limits"] = [h for h in ctx["metric_heads"] if h["limit"]]
     ctx["below_note"] = BELOW_NOTE if below else None
     ctx["outcome"] = outcome
@@ -505,7 +576,10 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
     ctx["sensors"] = [(k, _value_text(v)) for k, v in (first.get("sensors") or {}).items()]
     ctx["calibration"] = _calibration(first)
     ctx["test"] = _test_line(first)
-    ctx["loop"], ctx["loop_notes"] = _loop_figure(runs, title)
+    if ctx["te"]:
+        ctx["loop"], ctx["loop_notes"] = ctx["te"]["figure"], ctx["te"]["notes"]
+    else:
+        ctx["loop"], ctx["loop_notes"] = _loop_figure(runs, title)
     ctx["not_recorded"] = NOT_RECORDED
     return ctx
 

@@ -86,6 +86,50 @@ def _table(items: list[RunAnalysis]) -> Table:
     return table
 
 
+TE_ROWS: tuple[tuple[str, str, str], ...] = (
+    ("te_pp_arcsec", "TE peak-to-peak", "arcsec"),
+    ("te_pp_forward_arcsec", "  forward", "arcsec"),
+    ("te_pp_reverse_arcsec", "  reverse", "arcsec"),
+    ("te_total_Fi_arcsec", "F'i (ISO 1328)", "arcsec"),
+    ("te_tooth_fi_arcsec", "f'i (ISO 1328)", "arcsec"),
+    ("te_hysteresis_arcmin", "hysteresis", "arcmin"),
+)
+"""The table's rows of a transmission error run."""
+
+
+def _te_table(items: list[Any]) -> Table:
+    """One row per TE figure (run, metric, measured ± u, model [band], unit), then the
+    largest orders."""
+    table = Table(title="Transmission error")
+    table.add_column("run", overflow="fold")
+    table.add_column("metric", no_wrap=True)
+    table.add_column("measured ± u", justify="right", no_wrap=True)
+    table.add_column("model [band]", justify="right", no_wrap=True)
+    table.add_column("unit", no_wrap=True)
+    for item in items:
+        d = item.to_dict()
+        metrics, model = d["metrics"], d.get("model") or {}
+        band = model.get("band") or {}
+        rows = []
+        for key, label, unit in TE_ROWS:
+            value, u = metrics.get(key), metrics.get(f"{key}_u")
+            cell = "[red]n/a[/red]" if value is None else significant(value, u)
+            m = model.get(key)
+            mcell = "" if m is None else significant(m)
+            if key in band:
+                mcell += f" [{band[key][0]:.3g}, {band[key][1]:.3g}]"
+            rows.append((label, cell, mcell, unit))
+        biggest = sorted((o for o in metrics["te_orders"] if o["direction"] == "forward"),
+                         key=lambda o: -o["amplitude_arcsec"])[:4]
+        for o in biggest:
+            rows.append((f"order {o['order']:g}/{o['per']}",
+                         f"{o['amplitude_arcsec']:.2f} ∠ {o['phase_deg']:.0f}°", "", "arcsec"))
+        for i, (label, cell, mcell, unit) in enumerate(rows):
+            table.add_row(escape(d["run_id"]) if i == 0 else "", label, cell, escape(mcell),
+                          unit, end_section=i == len(rows) - 1)
+    return table
+
+
 def register(app: typer.Typer) -> None:
     @app.command()
     def analyse(
@@ -115,16 +159,18 @@ def register(app: typer.Typer) -> None:
             Path | None, typer.Option(help="Write the Fig. 6-style loop picture (PNG).")
         ] = None,
     ) -> None:
-        """Compute lost motion, backlash, stiffness, loop area and torque offset, with the model."""
+        """Compute lost motion, backlash, stiffness, loop area and torque offset, with the model;
+        of a transmission error run, its TE figures, orders and the seeds' band."""
         from rig.analyse import analyse_run
         from rig.json_output import JsonOutput
         from rig.runformat import is_campaign, read_run_or_campaign
+        from rig.te import analyse_te_run, is_te_run
 
         json_out = JsonOutput(json_file)
         console = Console(stderr=json_out.to_stdout)
         campaign = read_run_or_campaign(path)
-        items = [
-            analyse_run(
+        every: list[Any] = [
+            analyse_te_run(run) if is_te_run(run) else analyse_run(
                 run,
                 profile=profile,
                 percent=percent,
@@ -134,26 +180,45 @@ def register(app: typer.Typer) -> None:
             )
             for run in campaign.runs
         ]
-        console.print(_table(items))
+        items = [i for i in every if not is_te_run(i.run)]
+        te_items = [i for i in every if is_te_run(i.run)]
+        if items:
+            console.print(_table(items))
+        if te_items:
+            console.print(_te_table(te_items))
         for item in items:
             for key, why in item.loop.errors.items():
                 console.print(f"[yellow]{item.run.run_id}: {key}: {why}[/yellow]")
             for note in item.assumptions:
                 console.print(f"[dim]{item.run.run_id}: assumed: {note}[/dim]")
+        for item in te_items:
+            for key, why in item.result.errors.items():
+                console.print(f"[yellow]{escape(item.run.run_id)}: {key}: {escape(why)}[/yellow]")
+            for note in item.assumptions + item.result.notes:
+                console.print(f"[dim]{escape(item.run.run_id)}: {escape(note)}[/dim]")
+            if item.comparison and item.comparison["flagged"]:
+                console.print(f"[red]{escape(item.run.run_id)}: outside the model's band: "
+                              f"{escape(', '.join(item.comparison['flagged']))}[/red]")
         single = not is_campaign(path)
         if json_file is not None:
             if single:
-                payload: dict[str, Any] = items[0].to_dict()
+                payload: dict[str, Any] = every[0].to_dict()
             else:
                 payload = {
                     "campaign": campaign.meta.get("name"),
-                    "runs": [item.to_dict() for item in items],
+                    "runs": [item.to_dict() for item in every],
                 }
             json_out.write(payload, ensure_ascii=True)
             console.print(f"metrics written to {json_out.where}")
         if plot is not None:
-            from rig.plots import plot_loops
+            if items:
+                from rig.plots import plot_loops
 
-            title = None if single else f"Hysteresis loops: campaign {campaign.name}"
-            plot_loops(items, plot, title=title)
-            console.print(f"loop picture written to {plot}")
+                title = None if single else f"Hysteresis loops: campaign {campaign.name}"
+                plot_loops(items, plot, title=title)
+                console.print(f"loop picture written to {plot}")
+            else:
+                from rig.te_plots import plot_te
+
+                plot_te(te_items[0], plot)
+                console.print(f"TE picture written to {plot}")

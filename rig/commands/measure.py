@@ -60,6 +60,9 @@ def progress_bar(out: Console, total_s: float):
 def _print_run(out: Console, data: dict[str, Any]) -> None:
     if not data or data.get("status") != "completed":
         return
+    if data.get("te_raw") is not None:
+        _print_te(out, data)
+        return
 
     def f(key: str, digits: int = 3) -> str:
         value = data.get(key)
@@ -75,6 +78,24 @@ def _print_run(out: Console, data: dict[str, Any]) -> None:
               + (f" (model {m:.3f})" if m is not None else "")
               + f", backlash {f('backlash_arcmin')} arcmin, stiffness "
               f"{f('stiffness_Nm_per_arcmin', 2)} N·m/arcmin")
+
+
+def _print_te(out: Console, data: dict[str, Any]) -> None:
+    """A transmission error run's raw figures (rig/te_curve.py: nothing removed)."""
+    raw = data.get("te_raw") or {}
+
+    def f(key: str, unit: str) -> str:
+        value = raw.get(key)
+        return "n/a" if value is None else f"{value:.1f} {unit}"
+
+    verdict = f"{outcome_markup(data['outcome'])}: " if data.get("outcome") else ""
+    out.print(f"  {verdict}TE peak-to-peak (raw) {f('pp_arcsec', 'arcsec')}: forward "
+              f"{f('pp_forward_arcsec', 'arcsec')}, reverse {f('pp_reverse_arcsec', 'arcsec')}"
+              f"; hysteresis {f('hysteresis_arcmin', 'arcmin')}")
+
+
+TESTS = {"lost-motion": "lost_motion", "transmission-error": "transmission_error"}
+"""``rig measure --test`` values and the run.json ``test.kind`` each measures."""
 
 
 OUTCOME_STYLE = {"ok": "green", "not_ok": "red", "incomplete": "yellow"}
@@ -178,8 +199,24 @@ def register(app: typer.Typer) -> None:
         preview: Annotated[bool, typer.Option(
             "--preview", help="List the plan's steps and its duration; measure nothing.")
         ] = False,
+        test: Annotated[str, typer.Option(
+            "--test", help="lost-motion (the hysteresis loop) or transmission-error (the "
+            "input turned at --speed under a --brake torque, both encoders recorded).")
+        ] = "lost-motion",
+        speed: Annotated[float, typer.Option(
+            help="transmission-error: input speed, rpm.")] = 120.0,
+        brake: Annotated[float, typer.Option(
+            help="transmission-error: brake torque, fraction of the rated torque "
+                 "(within the torque limit).")] = 0.2,
+        revolutions: Annotated[float, typer.Option(
+            help="transmission-error: output revolutions in each direction (>= 1).")] = 1.0,
+        ratio: Annotated[float | None, typer.Option(
+            help="transmission-error: signed reduction ratio (output = input / ratio; "
+                 "default: the unit's, -z_external / (z_internal - z_external) for an "
+                 "internal involute pair).")] = None,
     ) -> None:
-        """Measure one hysteresis loop (GB/T order -T -> 0 -> +T -> 0 -> -T) into the store."""
+        """Measure one hysteresis loop (GB/T order -T -> 0 -> +T -> 0 -> -T), or with --test
+        transmission-error the transmission error in both directions, into the store."""
         from pydantic import ValidationError
 
         from rig.campaign import Limits
@@ -191,6 +228,15 @@ def register(app: typer.Typer) -> None:
         from simulators.plant.config import PlantConfigError, load_plant_config
 
         out = console()
+        if test not in TESTS:
+            raise RigError(f"--test: expected one of {', '.join(TESTS)}, got {test!r}")
+        unit_data: dict[str, Any] = {}
+        if unit is not None:
+            from rig.json_files import read_json_file
+
+            unit_data = read_json_file(unit, RigError, "unit data")
+            if not isinstance(unit_data, dict):
+                raise RigError(f"{unit}: the unit data must be a JSON object")
         try:
             loop = LoopParams(
                 rated_torque_Nm=rated_torque, amplitude_pct=amplitude, mode=mode,
@@ -204,7 +250,12 @@ def register(app: typer.Typer) -> None:
         except ValidationError as exc:
             raise RigError("; ".join(f"--{'-'.join(str(p) for p in e['loc'])}: {e['msg']}"
                                      for e in exc.errors())) from exc
-        plan = hysteresis_plan(loop, position)
+        if TESTS[test] == "transmission_error":
+            plan = _te_plan(rated_torque, speed, brake, revolutions, ratio,
+                            unit_data or (load_plant_config(plant).unit if plant is not None
+                                          else load_plant_config().unit))
+        else:
+            plan = hysteresis_plan(loop, position)
         est = estimate(plan.steps())
         if preview:
             for line in plan.listing():
@@ -212,13 +263,6 @@ def register(app: typer.Typer) -> None:
             out.print(f"{est.n_steps} steps, 1 run, about {est.total_s:.1f} s "
                       f"({est.dwell_s:.1f} s dwelling)")
             return
-        unit_data: dict[str, Any] = {}
-        if unit is not None:
-            from rig.json_files import read_json_file
-
-            unit_data = read_json_file(unit, RigError, "unit data")
-            if not isinstance(unit_data, dict):
-                raise RigError(f"{unit}: the unit data must be a JSON object")
         if serial:
             unit_data["serial"] = serial
         if operator is not None and not operator.strip():
@@ -274,3 +318,28 @@ def register(app: typer.Typer) -> None:
             out.print(f"n/a {note}")
         print_outcome(out, result)
         raise typer.Exit(exit_code(result["outcome"]))
+
+
+def _te_plan(rated_torque: float, speed: float, brake: float, revolutions: float,
+             ratio: float | None, unit: dict[str, Any]) -> Any:
+    """The transmission error plan of ``rig measure --test transmission-error``."""
+    from pydantic import ValidationError
+
+    from rig.errors import RigError
+    from rig.plans import TEParams, te_plan, unit_ratio
+
+    if ratio is None:
+        ratio = unit_ratio(unit)
+        if ratio is None:
+            raise RigError("--ratio: the unit data do not give the reduction ratio (an "
+                           "internal involute pair's z_internal and z_external); give it")
+    names = {"input_speed_rpm": "speed", "brake_torque_fraction": "brake",
+             "output_revolutions": "revolutions", "rated_torque_Nm": "rated-torque"}
+    try:
+        params = TEParams(rated_torque_Nm=rated_torque, ratio=ratio, input_speed_rpm=speed,
+                          brake_torque_fraction=brake, output_revolutions=revolutions)
+    except ValidationError as exc:
+        raise RigError("; ".join(
+            f"--{names.get(str(e['loc'][0]), str(e['loc'][0]))}: {e['msg']} "
+            f"(got {e.get('input')!r})" for e in exc.errors())) from exc
+    return te_plan(params)

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.errors import DeviceError, DeviceTimeout
+from drivers.errors import DeviceError, DeviceFault, DeviceTimeout
 from rig.engine.events import EventHub, ProgressEvent
 from rig.engine.frozen import FrozenTwistWatch
 from rig.engine.io import RigIO
@@ -39,7 +39,7 @@ from rig.engine.record import OpenRun, RunOutcome
 from rig.engine.safety import check_command, check_measured, preflight
 from rig.errors import RigError
 from rig.outcome import LIMIT_KEYS
-from rig.plans import Plan, run_label
+from rig.plans import TE_KIND, Plan, run_label
 from rig.plans.estimate import PlanEstimate, estimate
 from rig.plans.steps import (
     BeginRun,
@@ -54,6 +54,7 @@ from rig.plans.steps import (
     Settle,
     Step,
     StepTwist,
+    TurnInput,
     WaitTemperature,
     describe,
 )
@@ -65,6 +66,12 @@ ARCMIN_PER_DEG = 60.0
 UNRECORDED_MAX_ROWS = 500_000
 """Rows kept of a run's preparation (pre-cycles, preload) before its recording begins: the
 newest ~33 min at 250 Hz, kept in an aborted run if the plan stops before the recording."""
+JUMP_GAP_S = 0.03
+JUMP_MIN_DT_S = 5e-4
+JUMP_GAP_TOLERANCE_DEG = 0.5
+"""Two rows of a transmission error run further apart than ``JUMP_GAP_S`` (s: rows left out
+unpaired, or a stalled PC) are a count jump only beyond this much more TE change (output
+deg): the unit's own TE may have moved meanwhile, by far less."""
 STORE_RETRY_PERIOD_S = 1.0
 """While the store's database is away, the engine (paused, drive disabled) tries it this
 often (s)."""
@@ -149,6 +156,7 @@ class Engine:
         self._open: OpenRun | None = None
         self._setpoint = 0.0
         self._sample_window = 0
+        self._direction = 0
         self._step_index = 0
         self._control = ControlLog()
         """The setpoint, step and sample window over time: a row gets those of the instant it
@@ -256,7 +264,9 @@ class Engine:
         """
         steps = list(plan.steps())
         preflight(steps, self.torque_limit_Nm, has_input_motor=self.io.has_input_motor,
-                  has_climate=self.io.has_climate)
+                  has_climate=self.io.has_climate,
+                  has_input_encoder=self.io.has_input_encoder)
+        self._merger.wait_input = any(isinstance(st, TurnInput) for st in steps)
         self._plan = plan
         self._steps = steps
         self._step_index = 0
@@ -505,7 +515,7 @@ class Engine:
             if self._open is not None:
                 for group, state in self._by_control_state(rows):
                     self._open.append(group, state.setpoint_Nm, state.step,
-                                      state.sample_window)
+                                      state.sample_window, state.direction)
             elif self._moved:
                 for group, state in self._by_control_state(rows):
                     self._unrecorded.extend((r, state.setpoint_Nm, state.step) for r in group)
@@ -521,12 +531,13 @@ class Engine:
     def _note_control(self) -> None:
         """Log the control state in force from now (setpoint, step, sample window)."""
         self._control.set(time.monotonic(), ControlState(
-            self._setpoint, self._step_index + 1, self._sample_window))
+            self._setpoint, self._step_index + 1, self._sample_window, self._direction))
 
     def _by_control_state(self, rows: list[MergedRow]
                           ) -> list[tuple[list[MergedRow], ControlState]]:
         """``rows`` in runs of one control state: the state when each row was measured."""
-        now = ControlState(self._setpoint, self._step_index + 1, self._sample_window)
+        now = ControlState(self._setpoint, self._step_index + 1, self._sample_window,
+                           self._direction)
         out: list[tuple[list[MergedRow], ControlState]] = []
         for row in rows:
             state = self._control.at(row.t_mono_s) or now
@@ -616,6 +627,8 @@ class Engine:
                 self._end_run()
             case LockInput():
                 self._lock_input(step)
+            case TurnInput():
+                self._turn_input(step)
             case SetAmbient(temperature_C=c):
                 self.io.set_ambient(c)
             case WaitTemperature():
@@ -731,6 +744,123 @@ class Engine:
         self.io.lock_input(step.angle_deg, step.timeout_s)
         self._check_stopping()
 
+    def _turn_input(self, step: TurnInput) -> None:
+        """One direction of a transmission error run (see :class:`TurnInput`): brake torque,
+        turn, record from the end of the lead-in for the output revolutions, stop. Raises a
+        DeviceFault on a stall, a frozen output encoder, an overspeed or a count jump (the
+        engine then trips: zero torque, input stopped, the run kept and aborted)."""
+        self._ramp(step.brake_command_Nm, step.brake_rate_Nm_per_s, 0.02)
+        rows = self._recent_rows(0.1)
+        if not rows:
+            raise DeviceTimeout("acquisition", "recent encoder samples before turning", "none")
+        last = rows[-1]
+        in_start = last.input_angle_deg
+        in_rate = 6.0 * step.speed_rpm * step.direction  # deg/s, signed
+        out_rate = in_rate / step.ratio
+        lead_in = step.lead_in_output_deg * abs(step.ratio)  # deg of input
+        # deg of output, and a margin: the rows merged before the direction was set (at
+        # most a check period and a poll late) are not marked; the recorded span stays >= goal
+        goal = 360.0 * step.output_revolutions + abs(out_rate) * 0.1 + 0.5
+        t_start = time.monotonic()
+        deadline = t_start + step.timeout_factor * step.expected_s + 2.0
+        spin_up_until = last.t_mono_s + 0.3
+        out_begin: float | None = None
+        window: deque[MergedRow] = deque()
+        with self._cmd_lock:
+            self._check_stopping()
+            self.io.turn_input(step.direction * step.speed_rpm)
+        try:
+            while True:
+                self._sleep_until(time.monotonic() + 0.02)
+                new = [r for r in self._recent_rows(1.0) if r.t_mono_s > last.t_mono_s]
+                for row in new:
+                    self._check_jump(last, row, in_rate, out_rate, step)
+                    last = row
+                    window.append(row)
+                    while window and window[0].t_mono_s < row.t_mono_s - step.stall_s:
+                        window.popleft()
+                if new and new[-1].t_mono_s > spin_up_until + step.stall_s:
+                    self._check_speed(window, in_rate, out_rate, step)
+                if out_begin is None and abs(last.input_angle_deg - in_start) >= lead_in:
+                    out_begin = last.output_angle_deg
+                    self._direction = step.direction
+                    self._note_control()
+                if out_begin is not None and abs(last.output_angle_deg - out_begin) >= goal:
+                    break
+                if time.monotonic() > deadline:
+                    raise DeviceTimeout(
+                        "input motor", f"{step.output_revolutions:g} output revolutions "
+                        f"within {deadline - t_start:.1f} s",
+                        f"{abs(last.output_angle_deg - (out_begin or 0.0)) / 360.0:.3f}")
+        finally:
+            self._direction = 0
+            self._note_control()
+        with self._cmd_lock:
+            self._check_stopping()
+            self.io.stop_input()
+        self._sleep_until(time.monotonic() + 0.2)
+
+    @staticmethod
+    def _check_jump(prev: MergedRow, row: MergedRow, in_rate: float, out_rate: float,
+                    step: TurnInput) -> None:
+        """A count jump of either encoder between two rows: the transmission error
+        ``output - input / ratio`` changing by more than ``jump_tolerance_deg`` (output deg)
+        from one sample to the next (the unit's TE changes by arcsec per sample; a jump of
+        either encoder is the whole jump). The encoder named is the one whose change is
+        further from the motion expected at the set speed."""
+        dt = row.t_mono_s - prev.t_mono_s
+        if dt < JUMP_MIN_DT_S:  # two samples given (nearly) one SYNC's time: not judged
+            return
+        d_out = row.output_angle_deg - prev.output_angle_deg
+        d_in = row.input_angle_deg - prev.input_angle_deg
+        d_te = d_out - d_in / step.ratio
+        # the tolerance, plus 1.5 samples of output motion: a sample the PC paired with its
+        # neighbour's SYNC (a loaded PC) is not a jump; across a gap in the rows (left out,
+        # or a stalled PC) the unit's own TE may have moved: only a gross change counts
+        tolerance = step.jump_tolerance_deg + 1.5 * abs(out_rate) * min(dt, JUMP_GAP_S)
+        if dt > JUMP_GAP_S:
+            tolerance += JUMP_GAP_TOLERANCE_DEG
+        if not abs(d_te) > tolerance:
+            return
+        off_out = abs(d_out - out_rate * dt)
+        off_in = abs(d_in - in_rate * dt) / abs(step.ratio)
+        name, change = (("output encoder", d_out) if off_out >= off_in
+                        else ("input encoder", d_in))
+        raise DeviceFault(name, f"the output to follow the input within "
+                          f"{tolerance:.3g} deg between two samples "
+                          f"{dt * 1000:.1f} ms apart", f"a change of {d_te:+.4g} deg of the "
+                          f"transmission error ({name} {change:+.4g} deg): an encoder count "
+                          "jump")
+
+    @staticmethod
+    def _check_speed(window: deque[MergedRow], in_rate: float, out_rate: float,
+                     step: TurnInput) -> None:
+        """Stall (the input, or the output encoder frozen) or overspeed over the window."""
+        first, last = window[0], window[-1]
+        span = last.t_mono_s - first.t_mono_s
+        if span < 0.5 * step.stall_s:
+            return
+        moved_in = abs(last.input_angle_deg - first.input_angle_deg)
+        moved_out = abs(last.output_angle_deg - first.output_angle_deg)
+        want_in, want_out = abs(in_rate) * span, abs(out_rate) * span
+        rpm = moved_in / span / 6.0
+        if len(window) >= 5:  # the least-squares speed: one misplaced time does not count
+            t = np.array([r.t_mono_s for r in window])
+            a = np.array([r.input_angle_deg for r in window])
+            rpm = abs(float(np.polyfit(t - t[0], a, 1)[0])) / 6.0
+        if moved_in < step.stall_share * want_in:
+            raise DeviceFault("input motor", f"the input turning at {step.speed_rpm:g} rpm",
+                              f"{rpm:.3g} rpm over {span:.2f} s (input encoder): a stall")
+        if moved_out < step.stall_share * want_out:
+            raise DeviceFault("output encoder", f"the output turning at "
+                              f"{step.speed_rpm / abs(step.ratio):.3g} rpm",
+                              f"{moved_out / span / 6.0:.3g} rpm over {span:.2f} s while the "
+                              "input turns: a frozen output encoder or a broken unit")
+        if rpm > step.overspeed_factor * step.speed_rpm:
+            raise DeviceFault("input motor", f"at most {step.overspeed_factor:g} x "
+                              f"{step.speed_rpm:g} rpm", f"{rpm:.4g} rpm over {span:.2f} s "
+                              "(input encoder): an overspeed")
+
     def _wait_temperature(self, step: WaitTemperature) -> None:
         deadline = time.monotonic() + step.timeout_s
         while True:
@@ -794,12 +924,17 @@ class Engine:
         if self.io.has_climate:
             columns.append("temperature_C")
         columns += ["torque_command_Nm", "step", "sample_window"]
+        if test.get("kind") == TE_KIND:
+            columns.append("direction")
         recorder = self.store.begin_run(meta, columns, campaign_id=self.campaign_id)
         open_run = OpenRun(recorder, label, time.monotonic() if t0 is None else t0,
                            profile=self.options.profile,
                            limits=limits_dict(self.options.limits))
         self._dropped_at_begin = self._dropped_total()
-        self._frozen = frozen_watch(meta, test, open_run.t0)
+        # a transmission error run turns the output under a constant torque: its own watches
+        # (TurnInput: stall, frozen output, overspeed, count jumps) replace the frozen twist's
+        self._frozen = None if test.get("kind") == TE_KIND else frozen_watch(meta, test,
+                                                                             open_run.t0)
         share, rated = self.options.crosscheck_limit_share, test.get("rated_torque_Nm")
         self._cross_limit_Nm = (share * float(rated) if share is not None
                                 and isinstance(rated, int | float) and rated > 0 else None)
@@ -819,7 +954,8 @@ class Engine:
     def _dropped_total(self) -> int:
         """Encoder samples lost so far: full driver queues plus merge drops (count)."""
         counter = getattr(self.io, "samples_dropped", None)
-        return (0 if counter is None else int(counter())) + self._merger.dropped_before_torque
+        return ((0 if counter is None else int(counter())) + self._merger.dropped_before_torque
+                + self._merger.unpaired)
 
     def _stop_recording(self) -> None:
         """Wait until the rows up to now are in the open run, then stop appending rows."""

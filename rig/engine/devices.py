@@ -15,6 +15,7 @@ elsewhere), its sample number times its period.
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import time
 from typing import Any
@@ -25,6 +26,7 @@ from rig.devices import RigDevices
 from rig.engine.steady_clock import SteadyClock, SyncClock
 
 MAX_BAD_LINES_IN_A_ROW = 10
+log = logging.getLogger(__name__)
 
 
 class DevicesIO:
@@ -42,6 +44,7 @@ class DevicesIO:
         self.has_climate = devices.climate is not None
         self._bad_lines = 0
         self._commanding = False
+        self._turning = False
         self._torque_clock = SteadyClock(modulo_s=DEVICE_TIME_MODULO_S)
         self._output_clock = SteadyClock()
         self._input_clock = SteadyClock()
@@ -72,6 +75,7 @@ class DevicesIO:
             meta["encoder_period_s"] = d.encoder.period_s
         if d.input_encoder is not None:
             meta["input_encoder"] = d.input_encoder.device
+            meta["input_encoder_counts_per_rev"] = d.input_encoder.identity().counts_per_rev
         if d.torque_sensor is not None:
             meta["crosscheck_torque_sensor"] = d.torque_sensor.name
         return meta
@@ -163,9 +167,32 @@ class DevicesIO:
 
     def safe_state(self) -> None:
         self._commanding = False
-        if not self.devices.safe_state():
+        drive_safe = self.devices.safe_state()
+        if self._turning:  # a transmission error run: the input stops too
+            self._turning = False
+            motor = self.devices.input_motor
+            try:
+                if motor is not None:
+                    motor.stop()
+            except DeviceError as exc:
+                log.error("input motor stop not confirmed: %s", exc)
+        if not drive_safe:
             raise DeviceFault(self.devices.drive.name, "the safe state confirmed",
                               "no reply (the drive watchdog disables it)")
+
+    def turn_input(self, speed_rpm: float) -> None:
+        motor = self.devices.input_motor
+        if motor is None:
+            raise DeviceFault("input motor", "an input motor to turn the input", "none")
+        self._turning = True
+        motor.turn_at(speed_rpm)
+
+    def stop_input(self) -> None:
+        motor = self.devices.input_motor
+        if motor is None:
+            return
+        motor.stop()
+        self._turning = False
 
     def alive(self) -> None:
         self.devices.alive()

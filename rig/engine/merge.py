@@ -73,6 +73,14 @@ class _Series:
         v0, v1 = self.v[i - 1], self.v[i]
         return v0 + (v1 - v0) * (t - t0) / (t1 - t0)
 
+    def exact(self, t: float) -> float | None:
+        """The value stamped exactly ``t`` (the same SYNC), None if there is none."""
+        ts = self.t
+        i = bisect.bisect_left(ts, t)
+        if i < len(ts) and ts[i] == t:
+            return self.v[i]
+        return None
+
     def trim_before(self, t: float) -> None:
         """Drop points no longer needed for interpolation at times >= ``t``."""
         while len(self.t) > 2 and self.t[1] <= t:
@@ -89,6 +97,15 @@ class ChannelMerger:
         self._input = _Series()
         self._temperature = math.nan
         self.dropped_before_torque = 0
+        self.wait_input = False
+        """A transmission error run (the input turns): a row only once an input-encoder
+        sample at or after its time has come, and only with the input sample of the same
+        time (both encoders answer the same SYNC and get its send time, see
+        rig.engine.devices): interpolating between samples whose times came from another
+        clock would err by a part of a sample period of motion. Rows without one are
+        counted in ``unpaired`` and left out."""
+        self.unpaired = 0
+        self._last_paired_t = -math.inf
 
     def add_output(self, t_s: float, angle_deg: float) -> None:
         self._output.append((t_s, angle_deg))
@@ -112,14 +129,27 @@ class ChannelMerger:
         rows: list[MergedRow] = []
         out = self._output
         last_torque = self._torque.last_t
+        if self.wait_input:
+            last_torque = min(last_torque, self._input.last_t)
         while out and out[0][0] <= last_torque:
             t, angle = out.popleft()
             torque = self._torque.at(t, hold=False)
             if math.isnan(torque):
                 self.dropped_before_torque += 1
                 continue
-            rows.append(MergedRow(t, torque, angle, self._input.at(t, hold=True),
-                                  self._temperature))
+            if self.wait_input:
+                value = self._input.exact(t)
+                if value is not None and t - self._last_paired_t < 1e-5:
+                    value = None  # a time moved on by 1 us (rig.engine.devices._in_order):
+                    # two samples given one SYNC's time, at least one of them wrongly
+                if value is None:  # no input sample of this SYNC: a gap, not a guess
+                    self.unpaired += 1
+                    continue
+            else:
+                value = self._input.at(t, hold=True)
+            if self.wait_input:
+                self._last_paired_t = t
+            rows.append(MergedRow(t, torque, angle, value, self._temperature))
         if rows:
             self._torque.trim_before(rows[-1].t_mono_s)
             self._input.trim_before(rows[-1].t_mono_s)
@@ -134,6 +164,9 @@ class ControlState:
     setpoint_Nm: float
     step: int
     sample_window: int
+    direction: int = 0
+    """A transmission error run: +1 while the input turns forward and is recorded, -1 in
+    reverse, 0 otherwise."""
 
 
 class ControlLog:

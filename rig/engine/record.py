@@ -110,7 +110,7 @@ class OpenRun:
         self.crosscheck_max_diff_Nm = max(self.crosscheck_max_diff_Nm, diff_Nm)
 
     def append(self, rows: list[MergedRow], setpoint_Nm: float, step: int,
-               sample_window: int) -> None:
+               sample_window: int, direction: int = 0) -> None:
         """Append merged rows taken at or after the run's start (t_s ascending), while
         ``recording``."""
         if not self.recording:
@@ -124,7 +124,7 @@ class OpenRun:
                 "output_angle_deg": row.output_angle_deg,
                 "input_angle_deg": row.input_angle_deg, "temperature_C": row.temperature_C,
                 "torque_command_Nm": setpoint_Nm, "step": float(step),
-                "sample_window": float(sample_window),
+                "sample_window": float(sample_window), "direction": float(direction),
             }
             record = [values[c] for c in self.columns]
             self.recorder.append([None if (isinstance(v, float) and math.isnan(v)) else v
@@ -162,6 +162,9 @@ class OpenRun:
         """Analyse the run and close it as completed (metrics in run.json ``result``)."""
         result = self._base_result()
         analysis: dict[str, Any] = {}
+        test = self.recorder.meta.get("test", {})
+        if test.get("kind") == "transmission_error":
+            return self._finish_te(result, test)
         try:
             if len(self.data["t_s"]) < 10:
                 raise RigError(f"only {len(self.data['t_s'])} samples recorded")
@@ -171,6 +174,37 @@ class OpenRun:
             result["uncertainty"] = analysis.get("uncertainty", {})
             result["model"] = analysis.get("model")
         except (AnalysisError, RigError, ValueError) as exc:
+            result["analysis_error"] = str(exc)
+            log.warning("run %s: not analysed: %s", self.recorder.run_id, exc)
+        verdict = self._verdict("completed", None, result)
+        self.recorder.finish("completed", result=json_safe(result), extra={"outcome": verdict})
+        return self._outcome("completed", None, analysis, result, verdict)
+
+    def _finish_te(self, result: dict[str, Any], test: dict[str, Any]) -> RunOutcome:
+        """A transmission error run: the raw TE figures (rig/te_curve.py) under
+        ``result.te_raw``, and the analysis of rig/te.py (metrics, uncertainties, the model;
+        run-format.md's ``result``); closed as completed."""
+        from rig.te import analyse_te_run
+        from rig.te_curve import te_summary
+
+        analysis: dict[str, Any] = {}
+        try:
+            data = {c: np.asarray(v, dtype=float) for c, v in self.data.items()}
+            if "direction" not in data or "input_angle_deg" not in data:
+                raise RigError("a transmission error run needs input_angle_deg and direction")
+            raw = json_safe(te_summary(data, float(test["ratio"])))
+            result["te_raw"] = raw
+            analysis["te_raw"] = raw
+            item = analyse_te_run(self._run())
+            record = item.result_record()
+            result.update(record)
+            metrics = item.metrics_dict()
+            analysis.update(json_safe({**metrics, "uncertainty": record["uncertainty"],
+                                       "model": record["model"],
+                                       "comparison": item.comparison,
+                                       "encoder_eccentricity": record["encoder_eccentricity"],
+                                       "test_kind": "transmission_error"}))
+        except (AnalysisError, RigError, ValueError, KeyError) as exc:
             result["analysis_error"] = str(exc)
             log.warning("run %s: not analysed: %s", self.recorder.run_id, exc)
         verdict = self._verdict("completed", None, result)

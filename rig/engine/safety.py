@@ -4,7 +4,7 @@ commanded torque) and while it runs (every commanded and every measured torque).
 from __future__ import annotations
 
 from rig.errors import RigError
-from rig.plans.steps import Ramp, Step, StepTwist
+from rig.plans.steps import Ramp, Step, StepTwist, TurnInput
 
 
 class PlanRejected(RigError):
@@ -21,6 +21,8 @@ def commanded_torques(step: Step) -> list[float]:
         return [step.target_Nm]
     if isinstance(step, StepTwist):
         return [step.limit_Nm]
+    if isinstance(step, TurnInput):
+        return [step.brake_command_Nm]
     return []
 
 
@@ -43,7 +45,7 @@ def check_measured(torque_Nm: float, trip_Nm: float, channel: str) -> str | None
 
 
 def preflight(steps: list[Step], limit_Nm: float, *, has_input_motor: bool,
-              has_climate: bool) -> None:
+              has_climate: bool, has_input_encoder: bool = True) -> None:
     """Refuse a plan before anything moves: torques beyond ``limit_Nm`` or steps the rig
     cannot do. The message names the step (1-based) and what is wrong."""
     from rig.plans.steps import LockInput, SetAmbient, WaitTemperature, describe
@@ -57,6 +59,10 @@ def preflight(steps: list[Step], limit_Nm: float, *, has_input_motor: bool,
         if isinstance(step, LockInput) and not has_input_motor:
             problems.append(f"step {i} ({describe(step)}): the rig has no input motor "
                             "([input_motor] in the rig configuration)")
+        if isinstance(step, TurnInput) and not (has_input_motor and has_input_encoder):
+            problems.append(f"step {i} ({describe(step)}): a transmission error run needs an "
+                            "input motor and an input encoder ([input_motor], "
+                            "[input_encoder] in the rig configuration)")
         if isinstance(step, SetAmbient | WaitTemperature) and not has_climate:
             problems.append(f"step {i} ({describe(step)}): the rig has no climate chamber "
                             "([climate] in the rig configuration)")

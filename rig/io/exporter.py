@@ -2,7 +2,8 @@
 
 A run (its sample columns, then ``twist_arcmin``: the twist in arcmin centred on the loop,
 :func:`rig.analyse.sample_twist_arcmin`, the column the Python API's ``.to_pandas()`` adds; a
-``twist_arcmin`` the run already holds is recomputed, never doubled):
+``twist_arcmin`` the run already holds is recomputed, never doubled; a transmission error run
+also ``te_arcsec`` before it, each sample's TE, :func:`rig.te.sample_te_arcsec`):
 
 - ``csv``: a rig-run/1 run folder (run.json + samples.csv), :func:`rig.runformat.write_run`;
   its columns read back bit for bit.
@@ -112,13 +113,19 @@ def _meta_json(meta: dict[str, Any]) -> str:
 
 
 def with_twist(run: Run) -> Run:
-    """``run`` with :data:`rig.analyse.TWIST_COLUMN` as its last column (same meta)."""
+    """``run`` with :data:`rig.analyse.TWIST_COLUMN` as its last column (same meta); a
+    transmission error run also with ``te_arcsec`` (:func:`rig.te.sample_te_arcsec`) before
+    it."""
     from rig.analyse import TWIST_COLUMN, sample_twist_arcmin
+    from rig.te import TE_COLUMN, is_te_run, sample_te_arcsec
 
-    columns = [c for c in run.columns if c != TWIST_COLUMN]
+    added = [TE_COLUMN, TWIST_COLUMN] if is_te_run(run) else [TWIST_COLUMN]
+    columns = [c for c in run.columns if c not in added]
     data = {c: run.data[c] for c in columns}
+    if is_te_run(run):
+        data[TE_COLUMN] = sample_te_arcsec(run)
     data[TWIST_COLUMN] = sample_twist_arcmin(run)
-    return Run(meta=run.meta, columns=[*columns, TWIST_COLUMN], data=data, path=run.path,
+    return Run(meta=run.meta, columns=[*columns, *added], data=data, path=run.path,
                notes=list(run.notes))
 
 

@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from rig.plans.steps import (
     BeginRun,
@@ -39,6 +39,7 @@ from rig.plans.steps import (
     Settle,
     Step,
     StepTwist,
+    TurnInput,
     WaitTemperature,
     describe,
 )
@@ -320,3 +321,140 @@ def campaign_plan(loop: LoopParams, axes: CampaignAxes) -> Plan:
     """Multi-position / multi-amplitude / multi-temperature / repeated hysteresis runs."""
     params = {"loop": loop.model_dump(), "axes": axes.model_dump()}
     return Plan("hysteresis-campaign", params, lambda: campaign_steps(loop, axes))
+
+
+# --------------------------------------------------------------------------- transmission error
+
+TE_KIND = "transmission_error"
+Direction = Literal["forward", "reverse"]
+
+
+class TEParams(BaseModel):
+    """Parameters of one transmission error run (docs/run-format.md, "A transmission error
+    run"): the input turns at ``input_speed_rpm`` through ``output_revolutions`` output
+    revolutions in each of ``directions`` under a brake torque of ``brake_torque_fraction``
+    of the rated torque; ``ratio`` is the signed reduction ratio (``-8`` for the seed 000
+    45/40 pair). Times in s, angles in deg."""
+
+    model_config = _STRICT
+
+    rated_torque_Nm: float = Field(gt=0)
+    ratio: float
+    input_speed_rpm: float = Field(120.0, gt=0, le=6000)
+    brake_torque_fraction: float = Field(0.2, gt=0, le=1)
+    output_revolutions: float = Field(1.0, ge=1, le=100)
+    directions: list[Direction] = Field(default_factory=lambda: ["forward", "reverse"],
+                                        min_length=1, max_length=2)
+    lead_in_output_deg: float = Field(10.0, ge=0, le=360)
+    brake_rate_Nm_per_s: float = Field(20.0, gt=0)
+    stall_s: float = Field(0.5, gt=0)
+    overspeed_factor: float = Field(1.5, gt=1)
+    jump_tolerance_deg: float = Field(0.1, gt=0)
+    zero_window_s: float = Field(0.2, gt=0)
+
+    @field_validator("ratio")
+    @classmethod
+    def _ratio(cls, value: float) -> float:
+        if not (abs(value) >= 1.0 and abs(value) <= 10_000):
+            raise ValueError(f"the ratio must be a reduction ratio with 1 <= |ratio| <= 10000 "
+                             f"(signed: negative when the output turns against the input), "
+                             f"got {value!r}")
+        return value
+
+    @field_validator("directions")
+    @classmethod
+    def _distinct(cls, value: list[str]) -> list[str]:
+        if len(set(value)) != len(value):
+            raise ValueError(f"each direction once, got {value}")
+        return value
+
+    @property
+    def brake_torque_Nm(self) -> float:
+        """The brake torque's magnitude (N*m)."""
+        return self.rated_torque_Nm * self.brake_torque_fraction
+
+    def test_meta(self) -> dict[str, Any]:
+        """The run.json ``test`` keys of docs/run-format.md for a transmission error run."""
+        return {
+            "kind": TE_KIND,
+            "ratio": self.ratio,
+            "input_speed_rpm": self.input_speed_rpm,
+            "brake_torque_Nm": self.brake_torque_Nm,
+            "brake_torque_fraction": self.brake_torque_fraction,
+            "directions": list(self.directions),
+            "output_revolutions": self.output_revolutions,
+            "rated_torque_Nm": self.rated_torque_Nm,
+            "lead_in_output_deg": self.lead_in_output_deg,
+        }
+
+    def turn(self, direction: str) -> TurnInput:
+        """The :class:`TurnInput` step of one direction."""
+        return TurnInput(self.input_speed_rpm, 1 if direction == "forward" else -1,
+                         self.brake_torque_Nm, self.ratio, self.output_revolutions,
+                         self.lead_in_output_deg, self.brake_rate_Nm_per_s, self.stall_s,
+                         overspeed_factor=self.overspeed_factor,
+                         jump_tolerance_deg=self.jump_tolerance_deg)
+
+
+def unit_ratio(unit: dict[str, Any]) -> float | None:
+    """The signed reduction ratio of docs/run-format.md from a run.json ``unit``: for an
+    internal involute pair whose output is the external gear, ``-z_external / (z_internal -
+    z_external)`` (-8 for 45/40); ``unit.ratio`` when given; else None."""
+    given = unit.get("ratio")
+    if isinstance(given, int | float) and not isinstance(given, bool) and given:
+        return float(given)
+    z1, z2 = unit.get("z_internal"), unit.get("z_external")
+    if (unit.get("kind", "internal_involute") == "internal_involute"
+            and isinstance(z1, int) and isinstance(z2, int) and z1 > z2 > 0):
+        return -z2 / (z1 - z2)
+    return None
+
+
+def te_label(p: TEParams, repeat: int = 0, temperature_C: float | None = None) -> str:
+    """``[T25C-]te-s120-b20-r0``: speed (rpm), brake (% of rated), repeat."""
+    temp = "" if temperature_C is None else f"T{_num(temperature_C, 0)}C-"
+    return (f"{temp}te-s{_num(p.input_speed_rpm, 0)}-b{_num(100 * p.brake_torque_fraction, 0)}"
+            f"-r{repeat}")
+
+
+def te_run(p: TEParams, label: str, test: dict[str, Any] | None = None) -> Iterator[Step]:
+    """One recorded transmission error run: torque zero, then each direction turned under
+    the brake torque, the torque zero after, end."""
+    yield ReadTorqueZero("before", p.zero_window_s, p.brake_rate_Nm_per_s)
+    yield BeginRun(label, {**p.test_meta(), **(test or {})})
+    for direction in p.directions:
+        yield p.turn(direction)
+        yield Checkpoint(f"{direction} done")
+    yield ReadTorqueZero("after", p.zero_window_s, p.brake_rate_Nm_per_s)
+    yield EndRun()
+    yield Checkpoint(f"run {label} done")
+
+
+def te_plan(p: TEParams, repeats: int = 1) -> Plan:
+    """Transmission error runs (``rig measure --test transmission-error``)."""
+
+    def build() -> Iterator[Step]:
+        for k in range(repeats):
+            yield from te_run(p, te_label(p, k), {"repeat": k})
+
+    return Plan(TE_KIND, {"te": p.model_dump(), "repeats": repeats}, build)
+
+
+def te_campaign_plan(p: TEParams, axes: CampaignAxes) -> Plan:
+    """A campaign of transmission error runs: temperatures (outer) x repeats."""
+
+    def build() -> Iterator[Step]:
+        temps: list[float | None] = list(axes.temperatures_C) or [None]
+        for temp in temps:
+            if temp is not None:
+                yield SetAmbient(temp)
+                yield WaitTemperature(temp, axes.temperature_tolerance_C,
+                                      axes.temperature_timeout_s)
+            for k in range(axes.repeats):
+                test: dict[str, Any] = {"repeat": k}
+                if temp is not None:
+                    test["temperature_setpoint_C"] = temp
+                yield from te_run(p, te_label(p, k, temp), test)
+
+    return Plan(f"{TE_KIND}-campaign", {"te": p.model_dump(), "axes": axes.model_dump()},
+                build)

@@ -22,6 +22,7 @@ from rig.plans.steps import (
     Settle,
     Step,
     StepTwist,
+    TurnInput,
     WaitTemperature,
 )
 
@@ -79,6 +80,10 @@ def estimate(steps: Iterable[Step], *, input_speed_deg_per_s: float = 360.0,
                 dwell = st.expected_steps * per_step
                 dt = _ramp_s(torque, st.limit_Nm, st.rate_Nm_per_s) + dwell
                 torque = st.limit_Nm
+            case TurnInput() as turn:
+                dt = (_ramp_s(torque, turn.brake_command_Nm, turn.brake_rate_Nm_per_s)
+                      + turn.expected_s + 0.5)
+                torque = turn.brake_command_Nm
             case BeginRun():
                 out.n_runs += 1
         out.step_s.append(dt)

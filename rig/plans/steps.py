@@ -139,6 +139,48 @@ class ReadTorqueZero:
 
 
 @dataclass(frozen=True)
+class TurnInput:
+    """One direction of a transmission error run: hold the brake torque ``brake_torque_Nm``
+    (magnitude, N*m) against the output's motion, turn the input at ``speed_rpm`` (rpm) in
+    ``direction`` (+1 forward, -1 reverse), record (column ``direction``) once the input has
+    turned ``lead_in_output_deg`` of output angle times ``|ratio|`` (the start transient
+    excluded), until the output encoder has turned ``output_revolutions``; then stop the
+    input (``direction`` 0 while it stops).
+
+    Stops the plan (fault) on an input stall (the input encoder moves less than
+    ``stall_share`` of the expected angle over ``stall_s``; the output encoder likewise: a
+    frozen output), an overspeed (the input encoder's speed over ``stall_s`` beyond
+    ``overspeed_factor`` times ``speed_rpm``) and an encoder count jump (the transmission
+    error ``output - input / ratio`` changing by more than ``jump_tolerance_deg`` plus 1.5
+    samples' output motion, output deg, from one sample to the next)."""
+
+    speed_rpm: float
+    direction: int
+    brake_torque_Nm: float
+    ratio: float
+    output_revolutions: float = 1.0
+    lead_in_output_deg: float = 10.0
+    brake_rate_Nm_per_s: float = 20.0
+    stall_s: float = 0.5
+    stall_share: float = 0.2
+    overspeed_factor: float = 1.5
+    jump_tolerance_deg: float = 0.1
+    timeout_factor: float = 3.0
+
+    @property
+    def brake_command_Nm(self) -> float:
+        """The drive's torque (N*m): against the output, whose speed has the sign of
+        ``direction / ratio``."""
+        return -self.brake_torque_Nm * (1.0 if self.direction / self.ratio > 0 else -1.0)
+
+    @property
+    def expected_s(self) -> float:
+        """Time to turn the lead-in and the output revolutions (s)."""
+        output_deg = 360.0 * self.output_revolutions + self.lead_in_output_deg
+        return output_deg * abs(self.ratio) / (6.0 * self.speed_rpm)
+
+
+@dataclass(frozen=True)
 class Checkpoint:
     """A safe point: the engine pauses here when asked to, and reports progress."""
 
@@ -147,7 +189,7 @@ class Checkpoint:
 
 Step = (
     BeginRun | EndRun | LockInput | SetAmbient | WaitTemperature | Ramp | Settle | Dwell
-    | Sample | StepTwist | ReadTorqueZero | Checkpoint
+    | Sample | StepTwist | ReadTorqueZero | Checkpoint | TurnInput
 )
 
 
@@ -177,6 +219,11 @@ def describe(step: Step) -> str:
             return f"twist step {d:g} arcmin toward {lim:+.4g} N*m"
         case ReadTorqueZero(when=w):
             return f"read torque zero ({w})"
+        case TurnInput() as t:
+            way = "forward" if t.direction > 0 else "reverse"
+            return (f"turn input {way} at {t.speed_rpm:g} rpm for {t.output_revolutions:g} "
+                    f"output rev under {t.brake_command_Nm:+.4g} N*m brake torque "
+                    f"(about {t.expected_s:.1f} s)")
         case Checkpoint(label=label):
             return f"checkpoint {label}".rstrip()
     raise TypeError(f"not a plan step: {step!r}")

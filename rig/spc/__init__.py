@@ -59,9 +59,12 @@ METRICS: dict[str, tuple[str, str | None, str | None]] = {
     "lost_motion_arcmin": ("max", "lost_motion_arcmin_max", None),
     "backlash_arcmin": ("max", "backlash_arcmin_max", None),
     "stiffness_Nm_per_arcmin": ("min", None, "stiffness_Nm_per_arcmin_min"),
+    "te_pp_arcsec": ("max", "te_pp_max_arcsec", None),
 }
+"""The charted metrics; ``te_pp_arcsec`` (a transmission error run's peak-to-peak TE, GB/T
+35089 transmission accuracy) for the units tested for it."""
 LOWER_BOUND: dict[str, float | None] = {
-    m: 0.0 if m in IMPOSSIBLE_BELOW_ZERO else None for m in METRICS}
+    m: 0.0 if m in IMPOSSIBLE_BELOW_ZERO or m == "te_pp_arcsec" else None for m in METRICS}
 """The smallest value a metric can take (arcmin, N*m/arcmin): none of these is ever
 negative, so no chart of them has a lower control limit below 0 (analysis/spc.py)."""
 TEETH = (("z_internal", "z_external"), ("z_pinion", "z_gear"))

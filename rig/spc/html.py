@@ -139,7 +139,7 @@ def hover_targets(image: ChartImage, view: dict[str, Any], unit: str) -> list[di
 
 
 UNITS = {"lost_motion_arcmin": "arcmin", "backlash_arcmin": "arcmin",
-         "stiffness_Nm_per_arcmin": "N·m/arcmin"}
+         "stiffness_Nm_per_arcmin": "N·m/arcmin", "te_pp_arcsec": "arcsec"}
 
 
 def render_html(doc: dict[str, Any]) -> str:

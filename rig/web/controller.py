@@ -33,7 +33,15 @@ from rig.engine.safety import PlanRejected, preflight
 from rig.errors import RigError
 from rig.measure import RigSession, measure_plan, run_campaign, run_meta, run_result
 from rig.outcome import campaign_outcome
-from rig.plans import Plan, campaign_plan, hysteresis_plan
+from rig.plans import (
+    TE_KIND,
+    CampaignAxes,
+    Plan,
+    campaign_plan,
+    hysteresis_plan,
+    te_campaign_plan,
+    te_plan,
+)
 from rig.plans.estimate import estimate
 from rig.store import Store
 from rig.web.faults import explain
@@ -60,7 +68,13 @@ class ControlError(RigError):
 
 
 def build_plan(req: RunRequest) -> Plan:
-    """The engine plan of a request: one hysteresis run, or a campaign over ``axes``."""
+    """The engine plan of a request: one hysteresis run, or a campaign over ``axes``; with
+    ``test`` "transmission_error" the same of transmission error runs."""
+    if req.test == TE_KIND:
+        params = req.te_params()
+        return te_plan(params) if req.kind == "run" else te_campaign_plan(
+            params, CampaignAxes(repeats=req.axes.repeats,
+                                 temperatures_C=list(req.axes.temperatures_C)))
     loop = req.plan.loop_params()
     if req.kind == "run":
         return hysteresis_plan(loop, req.position_deg)
@@ -86,12 +100,13 @@ def compute_preview(req: RunRequest, facts: dict[str, Any]) -> dict[str, Any]:
             limit = min(limit, req.torque_limit_Nm)
         try:
             preflight(steps, limit, has_input_motor=facts["has_input_motor"],
-                      has_climate=facts["has_climate"])
+                      has_climate=facts["has_climate"],
+                      has_input_encoder=facts.get("has_input_encoder", True))
         except PlanRejected as exc:
             problems.append(str(exc))
     else:
         problems.append("no rig connected: the plan cannot be checked against a rig")
-    model, assumptions = model_summary(req)
+    model, assumptions = model_summary(req) if req.test != TE_KIND else (None, [])
     batch = None
     if model is not None:
         from rig.campaign import batch_band
@@ -103,7 +118,8 @@ def compute_preview(req: RunRequest, facts: dict[str, Any]) -> dict[str, Any]:
         "name": plan.name, "n_steps": len(steps), "n_runs": est.n_runs,
         "estimated_s": est.total_s, "dwell_s": est.dwell_s, "steps": listing,
         "truncated": len(steps) > len(listing), "torque_limit_Nm": limit,
-        "amplitude_Nm": req.plan.loop_params().amplitude_Nm,
+        "amplitude_Nm": (req.te_params().brake_torque_Nm if req.test == TE_KIND
+                         else req.plan.loop_params().amplitude_Nm),
         "fits": not problems, "problems": problems, "assumptions": assumptions,
         "model": model, "batch": batch,
     })
@@ -541,6 +557,8 @@ class RigController:
                 "torque_limit_Nm": None if session is None else session.io.torque_limit_Nm,
                 "has_input_motor": bool(session is not None and session.io.has_input_motor),
                 "has_climate": bool(session is not None and session.io.has_climate),
+                "has_input_encoder": bool(session is not None
+                                          and session.io.has_input_encoder),
                 "faults": self.faults()}
 
     def preview(self, req: RunRequest) -> dict[str, Any]:
@@ -635,7 +653,8 @@ class RigController:
         unit = req.unit.mapping()
         meta = run_meta(unit, session, req.operator, req.calibration_override,
                         override_how=OVERRIDE_HOW)
-        plan = hysteresis_plan(req.plan.loop_params(), req.position_deg)
+        plan = build_plan(req) if req.test == TE_KIND else hysteresis_plan(
+            req.plan.loop_params(), req.position_deg)
         engine, outcomes = measure_plan(session, tap, plan, meta, options=self._options(req),
                                         progress=self._on_event, on_engine=self._set_engine)
         limits = req.limits.limits()
@@ -660,6 +679,10 @@ class RigController:
             "limits": req.limits.model_dump(),
             "calibration_override": req.calibration_override,
         }
+        if req.test == TE_KIND:
+            data.update(test=TE_KIND, te=req.te.model_dump(exclude_none=True),
+                        axes={"repeats": req.axes.repeats,
+                              "temperatures_C": list(req.axes.temperatures_C)})
         camp = campaign_from_mapping({k: v for k, v in data.items() if v is not None},
                                      source="<control page>")
         result = run_campaign(camp, session, tap, progress=self._on_event,

@@ -161,6 +161,10 @@ class LiveHub:
             "t_s": [_finite(r[0]) for r in rows],
             "torque_Nm": [_finite(r[1]) for r in rows],
             "twist_arcmin": [_finite(r[2]) for r in rows],
+            **({"output_deg": [_finite(r[4]) for r in rows],
+                "te_arcsec": [_finite(r[5]) for r in rows],
+                "direction": [_finite(r[6]) for r in rows]}
+               if rows and len(rows[-1]) >= 7 else {}),
             "t_wall_s": rows[-1][3],
             "t_sent_s": time.time(),
         }

@@ -36,6 +36,15 @@ class TapRecorder:
         self._i_torque = cols.index("torque_Nm")
         self._i_angle = cols.index("output_angle_deg")
         self._i_temp = cols.index("temperature_C") if "temperature_C" in cols else None
+        test = (getattr(recorder, "meta", None) or {}).get("test") or {}
+        ratio = test.get("ratio")
+        self._te: tuple[int, int, float] | None = None
+        """A transmission error run: (input angle column, direction column, ratio); its rows
+        also carry the output angle (deg), the raw TE (arcsec, docs/run-format.md before the
+        mean) and the direction to the page."""
+        if (test.get("kind") == "transmission_error" and isinstance(ratio, int | float)
+                and ratio and "input_angle_deg" in cols and "direction" in cols):
+            self._te = (cols.index("input_angle_deg"), cols.index("direction"), float(ratio))
         self._t0_wall = time.time()
         self.latest: tuple[float, ...] | None = None
         """The newest row: (t_s, torque_Nm, twist_arcmin, t_wall_s[, temperature_C])."""
@@ -67,7 +76,18 @@ class TapRecorder:
         if math.isfinite(item[2]):
             temp = values[self._i_temp] if self._i_temp is not None else None
             self.latest = item if not isinstance(temp, int | float) else (*item, float(temp))
-            self._hub.add_rows([item])
+            self._hub.add_rows([self._with_te(item, values)])
+
+    def _with_te(self, item: tuple[float, ...], values: list[Any]) -> tuple[float, ...]:
+        """``item`` plus (output angle deg, raw TE arcsec, direction) in a TE run."""
+        if self._te is None:
+            return item
+        i_in, i_dir, ratio = self._te
+        out_deg, in_deg, direction = values[self._i_angle], values[i_in], values[i_dir]
+        if not all(isinstance(v, int | float) for v in (in_deg, direction)):
+            return (*item, math.nan, math.nan, 0.0)
+        te = 3600.0 * (float(out_deg) - float(in_deg) / ratio)
+        return (*item, float(out_deg), te, float(direction))
 
 
 class TapStore:

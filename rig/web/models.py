@@ -14,7 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from rig import ids
 from rig.campaign import Limits
-from rig.plans import CampaignAxes, LoopParams, check_plan_size
+from rig.plans import TE_KIND, CampaignAxes, LoopParams, TEParams, check_plan_size, unit_ratio
 
 ID_PATTERN = rf"^{ids.ID_PATTERN.pattern}$"
 """Run and campaign ids in URLs: the one rule of :mod:`rig.ids`."""
@@ -111,6 +111,8 @@ class LimitSettings(BaseModel):
     lost_motion_arcmin_max: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
     backlash_arcmin_max: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
     stiffness_Nm_per_arcmin_min: float | None = Field(None, gt=0, le=1e9, allow_inf_nan=False)
+    te_pp_max_arcsec: float | None = Field(None, gt=0, le=1e6, allow_inf_nan=False)
+    te_hysteresis_max_arcmin: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
 
     def limits(self) -> Limits:
         return Limits(**self.model_dump())
@@ -133,6 +135,19 @@ class AxesSettings(BaseModel):
         return CampaignAxes(**self.model_dump())
 
 
+class TESettings(BaseModel):
+    """The transmission error test (:class:`rig.plans.TEParams`): input speed (rpm), brake
+    torque (fraction of the plan's rated torque), output revolutions per direction, the
+    signed ratio (None: the unit's)."""
+
+    model_config = _strict
+
+    input_speed_rpm: float = Field(120.0, gt=0, le=6000, allow_inf_nan=False)
+    brake_torque_fraction: float = Field(0.2, gt=0, le=1, allow_inf_nan=False)
+    output_revolutions: float = Field(1.0, ge=1, le=100, allow_inf_nan=False)
+    ratio: float | None = Field(None, ge=-10_000, le=10_000, allow_inf_nan=False)
+
+
 class RunRequest(BaseModel):
     """Set up a single run (``kind`` "run") or a campaign (``kind`` "campaign": runs over
     ``axes``). ``position_deg`` (run only) locks the input there first (needs an input
@@ -141,6 +156,9 @@ class RunRequest(BaseModel):
     model_config = _strict
 
     kind: Literal["run", "campaign"] = "run"
+    test: Literal["lost_motion", "transmission_error"] = "lost_motion"
+    """The test: the hysteresis loop (``plan``) or the transmission error (``te``)."""
+    te: TESettings = Field(default_factory=TESettings)
     name: str = Field("web", pattern=NAME_PATTERN, description="Campaign name (campaigns).")
     operator: str | None = Field(None, min_length=1, max_length=80)
     calibration_override: str | None = Field(None, min_length=1, max_length=500)
@@ -154,9 +172,22 @@ class RunRequest(BaseModel):
     torque_limit_Nm: float | None = Field(None, gt=0, le=100_000, allow_inf_nan=False)
     profile: Literal["nabtesco", "harmonic-drive", "gbt", "spinea"] = "nabtesco"
 
+    def te_params(self) -> TEParams:
+        """The transmission error run's parameters (ValueError without a ratio)."""
+        ratio = self.te.ratio if self.te.ratio is not None else unit_ratio(self.unit.mapping())
+        if ratio is None:
+            raise ValueError("te.ratio: the unit does not give the reduction ratio; enter it")
+        return TEParams(rated_torque_Nm=self.plan.rated_torque_Nm, ratio=ratio,
+                        input_speed_rpm=self.te.input_speed_rpm,
+                        brake_torque_fraction=self.te.brake_torque_fraction,
+                        output_revolutions=self.te.output_revolutions)
+
     @model_validator(mode="after")
     def _small_enough(self) -> RunRequest:
         a = self.axes
+        if self.test == TE_KIND:
+            self.te_params()
+            return self
         n_runs = 1 if self.kind == "run" else (
             len(a.positions_deg) * len(a.amplitudes_pct) * max(1, len(a.temperatures_C))
             * a.repeats)

@@ -113,7 +113,7 @@ class GearPlant:
         at_monotonic = getattr(self.clock, "at_monotonic", None)
         if at_monotonic is None:
             return self.snapshot()
-        t = at_monotonic(float(t_mono_s))
+        t = at_monotonic(float(t_mono_s)) - self._t0  # the plant's time, as _advance's
         with self._lock:
             now = self._advance()
             if not t < now:
@@ -189,7 +189,39 @@ class GearPlant:
             raise ValueError(f"input angle must be a finite number of deg, got {angle_deg!r}")
         with self._lock:
             self._advance()
+            self._model.input_speed_deg_s = self.config.rig.input_speed_deg_per_s
             self._model.input_target_deg = value
+
+    def turn_input(self, speed_deg_per_s: float) -> float:
+        """Turn the eccentric shaft (input) at a constant speed (deg/s; the sign is the
+        direction, + forward) until :meth:`stop_input` or :meth:`lock_input_at`; 0 stops
+        it. Returns the input angle (deg) at the command."""
+        value = float(speed_deg_per_s)
+        if not math.isfinite(value):
+            raise ValueError(f"input speed must be a finite number of deg/s, got "
+                             f"{speed_deg_per_s!r}")
+        with self._lock:
+            self._advance()
+            m = self._model
+            if value == 0.0:
+                m.input_target_deg = m.input_deg
+            else:
+                m.input_speed_deg_s = abs(value)
+                m.input_target_deg = math.copysign(math.inf, value)
+            return m.input_deg
+
+    def stop_input(self) -> float:
+        """Stop the input where it is and hold it there; returns that angle (deg)."""
+        return self.turn_input(0.0)
+
+    def input_speed_deg_per_s(self) -> float:
+        """The input's speed now (deg/s, signed; 0 when it stands or is locked)."""
+        with self._lock:
+            self._advance()
+            m = self._model
+            if m.input_deg == m.input_target_deg:
+                return 0.0
+            return math.copysign(m.input_speed_deg_s, m.input_target_deg - m.input_deg)
 
     def set_ambient_temperature(self, celsius: float) -> None:
         """Set the ambient/heater setpoint the housing temperature follows (deg C)."""
@@ -280,6 +312,87 @@ class GearPlant:
             params.update(geo.kind_truth(theta))
             return params
 
+    def true_transmission_error(self, brake_torque_Nm: float, points_per_input_rev: int = 720,
+                                orders: list[int] | None = None) -> dict:
+        """Quasi-static truth of a transmission error run (docs/run-format.md): the unit's TE
+        (arcsec) over one output revolution from the input angle now, in each direction,
+        under a brake torque of magnitude ``brake_torque_Nm`` (N*m) against the output's
+        motion, at the current housing temperature, friction and dynamics off.
+
+        The output sits on the flank ``s`` the brake pushes it to (forward input: the output
+        turns negative, the brake pushes it positive, ``s = +1``), so its twist is
+        ``c(theta) + s (play(theta) / 2 + h(T))``: the pitch deviations and the
+        eccentricities' kinematic error in ``c`` (geometry.kinematic_error_um), the runout's
+        play (seed 000 eqs. 3, 4, 7) and the elastic twist on the flank.
+        ``TE = 3600 * twist_deg`` minus each direction's mean (run-format's ``c_d``); the
+        output encoder's mounting eccentricity is a reading error, reported apart under
+        ``encoder_eccentricity`` and not in the unit's TE.
+
+        Returns ``forward``/``reverse``: ``output_angle_deg`` (nominal, the output encoder's
+        angle without errors), ``input_angle_deg``, ``te_arcsec``, ``pp_arcsec``;
+        ``te_pp_arcsec`` (the larger direction's), ``te_hysteresis_arcmin`` (forward mean
+        minus reverse mean: play plus twice the elastic twist), ``te_orders`` (per output
+        revolution, ``TE ~ A cos(k theta_out + phase)`` with ``theta_out`` the output angle,
+        rad; default orders: the eccentricities' ``ratio`` and ``ratio + 1``),
+        ``encoder_eccentricity`` and ``injected`` (every injected value)."""
+        torque = abs(float(brake_torque_Nm))
+        if not math.isfinite(torque):
+            raise ValueError(f"brake torque must be finite, got {brake_torque_Nm!r}")
+        with self._lock:
+            self._advance()
+            model = self._scratch()
+        geo = model.geometry
+        ratio = model.ratio
+        n = int(round(ratio * points_per_input_rev))
+        start = model.input_deg
+        offset = self.config.rig.output_offset_deg
+        h_rad = model.compliance(torque)[0]
+        out: dict = {}
+        means = {}
+        for name, s in (("forward", 1.0), ("reverse", -1.0)):
+            theta = start + s * 360.0 * ratio * np.arange(n) / n
+            twist = np.empty(n)
+            for i, th in enumerate(theta):
+                model.input_deg = float(th)
+                twist[i] = model.pitch_offset_rad() + s * (0.5 * model.play_rad() + h_rad)
+            te = twist * ARCMIN_PER_RAD * 60.0
+            means[name] = float(te.mean())
+            te = te - te.mean()
+            out[name] = {"input_angle_deg": theta, "output_angle_deg": offset - theta / ratio,
+                         "te_arcsec": te, "pp_arcsec": float(te.max() - te.min())}
+        out["te_pp_arcsec"] = max(out["forward"]["pp_arcsec"], out["reverse"]["pp_arcsec"])
+        out["te_pp_forward_arcsec"] = out["forward"]["pp_arcsec"]
+        out["te_pp_reverse_arcsec"] = out["reverse"]["pp_arcsec"]
+        out["te_hysteresis_arcmin"] = (means["forward"] - means["reverse"]) / 60.0
+        wanted = orders if orders is not None else (
+            [int(round(ratio)), int(round(ratio)) + 1] if geo.kinematic_on else [])
+        out["te_orders"] = [
+            {**te_order(out[name]["output_angle_deg"], out[name]["te_arcsec"], k),
+             "direction": name}
+            for name in ("forward", "reverse") for k in wanted]
+        rig = self.config.rig
+        out["encoder_eccentricity"] = {
+            "order": 1, "per": "output_rev", "amplitude_arcsec": rig.encoder_eccentricity_arcsec,
+            "phase_deg": _wrap_deg(rig.encoder_eccentricity_phase_deg - 90.0),
+            "form": "reading error E sin(theta_out + encoder_eccentricity_phase_deg)"}
+        fx = self.config.effects
+        out["injected"] = {
+            "ratio": -ratio, "brake_torque_Nm": torque,
+            "kinematic_error": {"enabled": geo.kinematic_on,
+                                "internal_um": geo.kinematic_internal_um,
+                                "external_um": geo.kinematic_external_um,
+                                "internal_phase_deg": fx.kinematic_error.internal_phase_deg,
+                                "beta_deg": fx.kinematic_error.beta_deg,
+                                "internal_order": ratio, "external_order": ratio + 1.0},
+            "pitch_internal_um": geo.pitch_internal_um.tolist() if geo.spacing_on else [],
+            "pitch_external_um": geo.pitch_external_um.tolist() if geo.spacing_on else [],
+            "runout": fx.runout.enabled,
+            "encoder_eccentricity_arcsec": rig.encoder_eccentricity_arcsec,
+            "encoder_eccentricity_phase_deg": rig.encoder_eccentricity_phase_deg,
+            "drive_ripple_Nm": rig.drive_ripple_Nm, "drive_ripple_Hz": rig.drive_ripple_Hz,
+        }
+        return out
+
     def true_twist_arcmin(self, torque_Nm: np.ndarray, start_flank: int = -1) -> np.ndarray:
         """Quasi-static truth: the twist (arcmin, output angle minus ``-input / ratio``, zero
         at the centre of the nominal play) along a slow path of flange torques ``torque_Nm``
@@ -318,3 +431,21 @@ class GearPlant:
             return 0.5 * (a + b)
 
         return float(mid(level) - mid(-level))
+
+
+def te_order(output_angle_deg: np.ndarray, te_arcsec: np.ndarray, order: int) -> dict:
+    """The order-``order`` term of a TE curve sampled uniformly over one output revolution:
+    ``TE ~ A cos(order theta_out + phase)`` (A arcsec, phase deg, theta_out rad), by the
+    discrete Fourier sums ``a = 2/N sum TE cos``, ``b = 2/N sum TE sin``."""
+    theta = np.radians(np.asarray(output_angle_deg, dtype=float))
+    te = np.asarray(te_arcsec, dtype=float)
+    a = 2.0 * float(np.mean(te * np.cos(order * theta)))
+    b = 2.0 * float(np.mean(te * np.sin(order * theta)))
+    return {"order": int(order), "per": "output_rev", "amplitude_arcsec": math.hypot(a, b),
+            "phase_deg": _wrap_deg(math.degrees(math.atan2(-b, a)))}
+
+
+def _wrap_deg(value: float) -> float:
+    """An angle in (-180, 180] deg."""
+    wrapped = (value + 180.0) % 360.0 - 180.0
+    return 180.0 if wrapped == -180.0 else wrapped

@@ -26,6 +26,7 @@ EFFECT_NAMES = (
     "torque_sensor_offset",
     "shaft_compliance",
     "tooth_spacing_error",
+    "kinematic_error",
     "creep",
     "direction_gain",
 )
@@ -59,6 +60,12 @@ class RigConfig(_Strict):
     ``sqrt(K / inertia) / 2 pi`` with this damping ratio (sub-stepped, model.py)."""
     drive_ripple_Nm: float = Field(0.0, ge=0)
     drive_ripple_Hz: float = Field(100.0, gt=0)
+    encoder_eccentricity_arcsec: float = Field(0.0, ge=0)
+    """Mounting eccentricity of the output encoder: its reading errs by
+    ``E sin(theta_out + phase)`` (arcsec), once per output turn; not the unit's."""
+    encoder_eccentricity_phase_deg: float = 0.0
+    input_max_speed_rpm: float = Field(3000.0, gt=0)
+    """The input motor's speed range (rpm): a faster turn command is refused."""
 
 
 class MeasurementConfig(_Strict):
@@ -154,10 +161,24 @@ class ToothSpacingErrorConfig(_Effect):
     thickness_error_um_rms: float = Field(2.0, ge=0)
     pitch_error_um_rms: float = Field(3.0, ge=0)
     seed: int = 7
+    transition_fraction: float = Field(0.0, ge=0, le=1)
+    """Share of each tooth pitch over which the load passes linearly to the next tooth pair
+    (the double contact of a contact ratio above 1); 0: a step at the pitch boundary."""
     thickness_internal_um: list[float] | None = None
     thickness_external_um: list[float] | None = None
     pitch_internal_um: list[float] | None = None
     pitch_external_um: list[float] | None = None
+
+
+class KinematicErrorConfig(_Effect):
+    """The unit's kinematic (transmission) error from the eccentricities of seed 000
+    eq. (4): the tangential part of the ring's |AO1| and the pinion's |BO2| (um; None takes
+    the unit's ``runout_*_mm / 2``, eq. 7's de = F_r / 2), with their phases (deg)."""
+
+    internal_um: float | None = Field(None, ge=0)
+    external_um: float | None = Field(None, ge=0)
+    internal_phase_deg: float = 0.0
+    beta_deg: float = 0.0
 
 
 class CreepConfig(_Effect):
@@ -185,6 +206,7 @@ class EffectsConfig(_Strict):
     torque_sensor_offset: TorqueSensorOffsetConfig = TorqueSensorOffsetConfig()
     shaft_compliance: ShaftComplianceConfig = ShaftComplianceConfig()
     tooth_spacing_error: ToothSpacingErrorConfig = ToothSpacingErrorConfig()
+    kinematic_error: KinematicErrorConfig = KinematicErrorConfig()
     creep: CreepConfig = CreepConfig()
     direction_gain: DirectionGainConfig = DirectionGainConfig()
 

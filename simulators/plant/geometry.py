@@ -174,6 +174,12 @@ class MeshGeometry:
     """Sign of the play change with the center distance: -1 for an internal pair (seed 000
     eq. 3: a larger center distance closes the play), +1 for an external one."""
     kind: str = "internal_involute"
+    spacing_transition: float = 0.0
+    kinematic_on: bool = False
+    kinematic_internal_um: float = 0.0
+    kinematic_external_um: float = 0.0
+    kinematic_internal_phase_rad: float = 0.0
+    kinematic_beta_rad: float = 0.0
 
     @property
     def ratio(self) -> float:
@@ -243,6 +249,11 @@ class MeshGeometry:
             bearing_um = 1000.0 * 2.0 * tan_alpha * sum(c / 2.0 for c in clearances)
 
         th = fx.thermal_expansion
+        ke = fx.kinematic_error
+        ke_int = ke.internal_um if ke.internal_um is not None else (
+            1000.0 * u.num("runout_internal_mm") / 2.0 if ke.enabled else 0.0)
+        ke_ext = ke.external_um if ke.external_um is not None else (
+            1000.0 * u.num("runout_external_mm") / 2.0 if ke.enabled else 0.0)
         return cls(
             nominal=nominal, z_internal=z1, z_external=z2, module_mm=m,
             tan_alpha=tan_alpha, eccentric_distance_mm=a,
@@ -254,6 +265,11 @@ class MeshGeometry:
             pitch_external_um=pitch_ext, bearing_play_um=bearing_um,
             thermal_um_per_K=th.coefficient_um_per_K if th.enabled else 0.0,
             thermal_reference_C=th.reference_C, **extra,
+            spacing_transition=sp.transition_fraction if sp.enabled else 0.0,
+            kinematic_on=ke.enabled, kinematic_internal_um=ke_int,
+            kinematic_external_um=ke_ext,
+            kinematic_internal_phase_rad=math.radians(ke.internal_phase_deg),
+            kinematic_beta_rad=math.radians(ke.beta_deg),
         )
 
     def arcmin_from_um(self, j_t_um: float) -> float:
@@ -289,19 +305,61 @@ class MeshGeometry:
         n = math.floor(input_angle_deg * self.z_internal / 360.0 + 1e-9)
         return n, n % self.z_internal, n % self.z_external
 
+    def _handover(self, input_angle_deg: float) -> tuple[int, int, int, int, float]:
+        """(ring tooth, pinion tooth, next ring tooth, next pinion tooth, weight of the next
+        pair): over the last ``spacing_transition`` of each tooth pitch the load passes
+        linearly to the next pair (0: a step at the pitch boundary)."""
+        n, i, j = self.tooth_pair(input_angle_deg)
+        w = 0.0
+        tr = self.spacing_transition
+        if tr > 0.0:
+            frac = input_angle_deg * self.z_internal / 360.0 + 1e-9 - n
+            w = min(max((frac - (1.0 - tr)) / tr, 0.0), 1.0)
+        return i, j, (n + 1) % self.z_internal, (n + 1) % self.z_external, w
+
     def spacing_play_um(self, input_angle_deg: float) -> float:
         """Play change (um) of the tooth pair in mesh: sum of the two thickness deviations."""
         if not self.spacing_on:
             return 0.0
-        _, i, j = self.tooth_pair(input_angle_deg)
-        return float(self.thickness_internal_um[i] + self.thickness_external_um[j])
+        i, j, i2, j2, w = self._handover(input_angle_deg)
+        value = self.thickness_internal_um[i] + self.thickness_external_um[j]
+        if w:
+            value += w * (self.thickness_internal_um[i2] + self.thickness_external_um[j2]
+                          - value)
+        return float(value)
 
     def pitch_offset_um(self, input_angle_deg: float) -> float:
         """Shift of both flanks (um on the reference circle) of the tooth pair in mesh."""
         if not self.spacing_on:
             return 0.0
-        _, i, j = self.tooth_pair(input_angle_deg)
-        return float(self.pitch_internal_um[i] - self.pitch_external_um[j])
+        i, j, i2, j2, w = self._handover(input_angle_deg)
+        value = self.pitch_internal_um[i] - self.pitch_external_um[j]
+        if w:
+            value += w * (self.pitch_internal_um[i2] - self.pitch_external_um[j2] - value)
+        return float(value)
+
+    def kinematic_error_um(self, input_angle_deg: float) -> float:
+        """The unit's kinematic error from its eccentricities (um on the ring's reference
+        circle; eq. 1 makes it an output angle): the tangential part, across the crank line,
+        of seed 000 eq. (4)'s vectors |AO1| (ring, fixed, phase ``internal_phase``) and
+        |BO2| (pinion, spinning with the output), where eq. (4)'s radial part is the
+        runout's play (eqs. 3, 7)::
+
+            e_t = |AO1| sin(phase_int - theta) + |BO2| sin(psi + beta - theta),
+            psi = -(Z1 - Z2) theta / Z2   (the pinion spins against the crank, as the
+                                           paper's text says; eq. 4 prints +)
+
+        With the output angle ``theta_out = -theta / ratio`` the ring's term is
+        ``|AO1| sin(ratio theta_out + phase_int)``: once per input turn, order ``ratio`` (8)
+        per output revolution; the pinion's ``|BO2| sin((ratio + 1) theta_out + beta)``:
+        once per turn of the pinion against the crank, order ``ratio + 1`` (9), the same
+        kinematics as the tooth pair in mesh (:meth:`tooth_pair`)."""
+        if not self.kinematic_on:
+            return 0.0
+        theta = math.radians(input_angle_deg)
+        psi = -(self.z_internal - self.z_external) * theta / self.z_external
+        return (self.kinematic_internal_um * math.sin(self.kinematic_internal_phase_rad - theta)
+                + self.kinematic_external_um * math.sin(psi + self.kinematic_beta_rad - theta))
 
     def thermal_play_um(self, temperature_C: float) -> float:
         """Play change (um) from the housing temperature (linear)."""

@@ -153,6 +153,11 @@ class PlantModel:
         self.ambient_C = config.housing.ambient_C
         self.input_deg = rig.initial_input_angle_deg
         self.input_target_deg = self.input_deg
+        self.input_speed_deg_s = rig.input_speed_deg_per_s
+        """How fast the input moves toward its target (deg/s): the positioning speed, or the
+        speed of a constant-speed turn (then the target is +-inf)."""
+        self.encoder_ecc_deg = rig.encoder_eccentricity_arcsec / 3600.0
+        self.encoder_ecc_phase_rad = math.radians(rig.encoder_eccentricity_phase_deg)
         self.creep_rad = 0.0
         self.velocity = 0.0
         self.chain_Nm = 0.0
@@ -184,8 +189,9 @@ class PlantModel:
             self._geo_play_um = (geo.base_play_um(self.input_deg)
                                  + geo.runout_play_um(self.input_deg)
                                  + geo.spacing_play_um(self.input_deg))
-            self._geo_pitch_rad = (geo.arcmin_from_um(geo.pitch_offset_um(self.input_deg))
-                                   / ARCMIN_PER_RAD)
+            self._geo_pitch_rad = (geo.arcmin_from_um(
+                geo.pitch_offset_um(self.input_deg) + geo.kinematic_error_um(self.input_deg))
+                / ARCMIN_PER_RAD)
 
     def mesh_play_um(self) -> float:
         """Circumferential play of the mesh now (um, >= 0)."""
@@ -203,7 +209,8 @@ class PlantModel:
         return self._play_value
 
     def pitch_offset_rad(self) -> float:
-        """Shift of both flanks from the tooth pitch deviations (rad)."""
+        """Shift of both flanks (rad): the tooth pitch deviations and the kinematic error
+        of the eccentricities (geometry.kinematic_error_um)."""
         self._refresh_geometry()
         return self._geo_pitch_rad
 
@@ -465,7 +472,7 @@ class PlantModel:
         self.drive_Nm = target + (self.drive_Nm - target) * math.exp(
             -h / self.config.rig.drive_time_constant_s)
         if self.input_deg != self.input_target_deg:
-            move = self.config.rig.input_speed_deg_per_s * h
+            move = self.input_speed_deg_s * h
             diff = self.input_target_deg - self.input_deg
             self.input_deg = self.input_target_deg if abs(diff) <= move else (
                 self.input_deg + math.copysign(move, diff))
@@ -521,7 +528,7 @@ class PlantModel:
         for _ in range(count):
             refresh = False
             if self.input_deg != self.input_target_deg:
-                move = self.config.rig.input_speed_deg_per_s * dt
+                move = self.input_speed_deg_s * dt
                 diff = self.input_target_deg - self.input_deg
                 self.input_deg = self.input_target_deg if abs(diff) <= move else (
                     self.input_deg + math.copysign(move, diff))
@@ -625,9 +632,14 @@ class PlantModel:
 
     # -- readings --------------------------------------------------------------------------
     def output_angle_deg(self) -> float:
-        """Output encoder angle (deg), noise-free: offset - input / ratio + twist."""
-        return (self.config.rig.output_offset_deg - self.input_deg / self.ratio
-                + math.degrees(self.twist_rad))
+        """Output encoder angle (deg), noise-free: offset - input / ratio + twist, plus the
+        encoder's mounting eccentricity ``E sin(theta_out + phase)`` (a reading error)."""
+        angle = (self.config.rig.output_offset_deg - self.input_deg / self.ratio
+                 + math.degrees(self.twist_rad))
+        if self.encoder_ecc_deg:
+            angle += self.encoder_ecc_deg * math.sin(math.radians(angle)
+                                                     + self.encoder_ecc_phase_rad)
+        return angle
 
     def sensor_torque_Nm(self, true_Nm: float) -> float:
         """The torque channel without noise: direction gain and offset applied."""

@@ -152,6 +152,7 @@ function addRows(msg) {
     live.T.splice(0, live.T.length - MAX_POINTS);
     live.W.splice(0, live.W.length - MAX_POINTS);
   }
+  if (msg.te_arcsec) addTERows(msg);
   window.rigStats.batches += 1;
   window.rigStats.points = live.T.length;
   $("loop-title").textContent = live.runId ? "live: " + live.runId : "";
@@ -518,6 +519,8 @@ function renderResult(r) {
   }
   shown.key = "result";
   $("m-verdict").innerHTML = verdict;   // the verdict of what the title names
+  const teRun = runs.filter((x) => x.te_raw || x.test_kind === "transmission_error").pop();
+  if (teRun) showTEResult(teRun, r.limits || teRun.limits || {});
 }
 
 // The run of a campaign with the largest lost motion (completed runs; a figure below zero is
@@ -620,6 +623,13 @@ function request() {
     torque_limit_Nm: num(f.torque_limit_Nm.value),
     operator: f.operator.value.trim() || null,
   };
+  body.test = f.test.value;
+  if (body.test === "transmission_error") {
+    body.te = { input_speed_rpm: num(f.te_speed_rpm.value), brake_torque_fraction: num(f.te_brake_fraction.value),
+      output_revolutions: num(f.te_revolutions.value), ratio: num(f.te_ratio.value) };
+    body.limits.te_pp_max_arcsec = num(f.te_pp_max_arcsec.value);
+    body.limits.te_hysteresis_max_arcmin = num(f.te_hysteresis_max_arcmin.value);
+  }
   if (f.override.checked && f.override_reason.value.trim())
     body.calibration_override = f.override_reason.value.trim();
   if (kind === "campaign") {
@@ -627,6 +637,7 @@ function request() {
     body.axes = { positions_deg: list(f.positions_deg.value) || [0], repeats: num(f.repeats.value) || 1,
       amplitudes_pct: [body.plan.amplitude_pct] };
     const fe = live.fileExtra;   // a campaign file's settings the form has no field for
+    if (body.test === "transmission_error") body.axes = { repeats: body.axes.repeats };
     if (fe) {
       Object.assign(body.plan, fe.plan);
       Object.assign(body.axes, fe.axes);
@@ -1034,6 +1045,7 @@ function wire() {
     await previewPlan();
     const answer = await api("POST", "/api/control/start", request());
     live.T = []; live.W = []; live.stored = null; live.finished = null;
+    resetTE(request().test === "transmission_error");
     clearResult("starting", "measurement starting");
     reveal($("loop-panel"));   // the progress and the loop, wherever the Start button was
     return answer;
@@ -1056,6 +1068,7 @@ function wire() {
   $("setup").elements.kind.addEventListener("change", (e) => {
     $("setup").className = e.target.value === "campaign" ? "campaign" : "";
   });
+  $("setup").elements.test.addEventListener("change", showTestFields);
   $("unit-example").addEventListener("change", (e) => {
     const u = units.find((x) => x.name === e.target.value);
     if (u) fillUnit(u.unit);
@@ -1100,8 +1113,90 @@ async function logIn() {
   } else if (lastStatus) notice("logged in as operator", false);
 }
 
+// ---------------------------------------------------------------- transmission error
+// The live TE plot: TE = 3600 (output - input / ratio) against the output angle modulo 360
+// (docs/run-format.md), each direction less its running mean (c_d); the rig sends the raw
+// TE of each recorded row (rig/web/live_tap.py). After the run: the figures of the run's
+// analysis (rig/te.py), its limits and the verdict.
+const te = { F: [[], []], R: [[], []], sumF: 0, nF: 0, sumR: 0, nR: 0 };
+let tePlot = null;
+
+function makeTEPlot() {
+  const el = $("te-plot");
+  const facets = [{ scale: "x", auto: true }, { scale: "y", auto: true }];
+  return new uPlot({
+    mode: 2, width: plotWidth(el), height: 320, title: "",
+    scales: { x: { time: false }, y: {} },
+    axes: [axis("output angle (deg)"), axis("transmission error (arcsec)")],
+    legend: { show: true, live: false },
+    series: [{},
+      // points, not lines: the output angle wraps at 360 deg
+      { label: "forward", stroke: "#1f5fbf", fill: "#1f5fbf", paths: uPlot.paths.points(), points: { show: true, size: 3 }, facets },
+      { label: "reverse", stroke: "#c0392b", fill: "#c0392b", paths: uPlot.paths.points(), points: { show: true, size: 3 }, facets }],
+  }, [null, [[], []], [[], []]], el);
+}
+
+function showTestFields() {
+  const f = $("setup");
+  f.dataset.test = f.elements.test.value;
+  $("te-panel").hidden = f.elements.test.value !== "transmission_error" && !te.nF && !te.nR;
+}
+
+function resetTE(show) {
+  te.F = [[], []]; te.R = [[], []]; te.sumF = te.sumR = 0; te.nF = te.nR = 0;
+  for (const id of ["te-pp", "te-pp-u", "te-pp-dirs", "te-hyst", "te-limit", "te-verdict", "te-note"]) $(id).textContent = "";
+  if (show) $("te-panel").hidden = false;
+  drawTE();
+}
+
+function addTERows(msg) {
+  for (let i = 0; i < msg.te_arcsec.length; i++) {
+    const d = msg.direction[i], v = msg.te_arcsec[i], a = msg.output_deg[i];
+    if (v === null || a === null || !d) continue;
+    const x = ((a % 360) + 360) % 360;
+    if (d > 0) { te.F[0].push(x); te.F[1].push(v); te.sumF += v; te.nF += 1; }
+    else { te.R[0].push(x); te.R[1].push(v); te.sumR += v; te.nR += 1; }
+  }
+  $("te-panel").hidden = false;
+  $("te-title").textContent = msg.run_id ? "live: " + msg.run_id : "";
+  drawTE();
+}
+
+function drawTE() {
+  if (!tePlot) return;
+  const mF = te.nF ? te.sumF / te.nF : 0, mR = te.nR ? te.sumR / te.nR : 0;
+  tePlot.setData([null, [te.F[0], te.F[1].map((v) => v - mF)], [te.R[0], te.R[1].map((v) => v - mR)]]);
+  window.rigStats.te_points = te.nF + te.nR;
+}
+
+function showTEResult(run, limits) {
+  $("te-panel").hidden = false;
+  const raw = run.te_raw || {};
+  const pp = run.te_pp_arcsec !== undefined && run.te_pp_arcsec !== null ? run.te_pp_arcsec : raw.pp_arcsec;
+  $("te-pp").textContent = fmt(pp, 1);
+  const u = run.te_pp_arcsec_u;
+  $("te-pp-u").textContent = u !== undefined && u !== null && isFinite(u) ? " ± " + fmt(u, 1) : "";
+  const fwd = run.te_pp_forward_arcsec !== undefined ? run.te_pp_forward_arcsec : raw.pp_forward_arcsec;
+  const rev = run.te_pp_reverse_arcsec !== undefined ? run.te_pp_reverse_arcsec : raw.pp_reverse_arcsec;
+  $("te-pp-dirs").textContent = `${fmt(fwd, 1)} / ${fmt(rev, 1)}`;
+  const hyst = run.te_hysteresis_arcmin !== undefined && run.te_hysteresis_arcmin !== null
+    ? run.te_hysteresis_arcmin : raw.hysteresis_arcmin;
+  $("te-hyst").textContent = fmt(hyst, 3);
+  const lim = [];
+  if (limits.te_pp_max_arcsec) lim.push(`peak-to-peak ≤ ${fmt(limits.te_pp_max_arcsec, 1)} arcsec`);
+  if (limits.te_hysteresis_max_arcmin) lim.push(`hysteresis ≤ ${fmt(limits.te_hysteresis_max_arcmin, 3)} arcmin`);
+  $("te-limit").textContent = lim.length ? lim.join(", ") : "none set";
+  $("te-verdict").innerHTML = outcomeHtml(run.outcome);
+  $("te-title").textContent = run.label || run.run_id || "";
+  $("te-note").textContent = run.te_pp_arcsec !== undefined && run.te_pp_arcsec !== null
+    ? "the run's analysis (encoder eccentricity removed as documented); the plot: the raw TE"
+    : "raw TE (docs/run-format.md), nothing removed";
+}
+
 async function init() {
   plot = makePlot();
+  tePlot = makeTEPlot();
+  showTestFields();
   window.rigPage = { plot, live, scheduleDraw, addRows };
   wire();
   try {

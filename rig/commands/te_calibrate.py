@@ -1,0 +1,44 @@
+"""``rig te-calibrate RUN_A RUN_B``: the output encoder's mounting eccentricity by reversal
+(docs/transmission-error.md): two TE runs of one unit, the second with the coupling between
+the output and the encoder indexed by 180 deg; prints the ``[calibration.encoder]`` keys."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("te-calibrate")
+    def te_calibrate(
+        run_a: Annotated[Path, typer.Argument(help="TE run, coupling as mounted.")],
+        run_b: Annotated[Path, typer.Argument(help="TE run, coupling indexed by 180 deg.")],
+        json_file: Annotated[
+            Path | None, typer.Option("--json", help="Write the result as JSON ('-': stdout).")
+        ] = None,
+    ) -> None:
+        """Separate the output encoder's once-per-turn eccentricity from the unit's own TE by
+        the reversal of two runs; print the rig configuration lines that remove it."""
+        from rig.json_output import JsonOutput
+        from rig.runformat import read_run
+        from rig.te import reversal_calibration
+
+        json_out = JsonOutput(json_file)
+        console = Console(stderr=json_out.to_stdout)
+        cal = reversal_calibration(read_run(run_a), read_run(run_b))
+        console.print(f"encoder eccentricity {cal['eccentricity_arcsec']:.2f} ± "
+                      f"{cal['eccentricity_u_arcsec']:.2f} arcsec at "
+                      f"{cal['eccentricity_phase_deg']:.1f} deg (A cos(theta + p)); the unit's "
+                      f"own once-per-output-turn TE {cal['unit_order1_arcsec']:.2f} arcsec")
+        console.print("add to the output encoder's table of the rig configuration:",
+                      highlight=False)
+        console.print("[calibration.encoder]\n"
+                      f"eccentricity_arcsec = {cal['eccentricity_arcsec']:.3f}\n"
+                      f"eccentricity_phase_deg = {cal['eccentricity_phase_deg']:.2f}\n"
+                      f"eccentricity_u_arcsec = {cal['eccentricity_u_arcsec']:.3f}",
+                      highlight=False, markup=False)
+        if json_file is not None:
+            json_out.write(cal, ensure_ascii=True)

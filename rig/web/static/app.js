@@ -1183,7 +1183,7 @@ function showTEResult(run, limits) {
   $("te-verdict").innerHTML = outcomeHtml(run.outcome);
   $("te-title").textContent = run.label || run.run_id || "";
   $("te-note").textContent = run.te_pp_arcsec !== undefined && run.te_pp_arcsec !== null
-    ? "the run's analysis (encoder eccentricity removed as documented); the plot: the raw TE"
+    ? "the run's analysis (docs/transmission-error.md: the encoder eccentricity as calibrated); the plot: the raw TE"
     : "raw TE (docs/run-format.md), nothing removed";
 }
 

@@ -118,3 +118,21 @@ def test_te_campaign_file_keys_are_checked() -> None:
     with pytest.raises(CampaignError, match="te.ratio"):
         campaign_from_mapping({**base, "unit": {"kind": "beveloid", "serial": "x"}},
                               "te.toml")
+
+
+def test_the_page_opens_a_te_campaign_file_as_a_te_request() -> None:
+    from rig.web.campaign_files import example_setup
+    from rig.web.controller import build_plan
+    from rig.web.models import RunRequest
+
+    setup = example_setup("seed000-pair2-te")
+    request = setup["request"]
+    assert request["test"] == "transmission_error"
+    assert request["te"]["input_speed_rpm"] == 120.0
+    assert request["te"]["brake_torque_fraction"] == 0.3
+    req = RunRequest.model_validate({k: v for k, v in request.items() if v is not None})
+    plan = build_plan(req)
+    assert plan.name == "transmission_error-campaign"
+    assert any("turn input reverse at 120 rpm" in line for line in plan.listing())
+    loop = example_setup("seed000-pair2")["request"]
+    assert loop["test"] == "lost_motion" and "te" not in loop

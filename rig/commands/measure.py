@@ -89,6 +89,13 @@ def _print_te(out: Console, data: dict[str, Any]) -> None:
         return "n/a" if value is None else f"{value:.1f} {unit}"
 
     verdict = f"{outcome_markup(data['outcome'])}: " if data.get("outcome") else ""
+    pp, u = data.get("te_pp_arcsec"), data.get("te_pp_arcsec_u")
+    if pp is not None:
+        hyst = data.get("te_hysteresis_arcmin")
+        out.print(f"  {verdict}TE peak-to-peak {pp:.1f}" + (f" ± {u:.1f}" if u is not None else "")
+                  + " arcsec (the run's analysis, docs/transmission-error.md)"
+                  + (f", hysteresis {hyst:.3f} arcmin" if hyst is not None else ""))
+        verdict = ""
     out.print(f"  {verdict}TE peak-to-peak (raw) {f('pp_arcsec', 'arcsec')}: forward "
               f"{f('pp_forward_arcsec', 'arcsec')}, reverse {f('pp_reverse_arcsec', 'arcsec')}"
               f"; hysteresis {f('hysteresis_arcmin', 'arcmin')}")

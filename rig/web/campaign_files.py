@@ -141,7 +141,17 @@ def setup_of(camp: CampaignFile, unit: dict[str, Any] | None, source: str,
         "torque_limit_Nm": camp.torque_limit_Nm, "operator": camp.operator or None,
         "calibration_override": camp.calibration_override,
         "unit": unit,
+        "test": camp.test,
     }
+    if camp.test == "transmission_error":
+        te = camp.te.model_dump()
+        request["te"] = {k: te[k] for k in ("input_speed_rpm", "brake_torque_fraction",
+                                             "output_revolutions", "ratio")}
+        request["axes"] = {"repeats": camp.axes.repeats,
+                           "temperatures_C": list(camp.axes.temperatures_C)}
+        if te["directions"] != ["forward", "reverse"]:
+            notes.append(f"te.directions = {te['directions']} is not set from the page (both "
+                         "directions are turned)")
     page_unit = None if unit is None else {k: v for k, v in unit.items()
                                            if k in UnitData.model_fields}
     if page_unit is not None:

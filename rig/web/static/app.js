@@ -707,6 +707,18 @@ function fillFromCampaign(c) {
   f.kind.value = "campaign";
   $("setup").className = "campaign";
   f.name.value = q.name;
+  f.test.value = q.test || "lost_motion";
+  if (q.te) {
+    f.te_speed_rpm.value = String(q.te.input_speed_rpm);
+    f.te_brake_fraction.value = String(q.te.brake_torque_fraction);
+    f.te_revolutions.value = String(q.te.output_revolutions);
+    f.te_ratio.value = q.te.ratio === null || q.te.ratio === undefined ? "" : String(q.te.ratio);
+  }
+  for (const k of ["te_pp_max_arcsec", "te_hysteresis_max_arcmin"]) {
+    const v = q.limits[k];
+    f[k].value = v === null || v === undefined ? "" : String(v);
+  }
+  showTestFields();
   if (q.unit) {
     fillUnit(q.unit);
     if (q.unit.serial) f.serial.value = q.unit.serial;
@@ -718,7 +730,7 @@ function fillFromCampaign(c) {
   f.extra_levels_pct.value = shownList(q.plan.extra_levels_pct);
   const amps = q.axes.amplitudes_pct || [q.plan.amplitude_pct];
   f.amplitude_pct.value = String(amps.length === 1 ? amps[0] : q.plan.amplitude_pct);
-  f.positions_deg.value = shownList(q.axes.positions_deg);
+  f.positions_deg.value = shownList(q.axes.positions_deg || [0]);
   f.repeats.value = String(q.axes.repeats);
   const lm = q.limits.lost_motion_arcmin_max;
   f.lost_motion_arcmin_max.value = lm === null || lm === undefined ? "" : String(lm);
@@ -1189,7 +1201,7 @@ function showTEResult(run, limits) {
   $("te-verdict").innerHTML = outcomeHtml(run.outcome);
   $("te-title").textContent = run.label || run.run_id || "";
   $("te-note").textContent = run.te_pp_arcsec !== undefined && run.te_pp_arcsec !== null
-    ? "the run's analysis (encoder eccentricity removed as documented); the plot: the raw TE"
+    ? "the run's analysis (docs/transmission-error.md: the encoder eccentricity as calibrated); the plot: the raw TE"
     : "raw TE (docs/run-format.md), nothing removed";
 }
 

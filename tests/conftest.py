@@ -125,3 +125,26 @@ def make_store(request) -> StoreMaker:
     """The store test suite runs on both back-ends through this fixture."""
     server = request.getfixturevalue("pg_server") if request.param == "postgresql" else None
     return StoreMaker(request.param, server)
+
+
+# ------------------------------------------------------------- one simulated rig for the pages
+
+
+@pytest.fixture(scope="session")
+def simulated_rig():
+    """The simulated rig shared by the page tests (tests/simulated_page.py): opened by the
+    first test that uses it, kept open while the next test uses it too, closed as soon as
+    one does not (:func:`pytest_runtest_teardown` below) and at the end."""
+    from tests.simulated_page import SHARED
+
+    yield SHARED
+    SHARED.close()
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None):
+    yield  # the test's own fixtures (its pages) are closed first
+    if nextitem is None or "simulated_rig" not in getattr(nextitem, "fixturenames", ()):
+        from tests.simulated_page import SHARED
+
+        SHARED.close()

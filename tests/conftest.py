@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import fcntl
 import os
+import sys
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -44,11 +46,21 @@ def pytest_configure(config: pytest.Config) -> None:
 # worker's simulated devices. Those are marked ``alone``: they take an exclusive lock shared
 # by the workers, every other test takes it shared. The lock is taken outside the test's
 # timeout (the outermost wrapper of the test protocol), so waiting for it is not counted.
+# Consecutive alone tests of a worker hold it throughout: one wait for the other worker's
+# test in progress per run of alone tests, not one per test.
 
 
 def _machine_lock_path() -> Path | None:
     run = os.environ.get("PYTEST_XDIST_TESTRUNUID")
     return None if run is None else Path(tempfile.gettempdir()) / f"rig-tests-{run}.lock"
+
+
+_lock: dict[str, Any] = {"file": None, "mode": None}
+"""This worker's open lock file and the mode it holds (None: not held)."""
+
+
+def _alone(item: pytest.Item | None) -> bool:
+    return item is not None and item.get_closest_marker("alone") is not None
 
 
 @pytest.hookimpl(hookwrapper=True, tryfirst=True)
@@ -57,13 +69,26 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
     if path is None:  # one process: nothing to share
         yield
         return
-    alone = item.get_closest_marker("alone") is not None
-    with open(path, "a+") as f:
-        fcntl.flock(f, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
-        try:
-            yield
-        finally:
+    if _lock["file"] is None:
+        _lock["file"] = open(path, "a+")  # noqa: SIM115 - kept for the worker's life
+    f = _lock["file"]
+    mode = fcntl.LOCK_EX if _alone(item) else fcntl.LOCK_SH
+    if _lock["mode"] != mode:
+        if _lock["mode"] is not None:
             fcntl.flock(f, fcntl.LOCK_UN)
+        fcntl.flock(f, mode)
+        _lock["mode"] = mode
+    try:
+        yield
+    finally:
+        # The exclusive lock is kept into the next test when that one runs alone too (a
+        # module of alone tests, or the next module's): released between them, the other
+        # worker slipped one of its tests in each time, and this worker waited for it to
+        # end, idle, before each alone test. A shared lock is never kept (it would keep
+        # the other worker's alone tests waiting).
+        if not (_alone(item) and _alone(nextitem)):
+            fcntl.flock(f, fcntl.LOCK_UN)
+            _lock["mode"] = None
 
 
 # --------------------------------------------------------------------------- the store's back-ends
@@ -125,3 +150,26 @@ def make_store(request) -> StoreMaker:
     """The store test suite runs on both back-ends through this fixture."""
     server = request.getfixturevalue("pg_server") if request.param == "postgresql" else None
     return StoreMaker(request.param, server)
+
+
+# ------------------------------------------------------------- one simulated rig for the pages
+
+
+@pytest.fixture(scope="session")
+def simulated_rig():
+    """The simulated rig shared by the page tests (tests/simulated_page.py): opened by the
+    first test that uses it, kept open while the next test uses it too, closed as soon as
+    one does not (:func:`pytest_runtest_teardown` below) and at the end."""
+    from tests.simulated_page import SHARED
+
+    yield SHARED
+    SHARED.close()
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None):
+    yield  # the test's own fixtures (its pages) are closed first
+    shared = sys.modules.get("tests.simulated_page")  # imported by a test that used it
+    if shared is not None and (
+            nextitem is None or "simulated_rig" not in getattr(nextitem, "fixturenames", ())):
+        shared.SHARED.close()

@@ -110,3 +110,43 @@ def test_ctrl_c_with_live_streams_stops_cleanly(tmp_path: Path) -> None:
             f"a live stream ended {stream.ended_at and stream.ended_at - sent:.1f} s after "
             "Ctrl-C")
     assert exited_s < 30, f"rig serve took {exited_s:.1f} s to stop"
+
+
+def test_the_page_workers_are_ended_by_the_shutdown_even_mid_task() -> None:
+    """The app's shutdown ends its worker processes before it returns, a worker in the
+    middle of a long analysis too, and the request waiting for it gets a clear RigError.
+    Before, the workers were only asked to stop (``shutdown(wait=False)``): the server's exit
+    then waited for them (the niced preview worker up to 2 s on a loaded machine), and for
+    the analysis to finish."""
+    from rig.errors import RigError
+    from rig.web.workers import run_in_worker, shutdown_workers, warm_up, worker_pids
+
+    warm_up("preview", "analysis")
+    assert run_in_worker(abs, -2, pool="preview") == 2
+    waiting: list[BaseException | None] = []
+
+    def long_analysis() -> None:
+        try:
+            run_in_worker(time.sleep, 60.0)
+            waiting.append(None)
+        except BaseException as exc:  # noqa: BLE001 - what the request would see
+            waiting.append(exc)
+
+    thread = threading.Thread(target=long_analysis, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 60
+    while len(worker_pids("analysis")) < 1 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(1.0)  # the worker is in time.sleep(60)
+    pids = worker_pids("analysis") + worker_pids("preview")
+    assert len(pids) == 2, pids
+    sent = time.monotonic()
+    shutdown_workers()
+    for pid in pids:  # ended and reaped when shutdown_workers returns
+        with pytest.raises(ChildProcessError):
+            os.waitpid(pid, os.WNOHANG)
+        assert not Path(f"/proc/{pid}").exists(), pid
+    thread.join(30)
+    assert time.monotonic() - sent < 30  # not the 60 s analysis
+    assert len(waiting) == 1 and isinstance(waiting[0], RigError), waiting
+    assert "shutting down" in str(waiting[0])

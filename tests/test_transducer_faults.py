@@ -232,3 +232,20 @@ def test_line_noise_gives_a_reading_or_our_error(
         pass
     assert time.monotonic() - start < 1.0 + 5.0
     assert driver.range_Nm() == 20.0  # and the link is usable again at once
+
+
+def test_a_late_reply_coming_after_the_next_command_is_skipped(
+    sim: TransducerSimulator,
+) -> None:
+    """A reply that comes after its command timed out, and after the next command was sent
+    (a busy PC, a slow line), is that earlier command's: skipped, not taken for the next
+    one's (under load: "expected a 'RANGE ...' reply to 'RANGE?', got TQ ...")."""
+    assert sim.address is not None
+    with SerialTorqueTransducer(TransducerConfig(url=sim.address, timeout_s=1.0)) as tt:
+        sim.backdoor.delay(1.5)
+        _raises_within(DeviceTimeout, tt.read, bound_s=1.4)  # its reply leaves at 1.5 s
+        sim.backdoor.delay(0.0)
+        assert tt.range_Nm() == 20.0  # sent at 1.0 s: its reply follows the late one
+        assert tt.late_replies == 1
+        reading = tt.read()  # and the line is in step afterwards
+        assert isinstance(reading, TorqueReading)

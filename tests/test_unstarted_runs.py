@@ -30,12 +30,9 @@ from rig.plans import LoopParams, hysteresis_plan
 from rig.runformat import read_run
 from rig.simrig import SimulatedRig
 from rig.store import Store
-from rig.web import create_app
-from rig.web.controller import RigController
-from rig.web.live import LiveHub
-from rig.web.settings import resolve_settings
-from rig.web.simulated import example_unit, simulated_session_factory
+from rig.web.simulated import example_unit
 from simulators.plant.config import load_plant_config
+from tests.simulated_page import page_on
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -97,13 +94,8 @@ def test_heartbeat_lost_in_the_pre_cycle_leaves_an_aborted_run(tmp_path: Path):
 
 
 @pytest.fixture
-def page(tmp_path: Path):
-    root = tmp_path / "store"
-    store = Store(root)
-    controller = RigController(store, LiveHub(), simulated_session_factory(), simulated=True)
-    app = create_app(resolve_settings(store_root=root, token=TOKEN), controller)
-    with TestClient(app) as client:
-        wait_for(client, lambda s: s["state"] != "starting", 90.0)
+def page(simulated_rig, tmp_path: Path):
+    with page_on(simulated_rig, tmp_path / "store", TOKEN) as (client, store, _):
         yield client, store
 
 
@@ -115,30 +107,6 @@ def wait_for(client: TestClient, done, timeout_s: float) -> dict:
             return status
         assert time.monotonic() < deadline, f"timed out; last status {status}"
         time.sleep(0.05)
-
-
-def test_estop_in_the_pre_cycle_through_the_web_api_leaves_an_aborted_run(page):
-    client, store = page
-    unit = example_unit("seed000-pair1")
-    lock = client.post("/api/devices/input-lock", json={"angle_deg": 0.0}, headers=AUTH)
-    assert lock.status_code == 200, lock.text
-    r = client.post("/api/control/start", json={"unit": unit, "plan": PRE_CYCLE_PLAN},
-                    headers=AUTH)
-    assert r.status_code == 200, r.text
-    # in the first pre-cycle, on its way up from the preload's -10 N*m: torque applied
-    status = wait_for(client, lambda s: (s.get("progress") or {}).get("description", "")
-                      .startswith("torque to +10"), 90.0)
-    assert status["progress"]["run_id"] is None  # the recording has not begun
-    time.sleep(0.5)
-    stop = client.post("/api/control/estop")
-    assert stop.status_code == 200, stop.text
-    wait_for(client, lambda s: s["state"] == "fault", 60.0)
-    got = assert_aborted_record(store, "E-stop")
-    assert got["run"].n_samples > 100
-    assert got["run"].torque_Nm.min() < -8.0
-    listed = client.get("/api/runs").json()
-    assert [(r["run_id"], r["status"]) for r in listed] == [(got["info"].run_id, "aborted")]
-    assert "E-stop" in listed[0]["reason"]
 
 
 def test_sigterm_to_rig_serve_in_the_first_ramp_leaves_an_aborted_run(tmp_path: Path):
@@ -199,3 +167,27 @@ def test_sigterm_to_rig_serve_in_the_first_ramp_leaves_an_aborted_run(tmp_path: 
     assert row["status"] == "aborted" and "shut down" in row["reason"], row
     got = assert_aborted_record(Store(store_dir), "shut down")
     assert got["run"].torque_Nm.min() < -2.0
+
+
+def test_estop_in_the_pre_cycle_through_the_web_api_leaves_an_aborted_run(page):
+    client, store = page
+    unit = example_unit("seed000-pair1")
+    lock = client.post("/api/devices/input-lock", json={"angle_deg": 0.0}, headers=AUTH)
+    assert lock.status_code == 200, lock.text
+    r = client.post("/api/control/start", json={"unit": unit, "plan": PRE_CYCLE_PLAN},
+                    headers=AUTH)
+    assert r.status_code == 200, r.text
+    # in the first pre-cycle, on its way up from the preload's -10 N*m: torque applied
+    status = wait_for(client, lambda s: (s.get("progress") or {}).get("description", "")
+                      .startswith("torque to +10"), 90.0)
+    assert status["progress"]["run_id"] is None  # the recording has not begun
+    time.sleep(0.5)
+    stop = client.post("/api/control/estop")
+    assert stop.status_code == 200, stop.text
+    wait_for(client, lambda s: s["state"] == "fault", 60.0)
+    got = assert_aborted_record(store, "E-stop")
+    assert got["run"].n_samples > 100
+    assert got["run"].torque_Nm.min() < -8.0
+    listed = client.get("/api/runs").json()
+    assert [(r["run_id"], r["status"]) for r in listed] == [(got["info"].run_id, "aborted")]
+    assert "E-stop" in listed[0]["reason"]

@@ -1,5 +1,6 @@
 """Issue 21 item 9: every request body of the control API goes through one strict parser,
-whatever its ``Content-Type`` says. Against a real ``rig serve --simulated`` over HTTP: every
+whatever its ``Content-Type`` says. Against the page's app served by uvicorn over HTTP on the
+shared simulated rig (tests/simulated_page.py; ``rig serve`` runs the same app): every
 numeric field of every request body in the OpenAPI schema, with NaN, Infinity or 1e999, under
 ``application/JSON``, ``Application/Json; charset=UTF-8``, ``text/plain`` and no content type,
 is a 422 naming the field (415 for the non-JSON media type), never a 500. A valid body without a
@@ -16,7 +17,7 @@ from urllib.parse import urlsplit
 
 import pytest
 
-from tests.e2e.test_control_page import TOKEN, rig_serve
+from tests.e2e.test_control_page import TOKEN
 
 BAD_NUMBERS = ["NaN", "Infinity", "-Infinity", "1e999"]
 MEDIA_TYPES = ["application/JSON", "Application/Json; charset=UTF-8", "text/plain", None]
@@ -24,10 +25,19 @@ MARK = "__number__"
 
 
 @pytest.fixture(scope="module")
-def page(tmp_path_factory) -> Iterator[tuple[str, int]]:
-    root = tmp_path_factory.mktemp("web-body")
-    with rig_serve(root / "store") as (url, _link):
-        parts = urlsplit(url)
+def page(simulated_rig, tmp_path_factory) -> Iterator[tuple[str, int]]:
+    from rig.store import Store
+    from rig.web import create_app
+    from rig.web.controller import RigController
+    from rig.web.live import LiveHub
+    from rig.web.server import BackgroundServer
+    from rig.web.settings import resolve_settings
+
+    root = tmp_path_factory.mktemp("web-body") / "store"
+    controller = RigController(Store(root), LiveHub(), simulated_rig.factory(), simulated=True)
+    app = create_app(resolve_settings(store_root=root, token=TOKEN), controller)
+    with BackgroundServer(app) as server:
+        parts = urlsplit(server.url)
         deadline = time.monotonic() + 90
         while time.monotonic() < deadline:
             if request(parts.hostname, parts.port, "GET", "/api/status")[1].get("state") \

@@ -9,12 +9,9 @@ import time
 import pytest
 from fastapi.testclient import TestClient
 
-from rig.store import Store
-from rig.web import create_app
-from rig.web.controller import RigController
 from rig.web.live import LiveHub
-from rig.web.settings import resolve_settings
-from rig.web.simulated import example_unit, simulated_session_factory
+from rig.web.simulated import example_unit
+from tests.simulated_page import page_on
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -32,11 +29,8 @@ def wait_for(client: TestClient, done, timeout_s: float) -> dict:
         time.sleep(0.2)
 
 
-def test_campaign_from_the_page(tmp_path):
-    store = Store(tmp_path / "store")
+def test_campaign_from_the_page(simulated_rig, tmp_path):
     hub = LiveHub()
-    controller = RigController(store, hub, simulated_session_factory(), simulated=True)
-    app = create_app(resolve_settings(store_root=store.root, token=TOKEN), controller)
     body = {
         "kind": "campaign", "name": "page-campaign",
         "unit": {**example_unit("seed000-pair1"), "serial": "pair1-web"},
@@ -44,7 +38,7 @@ def test_campaign_from_the_page(tmp_path):
         "axes": {"positions_deg": [0.0, 180.0]},
         "limits": {"lost_motion_arcmin_max": 0.01},  # impossible: the cause is named
     }
-    with TestClient(app) as client:
+    with page_on(simulated_rig, tmp_path / "store", TOKEN, hub) as (client, store, _):
         wait_for(client, lambda s: s["state"] == "idle", 90.0)
         preview = client.post("/api/plan/preview", json=body).json()
         assert preview["n_runs"] == 2 and preview["fits"] is True

@@ -15,6 +15,8 @@ from rig.web.controller import RigController
 from rig.web.live import LiveHub
 from rig.web.settings import resolve_settings
 from rig.web.simulated import example_unit, simulated_session_factory
+from tests.simulated_page import page_on
+from tests.simulated_page import wait_for as wait_until
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -24,25 +26,15 @@ UNIT = example_unit("seed000-pair1")
 
 
 @pytest.fixture(scope="module")
-def page(tmp_path_factory: pytest.TempPathFactory):
-    root = tmp_path_factory.mktemp("rig-store")
-    store = Store(root)
-    controller = RigController(store, LiveHub(), simulated_session_factory(), simulated=True)
-    app = create_app(resolve_settings(store_root=root, token=TOKEN), controller)
-    with TestClient(app) as client:
-        wait_for(client, lambda s: s["state"] != "starting", 90.0)
+def page(simulated_rig, tmp_path_factory: pytest.TempPathFactory):
+    with page_on(simulated_rig, tmp_path_factory.mktemp("rig-store"), TOKEN) as (client, store,
+                                                                                _):
         yield client, store
 
 
 def wait_for(client: TestClient, done, timeout_s: float) -> dict:
     """Poll /api/status until ``done(status)``; generous timeouts (a loaded 2-core box)."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        status = client.get("/api/status").json()
-        if done(status):
-            return status
-        assert time.monotonic() < deadline, f"timed out; last status {status}"
-        time.sleep(0.1)
+    return wait_until(client, done, timeout_s, poll_s=0.1)
 
 
 def short_run(**plan: object) -> dict:
@@ -155,6 +147,8 @@ def test_a_drive_enabled_behind_the_idle_page_is_made_safe(tmp_path):
         encode_float32,
     )
 
+    # a rig of its own: the module's page watches the shared one (its monitor would see the
+    # outside master's write too)
     store = Store(tmp_path)
     controller = RigController(store, LiveHub(), simulated_session_factory(), simulated=True)
     app = create_app(resolve_settings(store_root=tmp_path, token=TOKEN), controller)

@@ -22,7 +22,7 @@ import contextlib
 import select
 import time
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Literal
 
@@ -162,6 +162,8 @@ class SerialTorqueTransducer:
         self._last_stream_seq: int | None = None
         self._last_query_seq: int | None = None
         self.stats = StreamStats()
+        self.late_replies = 0
+        """Replies of earlier commands that came after their timeout (skipped)."""
 
     # --- lifecycle ------------------------------------------------------------------------
 
@@ -238,7 +240,8 @@ class SerialTorqueTransducer:
         """``TQ?``: one reading; raises DeviceOutOfRange beyond the range, DeviceFault if the
         device repeats its last sample (a stuck measurement)."""
         t_sent = time.monotonic()
-        line, t_came = self._transact("TQ?")
+        line, t_came = self._transact("TQ?", lambda x: isinstance(x, Measurement)
+                                      and x.tag == "TQ")
         if not (isinstance(line, Measurement) and line.tag == "TQ"):
             raise DeviceProtocolError(self.device, "a 'TQ ...' reply to 'TQ?'", repr(line))
         if line.seq == self._last_query_seq:
@@ -393,7 +396,7 @@ class SerialTorqueTransducer:
         return TorqueReading(t_s, line.torque_Nm, line.seq, line.device_t_s, line.status)
 
     def _query(self, command: str, keyword: str) -> Reply:
-        line, _ = self._transact(command)
+        line, _ = self._transact(command, lambda x: isinstance(x, Reply) and x.keyword == keyword)
         if not (isinstance(line, Reply) and line.keyword == keyword):
             raise DeviceProtocolError(
                 self.device, f"a '{keyword} ...' reply to {command!r}", repr(line)
@@ -401,13 +404,20 @@ class SerialTorqueTransducer:
         return line
 
     def _expect_ok(self, command: str) -> None:
-        line, _ = self._transact(command)
+        line, _ = self._transact(command, lambda x: isinstance(x, Reply) and x.keyword == "OK")
         if not (isinstance(line, Reply) and line.keyword == "OK"):
             raise DeviceProtocolError(self.device, f"'OK' to {command!r}", repr(line))
 
-    def _transact(self, command: str) -> tuple[DeviceLine, float]:
+    def _transact(self, command: str, wanted: Callable[[DeviceLine], bool] | None = None
+                  ) -> tuple[DeviceLine, float]:
         """Send ``command``, return its reply and the host time it came (stream samples
-        that come meanwhile are kept for next_reading)."""
+        that come meanwhile are kept for next_reading).
+
+        ``wanted`` tells this command's reply: another reply that comes first is the late
+        answer of an earlier command that timed out (a busy PC or a slow line), counted in
+        :attr:`late_replies` and skipped. Stale input is discarded before the command is
+        sent, but a late reply still on its way then came after it, and was taken for this
+        command's (seen under load: "expected a 'TQ ...' reply to 'TQ?', got TEMP")."""
         if not self._streaming:
             self._discard_stale_input()
         self._write(command)
@@ -423,6 +433,9 @@ class SerialTorqueTransducer:
                 raise DeviceFault(
                     self.device, f"a reply to {command!r}", f"'ERR {line.code} {line.text}'"
                 )
+            if wanted is not None and not wanted(line):
+                self.late_replies += 1
+                continue
             return line, t_came
 
     def _resync(self) -> None:

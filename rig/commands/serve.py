@@ -40,6 +40,7 @@ def register(app: typer.Typer) -> None:
         """
         from rig.engine.host import EngineHost, EngineSpec
         from rig.errors import RigError
+        from rig.process_exit import prepare_exit
         from rig.store import Store, default_store_root
         from rig.web.app import create_app
         from rig.web.live import LiveHub
@@ -83,4 +84,7 @@ def register(app: typer.Typer) -> None:
         print(f"operator link: {url}#token={settings.token}", flush=True)
         print(f"store: {the_store.root}; {description}; Ctrl-C stops (the rig is left safe)",
               file=sys.stderr, flush=True)
-        uvicorn_server(web_app).run(sockets=[sock])
+        try:
+            uvicorn_server(web_app).run(sockets=[sock])
+        finally:  # the rig is closed (the lifespan's end): exit without a slow teardown
+            prepare_exit()

@@ -61,6 +61,7 @@ def register(app: typer.Typer) -> None:
         The first output line is one JSON object: the address of every device and
         "rig_config", the rig configuration file that connects to them.
         """
+        from rig.process_exit import prepare_exit
         from rig.simrig import SimulatedRig, serve_until_signalled
         from simulators.plant.config import PlantConfigError
 
@@ -81,5 +82,7 @@ def register(app: typer.Typer) -> None:
         apply_realtime_priority(sim_rig.realtime_priority or sim_rig.device_priority,
                                 what="simulated rig")
         print(json.dumps(addresses), flush=True)
-        raise typer.Exit(serve_until_signalled(
-            sim_rig, parent_pid=os.getppid() if exit_with_parent else None))
+        code = serve_until_signalled(sim_rig,
+                                     parent_pid=os.getppid() if exit_with_parent else None)
+        prepare_exit()  # the devices are stopped; a parent waits for this process to end
+        raise typer.Exit(code)

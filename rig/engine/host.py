@@ -43,6 +43,7 @@ from multiprocessing.connection import Client, Connection, Listener
 from typing import Any
 
 from rig.errors import RigError
+from rig.process_exit import prepare_exit
 
 __all__ = ["EngineHost", "EngineSpec"]
 
@@ -210,6 +211,7 @@ def _engine_main(spec: EngineSpec, address: Any, authkey: bytes, live: Connectio
     finally:
         with contextlib.suppress(OSError):
             listener.close()
+        prepare_exit()  # the server waits for this process to end
 
 
 # ---------------------------------------------------------------------- the server's side

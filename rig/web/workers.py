@@ -19,7 +19,7 @@ import os
 import signal
 import threading
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import BrokenExecutor, CancelledError, ProcessPoolExecutor
 from typing import Any, TypeVar
 
 from rig.blas import worker_initializer
@@ -117,6 +117,8 @@ def run_in_worker(fn: Callable[..., T], *args: Any, timeout_s: float = 600.0,
         _in_flight[pool] = _in_flight.get(pool, 0) + 1
     try:
         ok, value = _executor(pool).submit(_call, fn, *args).result(timeout=timeout_s)
+    except (BrokenExecutor, CancelledError) as exc:  # shutdown_workers stopped it
+        raise RigError(f"the {pool} worker was stopped (the page is shutting down)") from exc
     finally:
         with _lock:
             _in_flight[pool] -= 1
@@ -125,10 +127,33 @@ def run_in_worker(fn: Callable[..., T], *args: Any, timeout_s: float = 600.0,
     return value
 
 
+STOP_TIMEOUT_S = 2.0
+"""Time a worker process has to end after SIGTERM before it is killed (s)."""
+
+
 def shutdown_workers() -> None:
-    """Stop the worker processes (the app's shutdown)."""
+    """Stop the worker processes and wait until they have ended (the app's shutdown).
+
+    Queued requests are cancelled and the workers are terminated (SIGTERM; SIGKILL after
+    :data:`STOP_TIMEOUT_S`): a worker holds no state worth its work, and one asked to stop
+    politely would first finish its current analysis, then tear its interpreter down, the
+    preview worker at its lower priority on a loaded machine. Left to the interpreter's exit
+    (``shutdown(wait=False)`` alone), ``rig serve`` waited up to 2 s for them after Ctrl-C.
+    """
     with _lock:
         pools = list(_pools.values())
         _pools.clear()
+    processes = []
     for pool in pools:
+        # ProcessPoolExecutor keeps its processes by pid (no public accessor before 3.14's
+        # terminate_workers)
+        processes += list((getattr(pool, "_processes", None) or {}).values())
         pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+    for process in processes:
+        process.join(STOP_TIMEOUT_S)
+        if process.is_alive():
+            process.kill()
+            process.join(STOP_TIMEOUT_S)

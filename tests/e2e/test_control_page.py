@@ -86,6 +86,10 @@ def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
         expect(page.locator("#state")).to_have_text("idle", timeout=90_000)
 
         # first run: confirm the input lock, start, watch the loop drawn and the metrics
+        # (the shortest loop: 2 steps a quarter, no pre-cycle; the abort below runs the
+        # default plan, long enough to be stopped in the middle)
+        page.fill("#setup input[name=steps_per_quarter]", "2")
+        page.fill("#setup input[name=pre_cycles]", "0")
         page.click("#lock")
         expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
         expect(page.locator("#start")).to_be_enabled()
@@ -107,6 +111,8 @@ def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
         assert drawn["batches"] > 10 and len(drawn["latency_s"]) > 10
 
         # second run: abort it while it runs; the page shows the safe state
+        page.fill("#setup input[name=steps_per_quarter]", "4")
+        page.fill("#setup input[name=pre_cycles]", "1")
         page.click("#lock")
         expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
         first_run = runs[0]["run_id"]

@@ -69,7 +69,7 @@ def write_plant_toml(config: PlantConfig, path: Path) -> Path:
     """Write ``config`` as a plant TOML that :func:`load_plant_config` reads back."""
     data = config.model_dump(exclude={"source"})
     tables = {name: data[name] for name in ("unit", "rig", "housing", "noise", "effects",
-                                            "measurement")}
+                                            "measurement", "cycloid", "beveloid")}
     path.write_text(dump_rig_toml(tables, "plant written by rig measure / rig campaign run"),
                     encoding="utf-8")
     return path
@@ -167,6 +167,30 @@ def run_meta(unit: dict[str, Any], session: RigSession, operator: str | None = N
     return meta
 
 
+def simulated_truth(session: RigSession, pct: float
+                    ) -> Callable[[dict[str, Any]], dict[str, Any]] | None:
+    """On the simulated rig: each run's ``generator`` block, what the plant injected and its
+    true loop at the run's lock angle and temperature (simulators/plant/truth.py); None on a
+    real rig."""
+    config = session.plant_config
+    if config is None:
+        return None
+
+    def meta(test: dict[str, Any]) -> dict[str, Any]:
+        from simulators.plant.truth import generator_block
+
+        angle = test.get("input_angle_deg")
+        temp = test.get("temperature_C")
+        rated = test.get("rated_torque_Nm")
+        return {"generator": generator_block(
+            config, input_angle_deg=float(angle) if isinstance(angle, int | float) else 0.0,
+            temperature_C=float(temp) if isinstance(temp, int | float) else None,
+            rated_torque_Nm=float(rated) if isinstance(rated, int | float) else None,
+            pct=pct)}
+
+    return meta
+
+
 def measure_plan(session: RigSession, store: Store, plan: Plan, meta: dict[str, Any], *,
                  campaign_id: str | None = None, options: EngineOptions | None = None,
                  progress: Progress | None = None,
@@ -213,7 +237,8 @@ def run_campaign(camp: CampaignFile, session: RigSession, store: Store, *,
     campaign_id = store.create_campaign(camp.name, meta=json_safe(cmeta))
     options = EngineOptions(torque_limit_Nm=camp.torque_limit_Nm, profile=camp.profile,
                             stale_timeout_s=session.stale_timeout_s,
-                            limits=camp.limits.model_dump())
+                            limits=camp.limits.model_dump(),
+                            run_meta=simulated_truth(session, PROFILES.get(camp.profile, 3.0)))
     try:
         engine, outcomes = measure_plan(
             session, store, plan, meta,

@@ -24,6 +24,7 @@ import math
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -103,6 +104,9 @@ class EngineOptions:
     drain_timeout_s: float = 1.0
     profile: str | None = None
     extra_meta: dict[str, Any] = field(default_factory=dict)
+    run_meta: Callable[[dict[str, Any]], dict[str, Any]] | None = None
+    """Extra run.json keys of one run from its ``test`` (e.g. the simulated plant's truth
+    under ``generator``, rig/measure.py); None: none."""
     limits: dict[str, Any] | None = None
     """The limits of the runs (rig/outcome.py keys): run.json ``limits``, and ``outcome``
     against them."""
@@ -779,6 +783,11 @@ class Engine:
                 "plan": self._plan.meta() if self._plan else {"name": "ad hoc"},
                 "acquisition": acquisition_meta(self.io),
                 "limits": limits_dict(self.options.limits)}
+        if self.options.run_meta is not None:
+            try:
+                meta.update(self.options.run_meta(dict(test)))
+            except Exception as exc:  # the truth is a record, never a reason to stop a run
+                log.warning("run meta of %s not recorded: %s", label, exc)
         columns = ["t_s", "torque_Nm", "output_angle_deg"]
         if self.io.has_input_encoder:
             columns.append("input_angle_deg")

@@ -273,7 +273,9 @@ class GearPlant:
                 "ratio": m.ratio,
                 "drive_torque_Nm": m.drive_Nm,
                 "effects": fx.enabled_names(),
+                "kind": geo.kind,
             }
+            params.update(geo.kind_truth(theta))
             return params
 
     def true_twist_arcmin(self, torque_Nm: np.ndarray, start_flank: int = -1) -> np.ndarray:

@@ -193,6 +193,41 @@ class EffectsConfig(_Strict):
         return [name for name in EFFECT_NAMES if getattr(self, name).enabled]
 
 
+class CycloidConfig(_Strict):
+    """A ``cycloid`` unit (seed 002) as made and assembled, against its design in ``[unit]``:
+    every value here is a deviation the plant injects (0: as designed)."""
+
+    eccentricity_error_um: float = 0.0
+    """Crank eccentricity minus the design e (um): the center distance O1O2 of eq. (6)."""
+    shift_error_mm: float = 0.0
+    """As-made offset (shift, 移距) modification minus the unit's Delta1 (mm), eqs. (9)-(10)."""
+    rotation_error_mm: float = 0.0
+    """As-made rotation (转角) modification minus the unit's Delta2 (mm), eqs. (11)-(12)."""
+    equidistant_modification_mm: float = Field(0.0, ge=0)
+    """Equidistant (等距) modification of gear 1 (mm): each flank ground back this far along
+    its normal (the third modification seed 002 names)."""
+    mesh_phases: int = Field(6, ge=2, le=64)
+    """Mesh phases over one tooth pitch of gear 2 the assembled pair is solved at."""
+
+
+class BeveloidConfig(_Strict):
+    """A ``beveloid`` unit (seed 001) as installed: seed 001 eq. (8)'s installation errors of
+    the gear (0: the standard installation)."""
+
+    axial_shift_error_mm: float = 0.0
+    """dz of eq. (8): the gear's axial position error (mm), + towards the pinion's thick end."""
+    center_distance_error_mm: float = 0.0
+    """dx of eq. (8): center distance error along the line of centres (mm)."""
+    lateral_offset_mm: float = 0.0
+    """dy of eq. (8): offset of the gear axis across the line of centres (mm)."""
+    shaft_angle_horizontal_deg: float = 0.0
+    """dl_h of eq. (8): gear axis turned about the line of centres (crossed axes), deg."""
+    shaft_angle_vertical_deg: float = 0.0
+    """dl_v of eq. (8): gear axis turned in the plane of the axes (intersecting), deg."""
+    te_points_per_cycle: int = Field(8, ge=4, le=24)
+    """Points per mesh cycle of the eq. (11) transmission error (TCA)."""
+
+
 class NoiseConfig(_Strict):
     """Sensor noise: Gaussian, seeded (same seed and calls -> same numbers)."""
 
@@ -211,6 +246,8 @@ class PlantConfig(_Strict):
     effects: EffectsConfig = EffectsConfig()
     noise: NoiseConfig = NoiseConfig()
     measurement: MeasurementConfig = MeasurementConfig()
+    cycloid: CycloidConfig = CycloidConfig()
+    beveloid: BeveloidConfig = BeveloidConfig()
     source: str = "<memory>"
 
     def nominal(self) -> PlantConfig:
@@ -220,7 +257,10 @@ class PlantConfig(_Strict):
                     for name in EFFECT_NAMES}
         )
         noise = self.noise.model_copy(update={"twist_arcsec_rms": 0.0, "torque_Nm_rms": 0.0})
-        return self.model_copy(update={"effects": effects, "noise": noise})
+        return self.model_copy(update={
+            "effects": effects, "noise": noise,
+            "cycloid": CycloidConfig(mesh_phases=self.cycloid.mesh_phases),
+            "beveloid": BeveloidConfig(te_points_per_cycle=self.beveloid.te_points_per_cycle)})
 
     def with_effect(self, name: str, enabled: bool = True, **params: Any) -> PlantConfig:
         """A copy with effect ``name`` switched (and any of its parameters replaced)."""
@@ -240,11 +280,12 @@ class PlantConfig(_Strict):
         )
 
     def with_changes(self, **sections: dict[str, Any]) -> PlantConfig:
-        """A copy with keys of ``rig``/``housing``/``noise``/``measurement`` replaced,
-        validated."""
+        """A copy with keys of ``rig``/``housing``/``noise``/``measurement``/``unit``/
+        ``cycloid``/``beveloid`` replaced, validated."""
         data = self.model_dump()
         for section, values in sections.items():
-            if section not in ("rig", "housing", "noise", "unit", "measurement"):
+            if section not in ("rig", "housing", "noise", "unit", "measurement", "cycloid",
+                               "beveloid"):
                 raise PlantConfigError(f"{self.source}: cannot change section {section!r}")
             data[section] = {**data[section], **values}
         return plant_config_from_mapping(data, self.source)
@@ -270,10 +311,10 @@ def plant_config_from_mapping(data: dict[str, Any], source: str = "<memory>") ->
     except ValidationError as exc:
         raise PlantConfigError(_describe(exc, source)) from exc
     # The unit table is checked by the geometry (it names unit.<key> on error).
-    from simulators.plant.geometry import MeshGeometry
+    from simulators.plant.geometry import geometry_for
 
     try:
-        MeshGeometry.from_config(config)
+        geometry_for(config)
     except ValueError as exc:
         raise PlantConfigError(f"{source}: {exc}") from exc
     return config

@@ -114,6 +114,26 @@ def _checked(key: str, index: int, value: Any) -> float:
     return float(value)
 
 
+def geometry_for(config: UnitAndEffects) -> MeshGeometry:
+    """The plant geometry of the unit's ``kind`` (run-format.md ``unit.kind``):
+    ``internal_involute`` (default, seed 000), ``cycloid`` (seed 002), ``beveloid`` (seed 001).
+    Raises ValueError naming the key."""
+    unit = config.unit
+    kind = unit.get("kind", "internal_involute") if isinstance(unit, Mapping) else None
+    if kind == "cycloid":
+        from simulators.plant.cycloid import CycloidGeometry
+
+        return CycloidGeometry.from_config(config)
+    if kind == "beveloid":
+        from simulators.plant.beveloid import BeveloidGeometry
+
+        return BeveloidGeometry.from_config(config)
+    if kind not in (None, "internal_involute"):
+        raise ValueError(f"key unit.kind: {kind!r} has no plant (known: internal_involute, "
+                         "cycloid, beveloid)")
+    return MeshGeometry.from_config(config)
+
+
 def _tooth_table(explicit: list[float] | None, count: int, rms: float,
                  rng: np.random.Generator, name: str) -> np.ndarray:
     if explicit is not None:
@@ -150,6 +170,31 @@ class MeshGeometry:
     bearing_play_um: float
     thermal_um_per_K: float
     thermal_reference_C: float
+    runout_sign: float = -1.0
+    """Sign of the play change with the center distance: -1 for an internal pair (seed 000
+    eq. 3: a larger center distance closes the play), +1 for an external one."""
+    kind: str = "internal_involute"
+
+    @property
+    def ratio(self) -> float:
+        """Input turns per output turn, ``z_external / (z_internal - z_external)``; the output
+        turns opposite to the input."""
+        return self.z_external / (self.z_internal - self.z_external)
+
+    @property
+    def mesh_stiffening(self) -> tuple[tuple[float, float], ...]:
+        """Flank torques (N*m) where more flanks take load and the compliance (rad/(N*m)) each
+        takes off the mesh's; none for the involute pair (one linear stiffness)."""
+        return ()
+
+    def base_play_um(self, input_angle_deg: float) -> float:
+        """The unit's own play (um) at the lock angle before the switchable effects: the
+        reference nominal model's, the same at every angle for the involute pair."""
+        return self.nominal.play_um
+
+    def kind_truth(self, input_angle_deg: float) -> dict[str, Any]:
+        """Kind-specific true values at the lock angle (none for the involute pair)."""
+        return {}
 
     @classmethod
     def from_config(cls, config: UnitAndEffects) -> MeshGeometry:
@@ -157,11 +202,21 @@ class MeshGeometry:
         unit = config.unit
         nominal = reference_nominal(unit)
         u = _UnitView(unit)
-        fx = config.effects
         z1, z2 = u.int_("z_internal"), u.int_("z_external")
         alpha = math.radians(u.num("pressure_angle_deg", 20.0))
         m = u.num("module_mm")
         a = u.num("center_distance_mm", m * (z1 - z2) / 2.0)
+        return cls.build(config, nominal, z1, z2, m, math.tan(alpha), a)
+
+    @classmethod
+    def build(cls, config: UnitAndEffects, nominal: NominalMesh, z1: int, z2: int, m: float,
+              tan_alpha: float, a: float, **extra: Any) -> MeshGeometry:
+        """The geometry with the switchable effects' tables (runout, tooth spacing, bearing,
+        thermal) for tooth counts z1 (``*_internal`` tables) and z2 (``*_external``), module
+        ``m`` (mm), play sensitivity ``tan_alpha`` (2 tan_alpha um of play per um of center
+        distance) and center distance ``a`` (mm); ``extra``: a subclass's own fields."""
+        u = _UnitView(config.unit)
+        fx = config.effects
 
         ro = fx.runout
         f_int = ro.internal_mm if ro.internal_mm is not None else (
@@ -185,12 +240,12 @@ class MeshGeometry:
         if bc.enabled:
             clearances = bc.clearance_mm if bc.clearance_mm is not None else u.nums(
                 "bearing_clearance_mm")
-            bearing_um = 1000.0 * 2.0 * math.tan(alpha) * sum(c / 2.0 for c in clearances)
+            bearing_um = 1000.0 * 2.0 * tan_alpha * sum(c / 2.0 for c in clearances)
 
         th = fx.thermal_expansion
         return cls(
             nominal=nominal, z_internal=z1, z_external=z2, module_mm=m,
-            tan_alpha=math.tan(alpha), eccentric_distance_mm=a,
+            tan_alpha=tan_alpha, eccentric_distance_mm=a,
             runout_on=ro.enabled, ecc_internal_mm=f_int / 2.0, ecc_external_mm=f_ext / 2.0,
             beta_rad=math.radians(ro.beta_deg),
             internal_phase_rad=math.radians(ro.internal_phase_deg),
@@ -198,7 +253,7 @@ class MeshGeometry:
             thickness_external_um=thick_ext, pitch_internal_um=pitch_int,
             pitch_external_um=pitch_ext, bearing_play_um=bearing_um,
             thermal_um_per_K=th.coefficient_um_per_K if th.enabled else 0.0,
-            thermal_reference_C=th.reference_C,
+            thermal_reference_C=th.reference_C, **extra,
         )
 
     def arcmin_from_um(self, j_t_um: float) -> float:
@@ -225,7 +280,7 @@ class MeshGeometry:
             return 0.0
         delta_a_mm = self.center_distance_mm(input_angle_deg) - self.eccentric_distance_mm
         delta_a_um = 1000.0 * delta_a_mm
-        return -2.0 * self.tan_alpha * delta_a_um
+        return self.runout_sign * 2.0 * self.tan_alpha * delta_a_um
 
     def tooth_pair(self, input_angle_deg: float) -> tuple[int, int, int]:
         """(mesh index n, ring tooth, pinion tooth) in contact at the eccentric-shaft angle.
@@ -256,7 +311,7 @@ class MeshGeometry:
         """Circumferential play of the mesh (um, >= 0): nominal + runout + spacing + thermal.
 
         A negative sum (interference) is clamped at zero: the mesh is then preloaded."""
-        total = (self.nominal.play_um + self.runout_play_um(input_angle_deg)
+        total = (self.base_play_um(input_angle_deg) + self.runout_play_um(input_angle_deg)
                  + self.spacing_play_um(input_angle_deg) + self.thermal_play_um(temperature_C))
         return max(total, 0.0)
 

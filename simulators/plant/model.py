@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 from simulators.plant.config import PlantConfig
 from simulators.plant.friction import Friction
-from simulators.plant.geometry import ARCMIN_PER_RAD, MeshGeometry
+from simulators.plant.geometry import ARCMIN_PER_RAD, geometry_for
 
 _MAX_ITER = 80
 
@@ -44,11 +44,19 @@ class Compliance:
     soft_scale_Nm: float = 1.0
     bearing_c: float = 0.0
     bearing_torque_Nm: float = 0.0
+    stages: tuple[tuple[float, float], ...] = ()
+    """Multi-flank contact (cycloid, seed 002): beyond flank torque ``tau_j`` (N*m) another
+    flank takes load and the compliance falls by ``d_j`` (rad/(N*m)):
+    ``h -= sum_j d_j (tau - tau_j)+`` (simulators/plant/cycloid.py)."""
 
     def __call__(self, tau: float) -> tuple[float, float]:
         """(h, dh/dtau) at flank torque ``tau`` >= 0."""
         h = tau * self.c_lin
         dh = self.c_lin
+        for t_j, d_j in self.stages:
+            if tau > t_j:
+                h -= d_j * (tau - t_j)
+                dh -= d_j
         if self.soft_rad:
             e = math.exp(-tau / self.soft_scale_Nm)
             h += self.soft_rad * (1.0 - e)
@@ -66,7 +74,7 @@ class Compliance:
         if q <= 0.0:
             return 0.0
         c, cb, tb = self.c_lin, self.bearing_c, self.bearing_torque_Nm
-        if not self.soft_rad:
+        if not self.soft_rad and not self.stages:
             if cb:
                 tau = q / (mass * (c + cb) + 1.0)
                 if tau <= tb:
@@ -111,10 +119,10 @@ class PlantModel:
 
     def __init__(self, config: PlantConfig) -> None:
         self.config = config
-        self.geometry = MeshGeometry.from_config(config)
+        self.geometry = geometry_for(config)
         rig, fx = config.rig, config.effects
         geo = self.geometry
-        self.ratio = geo.z_external / (geo.z_internal - geo.z_external)
+        self.ratio = geo.ratio
         self.mesh_stiffness_Nm_per_rad = geo.nominal.stiffness_Nm_per_arcmin * ARCMIN_PER_RAD
         c_lin = 1.0 / self.mesh_stiffness_Nm_per_rad
         if fx.shaft_compliance.enabled:
@@ -127,6 +135,7 @@ class PlantModel:
             bearing_c=1.0 / (bc.soft_stiffness_Nm_per_arcmin * ARCMIN_PER_RAD) if bc.enabled
             else 0.0,
             bearing_torque_Nm=bc.soft_stage_torque_Nm if bc.enabled else 0.0,
+            stages=geo.mesh_stiffening,
         )
         self.creep_c = (1.0 / (fx.creep.stiffness_Nm_per_arcmin * ARCMIN_PER_RAD)
                         if fx.creep.enabled else 0.0)
@@ -172,7 +181,8 @@ class PlantModel:
         if self.input_deg != self._geo_deg:
             geo = self.geometry
             self._geo_deg = self.input_deg
-            self._geo_play_um = (geo.nominal.play_um + geo.runout_play_um(self.input_deg)
+            self._geo_play_um = (geo.base_play_um(self.input_deg)
+                                 + geo.runout_play_um(self.input_deg)
                                  + geo.spacing_play_um(self.input_deg))
             self._geo_pitch_rad = (geo.arcmin_from_um(geo.pitch_offset_um(self.input_deg))
                                    / ARCMIN_PER_RAD)
@@ -263,7 +273,7 @@ class PlantModel:
             return result(phi, 0.0)
         side = 1.0 if r_up < 0.0 else -1.0
         base = centre + side * half_play
-        if not compliance.soft_rad and not compliance.bearing_c:
+        if not compliance.soft_rad and not compliance.bearing_c and not compliance.stages:
             # linear flank: G = (phi - base) / c_lin, solve directly for phi
             stiff = 1.0 / compliance.c_lin
             known_c = known + base * stiff
@@ -284,6 +294,7 @@ class PlantModel:
 
         c_lin, soft, scale = compliance.c_lin, compliance.soft_rad, compliance.soft_scale_Nm
         c_b, t_b = compliance.bearing_c, compliance.bearing_torque_Nm
+        stages = compliance.stages
         exp = math.exp
 
         def contact(tau: float) -> tuple[float, float]:
@@ -299,6 +310,10 @@ class PlantModel:
                     dh += c_b
                 else:
                     h += t_b * c_b
+            for t_j, d_j in stages:
+                if tau > t_j:
+                    h -= d_j * (tau - t_j)
+                    dh -= d_j
             phi = base + side * h
             d = phi - phi0
             if k == 0.0:
@@ -496,7 +511,7 @@ class PlantModel:
         creep_c = self.creep_c
         thermal = bool(self.geometry.thermal_um_per_K)
         # frictionless, piecewise-linear chain: closed-form flank torque (compliance.invert)
-        linear = fr is None and not compliance.soft_rad
+        linear = fr is None and not compliance.soft_rad and not compliance.stages
         c_lin, c_b, t_b = compliance.c_lin, compliance.bearing_c, compliance.bearing_torque_Nm
         target = self.drive_target_Nm() + ripple_Nm
         drive, temp, amb = self.drive_Nm + ripple_Nm, self.temperature_C, self.ambient_C
@@ -562,7 +577,7 @@ class PlantModel:
         """The chain's compliance in the infinitely slow limit (creep fully developed)."""
         c = self.compliance
         return Compliance(c.c_lin + self.creep_c, c.soft_rad, c.soft_scale_Nm, c.bearing_c,
-                          c.bearing_torque_Nm)
+                          c.bearing_torque_Nm, c.stages)
 
     def quasi_static_path(self, torques_Nm, start_flank: int) -> list[float]:
         """Twists (rad) along a slow torque path, from rest on ``start_flank`` (state kept)."""

@@ -53,6 +53,7 @@ from analysis.diagnosis.fit import (
     run_lost_motion,
     teeth_of,
     temperatures_known,
+    with_kind_play_reference,
 )
 from analysis.diagnosis.report_measurement import measurement_report
 from analysis.diagnosis.where import gap_map, lack_of_fit, per_run_play, play_fourier
@@ -488,6 +489,11 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             amp_ext = math.hypot(c[2], c[3])
             amp_2 = math.hypot(f.coef("runout_h2c"), f.coef("runout_h2s"))
             out["amplitude_arcmin"] = amp_int + amp_ext + amp_2
+            if stack.physics is not None:
+                # the kind's two eccentricity terms may turn at nearly one rate (a cycloid's
+                # 1 and (2 z1 - z2) / z1 per crank turn): their split is then not determined
+                # by the positions, only the play change over them is
+                out["amplitude_arcmin"] = kind_runout_swing_arcmin(stack, c)
             if "runout_h2c" in f.names:
                 out["order2_amplitude_arcmin"] = amp_2
                 out["order2_play_um"] = float(_um(stack, amp_2))
@@ -540,6 +546,19 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
 
 
 # ------------------------------------------------------------------------------ diagnose
+
+
+def kind_runout_swing_arcmin(stack: Stack, coeffs: Sequence[float]) -> float:
+    """The largest runout play change (arcmin) the fitted eccentricity terms give over the
+    campaign's span of input angles (the kind's basis,
+    analysis.diagnosis.kind_physics.KindPhysics.runout_basis)."""
+    angles = [r.input_angle_deg for r in stack.runs if r.input_angle_deg is not None]
+    if not angles or stack.physics is None:
+        return 0.0
+    lo, hi = min(angles), max(max(angles), min(angles) + 360.0)
+    grid = np.linspace(lo, hi, 721)
+    basis = np.array([stack.physics.runout_basis(a) for a in grid])
+    return float(np.max(np.abs(basis @ np.asarray(coeffs, dtype=float))))
 
 
 def _um(stack: Stack, angle_arcmin: float) -> float:
@@ -669,6 +688,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
                             "(run.json 'unit'); a run has none usable")
     prepared = lag_if_it_helps(runs, prepared, tp)
     stack, zero_report = with_measurement_nuisance(prepared, alpha)
+    stack = with_kind_play_reference(stack)  # the unit kind's nominal shape (kind_physics)
     prepared = list(stack.runs)
     cond, varied = conditions_of(stack)
     cfolds = folds_by_condition(stack, cond)

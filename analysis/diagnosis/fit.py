@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import lsq_linear, minimize_scalar
@@ -203,6 +203,21 @@ def kind_play_and_flank_columns(physics: KindPhysics, input_angle_deg: float | N
         return [s / 2.0, s * tau]
     return [s / 2.0 * shape.play_ratio(input_angle_deg),
             s * shape.shape_Nm(input_angle_deg, s, tau)]
+
+
+def with_kind_play_reference(stack: Stack) -> Stack:
+    """The stack with the kind's mesh-phase play change referred to this unit's calibrated
+    mean play (the null model's), so that the change is added to the play, not scaled with
+    it (:attr:`analysis.diagnosis.kind_physics.CycloidShape.play_reference_arcmin`); the
+    stack itself for a kind without one."""
+    physics = stack.physics
+    if physics is None or physics.cycloid is None:
+        return stack
+    play = fit(stack, ("backlash",)).coef("play")
+    if not play > 0:
+        return stack
+    shape = replace(physics.cycloid, play_reference_arcmin=float(play))
+    return replace(stack, physics=replace(physics, cycloid=shape), cache={})
 
 
 def flank_band_Nm(run: PreparedRun) -> float:

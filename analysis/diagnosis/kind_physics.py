@@ -40,8 +40,9 @@ CYCLOID_PITCH_DEVIATION_MM = 0.008
 #: of module 3 and about 60 mm diameter (mm).
 BEVELOID_RUNOUT_MM = 0.020
 #: Mesh phases over one tooth pitch at which the cycloid's nominal play and loaded flank
-#: curve are tabulated (seed 002's free play varies with the mesh phase).
-CYCLOID_PHASES = 12
+#: curve are tabulated (seed 002's free play varies with the mesh phase): the nominal
+#: model's (analysis.models.cycloid_nominal.MESH_PHASES), linear between.
+CYCLOID_PHASES = 6
 #: Relative step of the numerical derivative of the play by the center distance (mm).
 CD_STEP_MM = 0.002
 
@@ -137,38 +138,42 @@ class CycloidShape:
         i = int(math.floor(u)) % self.phases_deg.size
         return i, (i + 1) % self.phases_deg.size, u - math.floor(u)
 
+    #: The unit's calibrated mean play (arcmin) the mesh-phase change is added to (None:
+    #: the nominal mean): an as-made deviation (an eccentricity error, a shift error) adds a
+    #: constant to the play and leaves its change over the mesh phase as it is.
+    play_reference_arcmin: float | None = None
+
     def play_ratio(self, input_angle_deg: float) -> float:
-        """The free play at this mesh phase over its mean across the mesh cycle."""
+        """The free play at this mesh phase over the mean play: ``1 + (P(phase) - mean P) /
+        P_ref`` (the play column's factor: its coefficient is the mean play)."""
         i, j, w = self._phase_index(input_angle_deg)
         play = (1 - w) * self.plays_arcmin[i] + w * self.plays_arcmin[j]
         mean = float(np.mean(self.plays_arcmin))
-        return float(play / mean) if mean > 0 else 1.0
+        ref = self.play_reference_arcmin or mean
+        return float(1.0 + (play - mean) / ref) if ref > 0 else 1.0
 
     def shape_Nm(self, input_angle_deg: float, flank: np.ndarray, tau: np.ndarray
                  ) -> np.ndarray:
-        """The loaded flank curve as an equivalent torque ``K_sec turn(|T|)`` (N*m) at the
-        mesh phase of this angle, per point's flank (+1/-1): the linear loop's ``|T|`` where
-        the flank is linear; multiplied by the compliance ``1 / K_sec`` it is the twist."""
-        i, j, w = self._phase_index(input_angle_deg)
+        """The loaded flank curve as an equivalent torque ``K_sec turn(|T|)`` (N*m): the
+        turn of gear 1 beyond first contact, mean over the mesh phases and both flank sides
+        (the flanks engaging one after another), the last slope continued beyond the grid;
+        multiplied by the compliance ``1 / K_sec`` it is the twist. Equal to ``|T|`` where
+        the flank is linear with the secant stiffness."""
         t = np.asarray(tau, dtype=float)
-        out = np.empty(t.size)
-        for side, mask in ((0, np.asarray(flank) >= 0), (1, np.asarray(flank) < 0)):
-            if not mask.any():
-                continue
-            a = np.interp(t[mask], self.torque_grid_Nm, self.turns_arcmin[i, side])
-            b = np.interp(t[mask], self.torque_grid_Nm, self.turns_arcmin[j, side])
-            turn = (1 - w) * a + w * b
-            # beyond the grid: the last (stiffest) slope continues
-            top = self.torque_grid_Nm[-1]
-            beyond = t[mask] > top
-            if beyond.any():
-                slope_a = np.diff(self.turns_arcmin[i, side][-2:])[0]
-                slope_b = np.diff(self.turns_arcmin[j, side][-2:])[0]
-                dt = self.torque_grid_Nm[-1] - self.torque_grid_Nm[-2]
-                slope = ((1 - w) * slope_a + w * slope_b) / dt
-                turn[beyond] += slope * (t[mask][beyond] - top)
-            out[mask] = self.secant_Nm_per_arcmin * turn
-        return out
+        mean = self.mean_turn_arcmin
+        turn = np.interp(t, self.torque_grid_Nm, mean)
+        top = self.torque_grid_Nm[-1]
+        beyond = t > top
+        if beyond.any():
+            slope = (mean[-1] - mean[-2]) / (top - self.torque_grid_Nm[-2])
+            turn[beyond] = mean[-1] + slope * (t[beyond] - top)
+        return self.secant_Nm_per_arcmin * turn
+
+    @property
+    def mean_turn_arcmin(self) -> np.ndarray:
+        """Gear 1's loaded turn beyond first contact (arcmin) on the torque grid, mean over
+        the mesh phases and both sides."""
+        return np.mean(self.turns_arcmin, axis=(0, 1))
 
     def describe(self) -> dict[str, Any]:
         return {
@@ -357,7 +362,7 @@ def beveloid_physics(unit: Mapping[str, Any]) -> KindPhysics:
       / cos(beta)`` um per um); a shaft bearing's radial clearance moves its axis by u_r / 2.
     * **Conversion**: a circumferential play on the gear's pitch circle.
     * **Inspected tolerances**: ``runout_pinion_mm`` / ``runout_gear_mm`` (F_r; else
-      ``runout_internal_mm`` / ``runout_external_mm``; else 0.020 mm, ISO 1328-2 grade 6),
+      ``runout_external_mm`` / ``runout_internal_mm``; else 0.020 mm, ISO 1328-2 grade 6),
       ``bearing_clearance_mm`` (the shaft bearings).
     * **No meaning of its own**: with ``z_pinion == z_gear`` the same tooth pair meshes at the
       same input angle every turn (repeat period one input turn): a tooth's play error is a
@@ -374,8 +379,9 @@ def beveloid_physics(unit: Mapping[str, Any]) -> KindPhysics:
     s = (backlash_closed_form(hi, shift).angle_arcmin
          - backlash_closed_form(lo, shift).angle_arcmin) / (2.0 * h * 1000.0)
     zp, zg = pair.pinion.teeth, pair.gear.teeth
-    fr_p = _num(unit, "runout_pinion_mm", _num(unit, "runout_internal_mm", BEVELOID_RUNOUT_MM))
-    fr_g = _num(unit, "runout_gear_mm", _num(unit, "runout_external_mm", BEVELOID_RUNOUT_MM))
+    # the plant's naming: the gear's runout under runout_internal_mm, the pinion's external
+    fr_p = _num(unit, "runout_pinion_mm", _num(unit, "runout_external_mm", BEVELOID_RUNOUT_MM))
+    fr_g = _num(unit, "runout_gear_mm", _num(unit, "runout_internal_mm", BEVELOID_RUNOUT_MM))
     clear = _clearances(unit)
     r2 = pair.gear.pitch_radius_mm
     not_testable = {}

@@ -182,7 +182,10 @@ def batch_band(
     from analysis.models.seed000_batch import lost_motion_batch
     from analysis.models.seed000_unit import InternalPairUnit
 
-    if unit.get("kind", "internal_involute") != "internal_involute":
+    kind = unit.get("kind", "internal_involute")
+    if kind in ("cycloid", "beveloid"):
+        return _kind_batch_band(unit, kind, rated_torque_Nm, pct, samples)
+    if kind != "internal_involute":
         return None
     try:
         parsed, _ = InternalPairUnit.from_mapping(unit)
@@ -193,8 +196,47 @@ def batch_band(
     low, high = batch.band_arcmin(0.95)
     worst = batch.to_dict()["worst_position_arcmin"]
     return {"band_95_arcmin": [low, high], "median_arcmin": worst["median"],
-            "samples": samples, "what": "seed 000 Table 1 tolerances, worst position "
+            "samples": samples, "kind": "internal_involute",
+            "what": "seed 000 Table 1 tolerances, worst position "
             "(seed 003's Monte Carlo method); `rig batch` for the whole distribution"}
+
+
+def _kind_batch_band(unit: dict[str, Any], kind: str, rated_torque_Nm: float, pct: float,
+                     samples: int) -> dict[str, Any] | None:
+    """The batch band of a cycloid (seed 002's modification budget,
+    :mod:`analysis.models.cycloid_batch`) or beveloid unit (seed 001's installation error
+    budget, :mod:`analysis.models.beveloid_batch`), with the compensation advice; None when
+    the unit's data cannot give one."""
+    from analysis.errors import AnalysisError
+
+    try:
+        if kind == "cycloid":
+            from analysis.models.cycloid_batch import cycloid_advice, cycloid_batch
+
+            batch = cycloid_batch(unit, rated_torque_Nm=rated_torque_Nm, lost_motion_pct=pct,
+                                  samples=samples)
+            advice = cycloid_advice(unit, rated_torque_Nm=rated_torque_Nm,
+                                    lost_motion_pct=pct, samples=samples)
+            what = ("seed 002's modification budget (Table 2, JB/T 10419 grade 5: runouts, "
+                    "pitch deviations, eccentricity, crank bearings, grinding), worst crank "
+                    "position (seed 003's Monte Carlo method)")
+        else:
+            from analysis.models.beveloid_batch import beveloid_advice, beveloid_batch
+
+            batch = beveloid_batch(unit, rated_torque_Nm=rated_torque_Nm, lost_motion_pct=pct,
+                                   samples=samples)
+            advice = beveloid_advice(unit, rated_torque_Nm=rated_torque_Nm,
+                                     lost_motion_pct=pct, samples=samples)
+            what = ("seed 001's installation error budget (eq. 8: center distance, lateral "
+                    "offset, axial position; runouts, bearings), worst position (seed 003's "
+                    "Monte Carlo method)")
+    except (AnalysisError, KeyError, TypeError, ValueError):
+        return None
+    low, high = batch.band_arcmin(0.95)
+    return {"band_95_arcmin": [low, high],
+            "median_arcmin": float(np.median(batch.worst_arcmin)),
+            "samples": samples, "kind": kind, "what": what,
+            "binding_fraction": batch.interference_fraction, "advice": advice}
 
 
 def summarise(runs: list[dict[str, Any]], limits: Limits) -> dict[str, Any]:

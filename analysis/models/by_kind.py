@@ -20,6 +20,17 @@ from analysis.errors import AnalysisError
 
 KINDS = ("internal_involute", "cycloid", "beveloid")
 
+MODEL_NAMES = {
+    "internal_involute": ("seed 000 reference nominal model, no runout",
+                          "seed 000 Table 1 tolerances"),
+    "cycloid": ("seed 002 compound cycloid pair, mean over the mesh phases",
+                "seed 002 modification budget"),
+    "beveloid": ("seed 001 beveloid pair, closed-form backlash",
+                 "seed 001 installation error budget"),
+}
+"""Per unit kind: the nominal model's name and the tolerances its batch band is drawn from
+(what the page and the certificate print beside them)."""
+
 
 class LoopModel(Protocol):
     """What a nominal loop model offers (units: arcmin at the output, N*m)."""

@@ -340,14 +340,36 @@ def _position_figure(campaign: Campaign, runs: list[Run], limits: dict[str, Any]
         model = next((m for m in models if m is not None), None)
     # the band as the campaign stored it (None: the batch model cannot use this unit)
     batch = summary["batch"] if "batch" in summary else _batch_band(campaign, runs)
+    kind = str((campaign.meta.get("unit") or (runs[0].meta.get("unit") if runs else None)
+                or {}).get("kind") or "internal_involute")
+    from analysis.models.by_kind import MODEL_NAMES
+
+    names = MODEL_NAMES.get(kind, (f"nominal model of kind {kind}", "the design's tolerances"))
     out: dict[str, Any] = {"figure": None, "batch": batch, "model": _fmt(model, ".3f"),
-                           "n_points": len(points)}
+                           "n_points": len(points), "kind": kind, "model_name": names[0],
+                           "band_source": names[1], "advice": _advice_text(batch)}
     if points:
         out["figure"] = position_svg(points, model, batch, limits.get("lost_motion_arcmin_max"))
     if batch and batch.get("band_95_arcmin"):
         low, high = batch["band_95_arcmin"]
         out["band"] = f"{low:.3f} .. {high:.3f} arcmin"
     return out
+
+
+def _advice_text(batch: dict[str, Any] | None) -> str | None:
+    """The compensation advice of a cycloid or beveloid batch band, in words (None: none)."""
+    advice = (batch or {}).get("advice") or {}
+    band = advice.get("band_95_arcmin")
+    if not band:
+        return None
+    if "rotation_modification_mm" in advice:
+        what = f"rotation modification Delta2 = {advice['rotation_modification_mm']:.4f} mm"
+    elif "axial_shift_mm" in advice:
+        what = f"gear axial position {advice['axial_shift_mm']:+.3f} mm"
+    else:
+        return None
+    return (f"{what} gives {band[0]:.3f} .. {band[1]:.3f} arcmin with at most "
+            f"{100 * advice.get('binding_fraction', 0.0):.1f} % of units binding")
 
 
 def _batch_band(campaign: Campaign, runs: list[Run]) -> dict[str, Any] | None:

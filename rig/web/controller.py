@@ -117,7 +117,11 @@ def model_summary(req: RunRequest) -> tuple[dict[str, Any] | None, list[str]]:
     if model is None:
         return None, assumptions
     _, pct = resolve_profile(req.profile, None)
-    out: dict[str, Any] = {"lost_motion_pct": pct}
+    from analysis.models.by_kind import MODEL_NAMES
+
+    kind = str(req.unit.mapping().get("kind") or "internal_involute")
+    out: dict[str, Any] = {"lost_motion_pct": pct, "kind": kind,
+                           "model_name": MODEL_NAMES.get(kind, (kind, ""))[0]}
     for key in ("play_arcmin", "backlash_arcmin", "stiffness_Nm_per_arcmin"):
         value = getattr(model, key, None)
         out[key] = value if isinstance(value, int | float) else None

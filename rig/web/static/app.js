@@ -207,6 +207,11 @@ function showMetrics(m, model, partial = false) {
   if (partial) $("m-hysteresis-u").textContent = " (the loop is not closed yet)";
   const mm = (m && m.model) || model;
   $("m-model").textContent = fmt(mm && mm.lost_motion_arcmin);
+  // the unit kind's own model and batch band are named (cycloid: seed 002, beveloid: seed 001)
+  const named = (live.model && live.model.model_name) || (model && model.model_name);
+  if (named) $("m-model-label").textContent = `nominal model (${named}): lost motion`;
+  const kind = live.batch && live.batch.kind;
+  if (kind) $("m-batch-label").textContent = `batch band (95 %, ${kind})`;
   const band = live.batch && live.batch.band_95_arcmin;
   $("m-batch").textContent = band ? `${fmt(band[0])} .. ${fmt(band[1])}` : "–";
   const flags = [];

@@ -133,7 +133,7 @@ def test_validate_diagnosis_kind_cli(tmp_path) -> None:
     out = tmp_path / "bev.json"
     run = subprocess.run(
         [sys.executable, "-m", "rig", "validate-diagnosis", "--kind", "beveloid", "--cases",
-         "1", "--nulls", "1", "--no-artifacts", "--json", str(out)],
+         "1", "--no-artifacts", "--json", str(out)],
         capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr
     summary = json.loads(out.read_text())

@@ -224,6 +224,11 @@ def register(app: typer.Typer) -> None:
             "real rig's measuring system (impacts and bounces, sensor lag, ADC grid, drive "
             "loop and ripple, drifting zero, Coulomb friction, encoder, jittered sampling with "
             "dropped rows, pre-cycles; docs/diagnosis.md), or the plant's columns.")] = True,
+        kind: Annotated[str | None, typer.Option(
+            "--kind", help="Our generator for another unit kind: cycloid (seed 002) or "
+            "beveloid (seed 001): --cases withheld effects of the vocabulary (cycling) with "
+            "min(20, cases) null campaigns of that kind's plant (--nulls adds more), graded "
+            "per effect.")] = None,
         over_the_wire: Annotated[bool, typer.Option(
             "--over-the-wire", help="Record campaigns through the real sequencer, drivers and "
             "simulated devices (rig campaign run --simulated) with the rig's dynamics on and "
@@ -234,12 +239,10 @@ def register(app: typer.Typer) -> None:
         short: Annotated[bool, typer.Option(
             "--short", help="With --over-the-wire: half the positions per campaign.")
         ] = False,
-        kind: Annotated[str | None, typer.Option(
-            "--kind", help="Our generator for another unit kind: cycloid (seed 002) or "
-            "beveloid (seed 001): --cases withheld effects of the vocabulary (cycling) plus "
-            "--nulls null campaigns of that kind's plant, graded per effect.")] = None,
         nulls: Annotated[int, typer.Option(
-            min=0, help="With --kind: null campaigns (no effect) beside the --cases.")] = 20,
+            min=0, help="Add N null campaigns (no withheld effect) to our generator's or the "
+            "over-the-wire cases: the false-alarm rate measured on its own (the target is at "
+            "most 1 in 20).")] = 0,
         jobs: Annotated[int, typer.Option(min=1, help="Worker processes (with "
                                           "--over-the-wire: simulated rigs at a time).")] = 1,
         verbose: Annotated[bool, typer.Option("--verbose", help="One line per case.")] = False,
@@ -261,7 +264,8 @@ def register(app: typer.Typer) -> None:
             if like is not None or cases_dir or over_the_wire:
                 raise RigError("--kind goes with our generator only (not with --like, "
                                "--cases-dir or --over-the-wire)")
-            json_out.write(_kind(kind, cases or 30, nulls, seed, jobs, verbose, artifacts),
+            n = cases or 30
+            json_out.write(_kind(kind, n, min(20, n) + nulls, seed, jobs, verbose, artifacts),
                            ensure_ascii=True)
             return
         if like is not None:

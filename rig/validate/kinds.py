@@ -160,7 +160,13 @@ def make_kind_case(index: int, effect: str, kind: str, rng: np.random.Generator,
                  "soft_stage_torque_Nm": float(rng.uniform(0.6, 2.0))}
         form = "two_stage"
     elif effect == "thermal_expansion":
-        truth = {"coefficient_um_per_K": float(rng.choice([-1, 1]) * rng.uniform(0.4, 1.0)),
+        # a play change of 30-80 % of the unit's own play over the 28 K above the reference:
+        # the mesh stays open (a beveloid's play is a few um, a cycloid's some 40 um)
+        from simulators.plant.geometry import geometry_for
+
+        play_um = geometry_for(config).base_play_um(positions[0])
+        sign = float(rng.choice([-1, 1]))
+        truth = {"coefficient_um_per_K": sign * float(rng.uniform(0.3, 0.8)) * play_um / 28.0,
                  "reference_C": 20.0}
         positions = [positions[0]] * 8
         temps = [t for t in (12.0, 24.0, 36.0, 48.0) for _ in range(2)]

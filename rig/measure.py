@@ -167,26 +167,33 @@ def run_meta(unit: dict[str, Any], session: RigSession, operator: str | None = N
     return meta
 
 
-def simulated_truth(session: RigSession, pct: float
+def simulated_truth(session: RigSession, pct: float, rated_torque_Nm: float,
+                    positions_deg: list[float], temperatures_C: list[float] | None = None,
                     ) -> Callable[[dict[str, Any]], dict[str, Any]] | None:
     """On the simulated rig: each run's ``generator`` block, what the plant injected and its
     true loop at the run's lock angle and temperature (simulators/plant/truth.py); None on a
-    real rig."""
+    real rig. The blocks of every planned position and temperature are computed here, before
+    the engine starts: a run's start never waits for them (the drive's keepalive would)."""
     config = session.plant_config
     if config is None:
         return None
+    from simulators.plant.truth import generator_block
+
+    temps: list[float | None] = list(temperatures_C) if temperatures_C else [None]
+    blocks = {(round(float(a), 6), t): generator_block(
+        config, input_angle_deg=float(a), temperature_C=t, rated_torque_Nm=rated_torque_Nm,
+        pct=pct) for a in positions_deg for t in temps}
 
     def meta(test: dict[str, Any]) -> dict[str, Any]:
-        from simulators.plant.truth import generator_block
-
         angle = test.get("input_angle_deg")
+        angle = round(float(angle), 6) if isinstance(angle, int | float) else 0.0
         temp = test.get("temperature_C")
-        rated = test.get("rated_torque_Nm")
-        return {"generator": generator_block(
-            config, input_angle_deg=float(angle) if isinstance(angle, int | float) else 0.0,
-            temperature_C=float(temp) if isinstance(temp, int | float) else None,
-            rated_torque_Nm=float(rated) if isinstance(rated, int | float) else None,
-            pct=pct)}
+        if temps == [None] or not isinstance(temp, int | float):
+            key_t = temps[0]
+        else:
+            key_t = min((t for t in temps if t is not None), key=lambda t: abs(t - temp))
+        block = blocks.get((angle, key_t))
+        return {} if block is None else {"generator": block}
 
     return meta
 
@@ -238,7 +245,10 @@ def run_campaign(camp: CampaignFile, session: RigSession, store: Store, *,
     options = EngineOptions(torque_limit_Nm=camp.torque_limit_Nm, profile=camp.profile,
                             stale_timeout_s=session.stale_timeout_s,
                             limits=camp.limits.model_dump(),
-                            run_meta=simulated_truth(session, PROFILES.get(camp.profile, 3.0)))
+                            run_meta=simulated_truth(
+                                session, PROFILES.get(camp.profile, 3.0),
+                                camp.plan.rated_torque_Nm, camp.axes.positions_deg or [0.0],
+                                camp.axes.temperatures_C))
     try:
         engine, outcomes = measure_plan(
             session, store, plan, meta,
@@ -253,6 +263,11 @@ def run_campaign(camp: CampaignFile, session: RigSession, store: Store, *,
     summary = summarise(runs, camp.limits)
     summary["batch"] = batch_band(unit, camp.plan.rated_torque_Nm,
                                   PROFILES.get(camp.profile, 3.0))
+    from analysis.models.by_kind import MODEL_NAMES
+
+    kind = str(unit.get("kind") or "internal_involute")
+    summary["unit_kind"] = kind
+    summary["model_name"] = MODEL_NAMES.get(kind, (kind, ""))[0]
     status = "completed" if engine.state == "completed" else "aborted"
     reason = engine.stopping_reason
     summary["outcome"] = campaign_outcome([r["outcome"] for r in runs], status)

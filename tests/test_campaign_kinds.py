@@ -81,6 +81,11 @@ def test_example_campaign_of_each_kind(name, positions, exit_code, outcome, tmp_
         assert run.meta["unit"]["kind"] == kind
     print("\n" + "\n".join(lines))
     # the campaign's batch band is the kind's own (seed 002 / seed 001 budget), with advice
+    assert result["unit_kind"] == kind and result["model_name"] == MODEL_NAMES[kind][0]
+    printed = " ".join((res.stdout + res.stderr).split())
+    assert f"unit kind {kind}; model ({MODEL_NAMES[kind][0]})" in printed
+    assert f"production batch of this design ({MODEL_NAMES[kind][1]}, 95 %)" in printed
+    assert "compensation advice:" in printed
     batch = result["batch"]
     assert batch is not None and batch["kind"] == kind
     low, high = batch["band_95_arcmin"]

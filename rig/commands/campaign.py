@@ -114,14 +114,27 @@ def register(app: typer.Typer) -> None:
             out.print(f"runout signature (once per input revolution): amplitude "
                       f"{sig['amplitude']:.3f} arcmin at {sig['phase_deg']:.0f} deg, "
                       f"residual {sig['residual_rms']:.3f} arcmin")
+        from analysis.models.by_kind import MODEL_NAMES
+
+        kind = result.get("unit_kind") or "internal_involute"
+        model_name, band_source = MODEL_NAMES.get(kind, (kind, "the design's tolerances"))
         model = result.get("model") or {}
         if model.get("lost_motion_arcmin") is not None:
-            out.print(f"model (reference nominal, no runout): lost motion "
+            out.print(f"unit kind {kind}; model ({model_name}): lost motion "
                       f"{model['lost_motion_arcmin']:.3f} arcmin")
-        band = (result.get("batch") or {}).get("band_95_arcmin")
+        batch = result.get("batch") or {}
+        band = batch.get("band_95_arcmin")
         if band:
-            out.print(f"production batch of this design (seed 000 tolerances, 95 %): "
+            out.print(f"production batch of this design ({band_source}, 95 %): "
                       f"{band[0]:.3f} .. {band[1]:.3f} arcmin")
+        advice = batch.get("advice") or {}
+        if advice.get("band_95_arcmin"):
+            what = (f"rotation modification Delta2 = {advice['rotation_modification_mm']:.4f} mm"
+                    if "rotation_modification_mm" in advice
+                    else f"gear axial position {advice['axial_shift_mm']:+.3f} mm")
+            low, high = advice["band_95_arcmin"]
+            out.print(f"compensation advice: {what} gives {low:.3f} .. {high:.3f} arcmin "
+                      f"({100 * advice['binding_fraction']:.1f} % of units binding)")
         out.print(f"campaign folder: {result['path']}")
         if result["status"] != "completed":
             out.print(f"[red]campaign aborted: {escape(str(result['reason']))}[/red]")

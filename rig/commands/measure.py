@@ -242,10 +242,15 @@ def register(app: typer.Typer) -> None:
         st = Store(store, samples=samples)
         with open_session(rig=rig, simulated=simulated, plant=plant_cfg) as session, \
                 progress_bar(out, est.total_s) as on_event:
+            from analysis.loop import PROFILES
             from rig.engine import EngineOptions
+            from rig.measure import simulated_truth
 
             options = EngineOptions(profile=profile, stale_timeout_s=session.stale_timeout_s,
-                                    limits=limits.model_dump())
+                                    limits=limits.model_dump(),
+                                    run_meta=simulated_truth(
+                                        session, PROFILES.get(profile, 3.0), rated_torque,
+                                        [position if position is not None else 0.0]))
             meta = run_meta(unit_data, session, operator and operator.strip(),
                             calibration_override)
             try:

@@ -208,10 +208,11 @@ function showMetrics(m, model, partial = false) {
   const mm = (m && m.model) || model;
   $("m-model").textContent = fmt(mm && mm.lost_motion_arcmin);
   // the unit kind's own model and batch band are named (cycloid: seed 002, beveloid: seed 001)
-  const named = (live.model && live.model.model_name) || (model && model.model_name);
-  if (named) $("m-model-label").textContent = `nominal model (${named}): lost motion`;
-  const kind = live.batch && live.batch.kind;
-  if (kind) $("m-batch-label").textContent = `batch band (95 %, ${kind})`;
+  const own = (live.model && live.model.kind) ? live.model : model;
+  if (own && own.kind && own.kind !== "internal_involute" && own.model_name) {
+    $("m-model-label").textContent = `nominal model (${own.model_name}): lost motion`;
+    $("m-batch-label").textContent = `batch band (95 %, ${own.kind})`;
+  }
   const band = live.batch && live.batch.band_95_arcmin;
   $("m-batch").textContent = band ? `${fmt(band[0])} .. ${fmt(band[1])}` : "–";
   const flags = [];
@@ -278,6 +279,18 @@ function showCampaign(title, summary) {
                { label: "batch 97.5 %", stroke: "#888", dash: [2, 3], points: { show: false } }],
     }, data, $("campaign-plot"));
   } else campaignPlot.setData(data);
+  // the unit kind, its nominal model and the tolerances of its band (cycloid: seed 002,
+  // beveloid: seed 001), with the kind's compensation advice
+  const b = summary.batch || {};
+  const advice = b.advice && b.advice.band_95_arcmin ? (b.advice.rotation_modification_mm !== undefined
+    ? `rotation modification Δ2 = ${fmt(b.advice.rotation_modification_mm, 4)} mm`
+    : `gear axial position ${fmt(b.advice.axial_shift_mm, 3)} mm`) +
+    ` gives ${fmt(b.advice.band_95_arcmin[0])} .. ${fmt(b.advice.band_95_arcmin[1])} arcmin` : "";
+  const model = summary.model && summary.model.lost_motion_arcmin;
+  $("campaign-note").textContent = summary.unit_kind ? `unit kind ${summary.unit_kind}; ` +
+    `nominal model (${summary.model_name}): ${fmt(model)} arcmin; ` +
+    (band ? `batch band (${b.what ? b.what.split(" (")[0] : "95 %"}): ${fmt(band[0])} .. ${fmt(band[1])} arcmin` : "no batch band") +
+    (advice ? `; advice: ${advice}` : "") : "";
 }
 
 // ---------------------------------------------------------------- status

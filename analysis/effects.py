@@ -248,13 +248,14 @@ def runout_play_change_arcmin(
     return um_to_arcmin(play_um, module_mm, z_internal)
 
 
-def runout_basis(input_angle_deg: np.ndarray | float, z_internal: int, z_external: int
-                 ) -> np.ndarray:
+def runout_basis(input_angle_deg: np.ndarray | float, z_internal: int, z_external: int,
+                 order: float | None = None) -> np.ndarray:
     """First-order form of eq. (4) for fitting: ``|AB| - a ~ e_int cos(theta - psi) +
-    e_ext cos(k theta - beta)`` with ``k = (2 z_ext - z_int) / z_ext``. Columns
+    e_ext cos(k theta - beta)`` with ``k = (2 z_ext - z_int) / z_ext`` (or ``order``: another
+    kind's second term, analysis.diagnosis.kind_physics). Columns
     (cos theta, sin theta, cos k theta, sin k theta), shape (n, 4)."""
     theta = np.radians(np.asarray(input_angle_deg, dtype=float))
-    k = (2.0 * z_external - z_internal) / z_external
+    k = (2.0 * z_external - z_internal) / z_external if order is None else float(order)
     return np.stack([np.cos(theta), np.sin(theta), np.cos(k * theta), np.sin(k * theta)],
                     axis=-1)
 
@@ -329,6 +330,8 @@ class LoopParams:
     torque_offset_Nm: float = 0.0
     shaft_stiffness_Nm_per_arcmin: float = math.inf
     spacing_play_arcmin: dict[int, float] = field(default_factory=dict)
+    #: The second runout term's cycles per input turn (None: seed 000 eq. 4's).
+    runout_order: float | None = None
 
     def with_(self, **changes: object) -> LoopParams:
         """A copy with some parameters replaced."""
@@ -347,7 +350,8 @@ def play_at_arcmin(params: LoopParams, input_angle_deg: float | None, temperatur
     runout + thermal + tooth spacing."""
     play: np.ndarray | float = params.play_arcmin + params.bearing_extra_play_arcmin
     if input_angle_deg is not None:
-        play = play + float(runout_basis(input_angle_deg, z_internal, z_external)
+        play = play + float(runout_basis(input_angle_deg, z_internal, z_external,
+                                         params.runout_order)
                             @ np.asarray(params.runout_coeffs_arcmin))
         if any(params.runout_order2_arcmin):
             play = play + float(runout_harmonic_basis(input_angle_deg)

@@ -54,6 +54,7 @@ from analysis.diagnosis.fit import (
     run_lost_motion,
     teeth_of,
     temperatures_known,
+    with_kind_play_reference,
 )
 from analysis.diagnosis.flanks import flank_asymmetry
 from analysis.diagnosis.report_measurement import measurement_report
@@ -270,6 +271,9 @@ def testable(stack: Stack, cond: dict[str, tuple], varied: list[str]) -> dict[st
         why["thermal_expansion"] = "temperature does not vary by 2 K or more"
     why["shaft_compliance"] = ("a series compliance changes only the slope: from loops alone it "
                                "is the stiffness parameter (see parameter_error)")
+    if stack.physics is not None:
+        # effects without a meaning of their own in the unit kind's geometry
+        why.update(stack.physics.not_testable)
     return why
 
 
@@ -459,6 +463,16 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
                 notes.append(f"the soft stage does not end inside the loaded range (stage "
                              f"torque at the search's bound, {top:.3g} N*m): a slope change, "
                              "not a clearance taken up")
+            if stack.physics is not None:
+                clear = None
+                if stack.physics.bearing_budget_arcmin is not None:
+                    out["budget_extra_play_arcmin"] = stack.physics.bearing_budget_arcmin
+                    budget = stack.physics.bearing_budget_arcmin
+                    if budget > 0 and take_up > 2.0 * budget:
+                        ok = False
+                        notes.append(f"soft stage takes up {take_up:.3f} arcmin, above twice "
+                                     f"the inspected bearing clearances' play ({budget:.3f} "
+                                     f"arcmin, {stack.physics.kind} geometry)")
             if isinstance(clear, list) and clear:
                 budget = bearing_play_arcmin(clear, stack.pressure_angle_deg, m, z1)
                 out["budget_extra_play_arcmin"] = budget
@@ -477,12 +491,21 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             amp_ext = math.hypot(c[2], c[3])
             amp_2 = math.hypot(f.coef("runout_h2c"), f.coef("runout_h2s"))
             out["amplitude_arcmin"] = amp_int + amp_ext + amp_2
+            if stack.physics is not None:
+                # the kind's two eccentricity terms may turn at nearly one rate (a cycloid's
+                # 1 and (2 z1 - z2) / z1 per crank turn): their split is then not determined
+                # by the positions, only the play change over them is
+                out["amplitude_arcmin"] = kind_runout_swing_arcmin(stack, c)
             if "runout_h2c" in f.names:
                 out["order2_amplitude_arcmin"] = amp_2
-                out["order2_play_um"] = float(arcmin_to_um(amp_2, m, z1))
-            out["internal_um"] = float(arcmin_to_um(amp_int, m, z1)) / k
+                out["order2_play_um"] = float(_um(stack, amp_2))
+            out["internal_um"] = float(_um(stack, amp_int)) / k
             out["internal_phase_deg"] = math.degrees(math.atan2(-c[1], -c[0]))
-            out["external_um"] = float(arcmin_to_um(amp_ext, m, z1)) / k
+            out["external_um"] = float(_um(stack, amp_ext)) / k
+            if stack.physics is not None:
+                # the eccentricities by the kind's own center distance -> play (kind_physics)
+                out["internal_um"] = stack.physics.eccentricity_um(amp_int)
+                out["external_um"] = stack.physics.eccentricity_um(amp_ext)
             out["beta_deg"] = math.degrees(math.atan2(-c[3], -c[2]))
             out["amplitude_um"] = out["internal_um"] + out["external_um"]
             budget = 2.0 * stack.runout_budget_arcmin
@@ -494,35 +517,58 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             c = f.coef("thermal")
             out["coefficient_arcmin_per_K"] = c
             out["coefficient_arcmin_per_K_ci95"] = _ci(f, "thermal", scale)
-            out["coefficient_um_per_K"] = float(arcmin_to_um(c, m, z1))
+            out["coefficient_um_per_K"] = float(_um(stack, c))
             slope = abs(out["coefficient_um_per_K"])
             if "thermal2" in f.names:
                 c2 = f.coef("thermal2")
                 out["quadratic_arcmin_per_K2"] = c2
-                out["quadratic_um_per_K2"] = float(arcmin_to_um(c2, m, z1))
+                out["quadratic_um_per_K2"] = float(_um(stack, c2))
                 # the local coefficient d(play)/dT at the ends of the campaign's range
                 temps = [r.mean_temperature_C for r in stack.runs
                          if r.mean_temperature_C is not None]
                 ends = [min(temps) - stack.reference_C, max(temps) - stack.reference_C]
                 slope = max(abs(out["coefficient_um_per_K"] + 2.0 * out["quadratic_um_per_K2"]
                                 * d) for d in ends)
-            if slope > 3.0:
+            limit = 3.0 if stack.physics is None else stack.physics.thermal_limit_um_per_K
+            if slope > limit:
                 ok = False
-                notes.append("thermal play change above 3 um/K")
+                notes.append(f"thermal play change above {limit:g} um/K")
         elif e == "tooth_spacing_error":
             teeth = {n: float(b) for n, b in zip(f.names, f.beta, strict=True)
                      if n.startswith("tooth_")}
             vals = np.array(list(teeth.values())) if teeth else np.zeros(1)
             out["play_change_arcmin_rms"] = float(np.std(vals))
-            out["play_change_um_rms"] = float(arcmin_to_um(np.std(vals), m, z1))
+            out["play_change_um_rms"] = float(_um(stack, np.std(vals)))
             out["per_tooth_arcmin"] = {k.split("_")[1]: v for k, v in teeth.items()}
-            if out["play_change_um_rms"] > 12.0:
+            limit = 12.0 if stack.physics is None else stack.physics.spacing_limit_um
+            if out["play_change_um_rms"] > limit:
                 ok = False
-                notes.append("tooth-to-tooth play change above 12 um rms")
+                notes.append(f"tooth-to-tooth play change above {limit:g} um rms")
     return out, ok, notes
 
 
 # ------------------------------------------------------------------------------ diagnose
+
+
+def kind_runout_swing_arcmin(stack: Stack, coeffs: Sequence[float]) -> float:
+    """The largest runout play change (arcmin) the fitted eccentricity terms give over the
+    campaign's span of input angles (the kind's basis,
+    analysis.diagnosis.kind_physics.KindPhysics.runout_basis)."""
+    angles = [r.input_angle_deg for r in stack.runs if r.input_angle_deg is not None]
+    if not angles or stack.physics is None:
+        return 0.0
+    lo, hi = min(angles), max(max(angles), min(angles) + 360.0)
+    grid = np.linspace(lo, hi, 721)
+    basis = np.array([stack.physics.runout_basis(a) for a in grid])
+    return float(np.max(np.abs(basis @ np.asarray(coeffs, dtype=float))))
+
+
+def _um(stack: Stack, angle_arcmin: float) -> float:
+    """An output angle (arcmin) as circumferential play (um): seed 000 eq. (1), or the unit
+    kind's own reference radius (analysis.diagnosis.kind_physics)."""
+    if stack.physics is not None:
+        return float(stack.physics.arcmin_to_um(angle_arcmin))
+    return float(arcmin_to_um(angle_arcmin, stack.module_mm, stack.z_internal))
 
 
 def _sys(h: float, noise: float) -> float:
@@ -651,6 +697,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
                             "(run.json 'unit'); a run has none usable")
     prepared = lag_if_it_helps(runs, prepared, tp)
     stack, zero_report = with_measurement_nuisance(prepared, alpha)
+    stack = with_kind_play_reference(stack)  # the unit kind's nominal shape (kind_physics)
     prepared = list(stack.runs)
     cond, varied = conditions_of(stack)
     cfolds = folds_by_condition(stack, cond)
@@ -999,6 +1046,11 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
     }
     report["measurement"] = _clean(measurement_report(runs, prepared, stack, base, zero_report,
                                                       tp, alpha))
+    if stack.physics is not None:
+        # the unit kind's effect physics (analysis.diagnosis.kind_physics) and the effects
+        # that have no meaning of their own in its geometry (never fitted)
+        report["kind_physics"] = _clean(stack.physics.to_dict())
+        report["not_testable"] = dict(stack.physics.not_testable)
     return Diagnosis(report=report, stack=stack, base=base, models=models)
 
 

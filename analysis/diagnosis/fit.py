@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import lsq_linear, minimize_scalar
 
 from analysis.diagnosis.data import PreparedRun
+from analysis.diagnosis.kind_physics import KindPhysics, physics_for_unit
 from analysis.effects import (
     LoopParams,
     chain_torque_Nm,
@@ -73,6 +74,8 @@ class Stack:
     nuisance_friction_max_Nm: float = 0.0
     #: Why the play crossings rule a common torque-sensor offset out ('' : they do not).
     offset_veto: str = ""
+    #: The unit kind's effect physics (analysis.diagnosis.kind_physics); None: seed 000's.
+    physics: KindPhysics | None = None
 
     @property
     def n_runs(self) -> int:
@@ -99,12 +102,21 @@ def build_stack(runs: Sequence[PreparedRun]) -> Stack:
     # prior of a runout coefficient: the eq. (4)/(3) play change of the inspected runout
     runout_um = 2.0 * math.tan(math.radians(alpha)) * 1000.0 * max(fr, 0.01) / 2.0
     temps = [r.mean_temperature_C for r in runs if r.mean_temperature_C is not None]
+    rated = float(np.median([r.rated_torque_Nm for r in runs]))
+    runout_budget = float(um_to_arcmin(runout_um, m, z1))
+    spacing_budget = float(um_to_arcmin(4.0, m, z1))
+    physics = physics_for_unit(unit, rated)
+    if physics is not None:
+        # the kind's own geometry (analysis.diagnosis.kind_physics): mesh steps per input
+        # turn and the mate's tooth count, its inspected tolerances' play
+        z1, z2 = physics.z_input, physics.z_mate
+        runout_budget = physics.runout_budget_arcmin
+        spacing_budget = physics.spacing_prior_arcmin
     return Stack(
         runs=tuple(runs), z_internal=z1, z_external=z2, module_mm=m, pressure_angle_deg=alpha,
-        runout_budget_arcmin=float(um_to_arcmin(runout_um, m, z1)),
-        spacing_budget_arcmin=float(um_to_arcmin(4.0, m, z1)),
+        runout_budget_arcmin=runout_budget, spacing_budget_arcmin=spacing_budget,
         reference_C=float(np.mean(temps)) if temps else 20.0,
-        rated_Nm=float(np.median([r.rated_torque_Nm for r in runs])),
+        rated_Nm=rated, physics=physics,
     )
 
 
@@ -152,6 +164,8 @@ def run_columns(stack: Stack, run: PreparedRun, effects: Sequence[str], nl: dict
     s = flank_sign(g, flank_band_Nm(run), run.start_flank)
     tau = np.abs(g)
     cols = [s / 2.0, s * tau]
+    if stack.physics is not None:
+        cols = kind_play_and_flank_columns(stack.physics, run.input_angle_deg, s, tau)
     if "stiffness_nonlinearity" in effects:
         cols.append(s * -np.expm1(-tau / nl["stiffening_torque_Nm"]))
     if "bearing_clearance" in effects:
@@ -159,7 +173,9 @@ def run_columns(stack: Stack, run: PreparedRun, effects: Sequence[str], nl: dict
         cols.append(s * (tb * np.tanh(tau / tb) if stack.bearing_smooth
                          else np.minimum(tau, tb)))
     if "runout" in effects:
-        basis = runout_basis(run.input_angle_deg or 0.0, stack.z_internal, stack.z_external)
+        basis = (runout_basis(run.input_angle_deg or 0.0, stack.z_internal, stack.z_external)
+                 if stack.physics is None else stack.physics.runout_basis(
+                     run.input_angle_deg or 0.0))
         cols += [s / 2.0 * b for b in basis]
         if stack.runout_order2:
             cols += [s / 2.0 * b for b in runout_harmonic_basis(run.input_angle_deg or 0.0)]
@@ -173,6 +189,35 @@ def run_columns(stack: Stack, run: PreparedRun, effects: Sequence[str], nl: dict
                                      stack.z_external))
         cols += [s / 2.0 * (1.0 if t == tooth else 0.0) for t in teeth]
     return np.column_stack(cols)
+
+
+def kind_play_and_flank_columns(physics: KindPhysics, input_angle_deg: float | None,
+                                s: np.ndarray, tau: np.ndarray) -> list[np.ndarray]:
+    """The play and compliance columns in the kind's own nominal shape: the compound
+    cycloid's free play at the run's mesh phase relative to its mean over the mesh cycle, and
+    its flanks engaging one after another as an equivalent torque (seed 002 eqs. 1-14, seed
+    004 eq. 8 per flank; :class:`analysis.diagnosis.kind_physics.CycloidShape`); the pinned
+    linear loop's ``s / 2`` and ``s |G|`` for a kind without a shape."""
+    shape = physics.cycloid
+    if shape is None or input_angle_deg is None:
+        return [s / 2.0, s * tau]
+    return [s / 2.0 * shape.play_ratio(input_angle_deg),
+            s * shape.shape_Nm(input_angle_deg, s, tau)]
+
+
+def with_kind_play_reference(stack: Stack) -> Stack:
+    """The stack with the kind's mesh-phase play change referred to this unit's calibrated
+    mean play (the null model's), so that the change is added to the play, not scaled with
+    it (:attr:`analysis.diagnosis.kind_physics.CycloidShape.play_reference_arcmin`); the
+    stack itself for a kind without one."""
+    physics = stack.physics
+    if physics is None or physics.cycloid is None:
+        return stack
+    play = fit(stack, ("backlash",)).coef("play")
+    if not play > 0:
+        return stack
+    shape = replace(physics.cycloid, play_reference_arcmin=float(play))
+    return replace(stack, physics=replace(physics, cycloid=shape), cache={})
 
 
 def flank_band_Nm(run: PreparedRun) -> float:
@@ -587,6 +632,7 @@ def loop_params(stack: Stack, f: LinearFit) -> LoopParams:
         thermal_reference_C=stack.reference_C,
         torque_offset_Nm=f.nl.get("torque_offset_Nm", 0.0),
         spacing_play_arcmin=teeth,
+        runout_order=None if stack.physics is None else stack.physics.runout_order,
     )
 
 

@@ -2,6 +2,8 @@
 
     rig validate-diagnosis [--cases N] [--seed S] [--jobs J] [--artifacts/--no-artifacts]
                            [--json SUMMARY.json]
+    rig validate-diagnosis --kind cycloid|beveloid [--cases N] [--nulls M] [--seed S]
+                           [--jobs J] [--artifacts/--no-artifacts] [--json SUMMARY.json]
     rig validate-diagnosis --cases-dir DIR --labels LABELS.json [--cases-dir ... --labels ...]
                            [--with-generator] [--jobs J] [--json SUMMARY.json]
     rig validate-diagnosis --like CAMPAIGN [--cases N] [--jobs J] [--seed S] --json FILE
@@ -99,6 +101,31 @@ def _ours(cases: int, seed: int, jobs: int, verbose: bool, artifacts: bool,
         console.print(f"(kinds not drawn at {cases} cases: {', '.join(missing)})")
     return {**graded, "artifacts": artifacts, "seed": seed, "nulls_added": nulls,
             "by_form": by_form, "figures": old}
+
+
+def _kind(kind: str, cases: int, nulls: int, seed: int, jobs: int, verbose: bool,
+          artifacts: bool) -> dict[str, Any]:
+    """Our generator for another unit kind (rig/validate/kinds.py): effects and nulls."""
+    from rig.validate.kinds import check_kind, graded_kind_validation
+
+    check_kind(kind)
+    what = "with" if artifacts else "without"
+    console.print(f"our {kind} generator (the {kind} plant), {what} a real rig's "
+                  "measuring-system artefacts", soft_wrap=True)
+    with Progress(console=console, transient=True) as progress:
+        task = progress.add_task(f"{kind}: diagnosing campaigns", total=cases + nulls)
+        _, graded = graded_kind_validation(kind, cases, nulls, seed, jobs, artifacts,
+                                           progress=lambda _r: progress.advance(task))
+    _print_graded(graded, verbose)
+    for effect, why in graded["not_testable"].items():
+        console.print(f"not withheld: {effect} ({why})", soft_wrap=True, markup=False)
+    acc = graded["effect_accuracy"]
+    console.print(f"{kind}: withheld effects {'n/a' if acc is None else f'{acc:.1%}'} correct "
+                  f"over {graded['effect_cases']} (target >= 90 %); false alarms "
+                  f"{graded['false_alarms']} of {graded['null_cases']} null campaigns (target "
+                  "at most 1 in 20)", soft_wrap=True)
+    console.print("targets met" if graded["targets_met"] else "[red]targets NOT met[/red]")
+    return graded
 
 
 def _fmt_size(size: dict[str, Any] | None) -> str:
@@ -199,6 +226,11 @@ def register(app: typer.Typer) -> None:
             "real rig's measuring system (impacts and bounces, sensor lag, ADC grid, drive "
             "loop and ripple, drifting zero, Coulomb friction, encoder, jittered sampling with "
             "dropped rows, pre-cycles; docs/diagnosis.md), or the plant's columns.")] = True,
+        kind: Annotated[str | None, typer.Option(
+            "--kind", help="Our generator for another unit kind: cycloid (seed 002) or "
+            "beveloid (seed 001): --cases withheld effects of the vocabulary (cycling) with "
+            "min(20, cases) null campaigns of that kind's plant (--nulls adds more), graded "
+            "per effect.")] = None,
         over_the_wire: Annotated[bool, typer.Option(
             "--over-the-wire", help="Record campaigns through the real sequencer, drivers and "
             "simulated devices (rig campaign run --simulated) with the rig's dynamics on and "
@@ -230,6 +262,14 @@ def register(app: typer.Typer) -> None:
         json_out = JsonOutput(json_file)
         console.stderr = json_out.to_stdout  # with --json -: the tables on stderr
 
+        if kind is not None:
+            if like is not None or cases_dir or over_the_wire:
+                raise RigError("--kind goes with our generator only (not with --like, "
+                               "--cases-dir or --over-the-wire)")
+            n = cases or 30
+            json_out.write(_kind(kind, n, min(20, n) + nulls, seed, jobs, verbose, artifacts),
+                           ensure_ascii=True)
+            return
         if like is not None:
             if cases_dir:
                 raise RigError("--like and --cases-dir: give one of them")

@@ -31,6 +31,7 @@ import numpy as np
 
 from analysis.errors import AnalysisError
 from analysis.models.beveloid_nominal import beveloid_nominal_model, beveloid_pair_from_unit
+from analysis.models.kind_batch import KindBatch
 from analysis.models.seed001_beveloid import BeveloidPair, backlash_closed_form
 
 ARCMIN_PER_RAD = 10800.0 / math.pi
@@ -49,24 +50,8 @@ class Seed001InstallationBudget:
     bearing_clearance_max_um: tuple[float, ...] = (4.0, 4.0)
 
 
-@dataclass(frozen=True)
-class BeveloidBatch:
-    """Per sampled unit (arcmin): lost motion at its worst position and its smallest play."""
-
-    worst_arcmin: np.ndarray
-    least_play_arcmin: np.ndarray
-    rated_torque_Nm: float
-    lost_motion_pct: float
-    samples: int
-
-    def band_arcmin(self, coverage: float = 0.95) -> tuple[float, float]:
-        tail = 50.0 * (1.0 - coverage)
-        low, high = np.percentile(self.worst_arcmin, [tail, 100.0 - tail])
-        return float(low), float(high)
-
-    @property
-    def interference_fraction(self) -> float:
-        return float(np.mean(self.least_play_arcmin < 0.0))
+BeveloidBatch = KindBatch
+"""The batch of this kind (analysis.models.kind_batch)."""
 
 
 def _rayleigh(rng: np.random.Generator, limit: float, n: int) -> np.ndarray:

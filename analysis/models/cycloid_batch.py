@@ -36,6 +36,7 @@ import numpy as np
 
 from analysis.errors import AnalysisError
 from analysis.models.cycloid_nominal import cycloid_nominal_model
+from analysis.models.kind_batch import KindBatch
 from analysis.models.seed002_cycloid import CompoundCycloidPair, flank_angle_rad
 
 ARCMIN_PER_RAD = 10800.0 / math.pi
@@ -56,25 +57,8 @@ class Seed002Tolerances:
     rotation_um: tuple[float, float] = (-0.5, 0.5)
 
 
-@dataclass(frozen=True)
-class CycloidBatch:
-    """Per sampled unit (arcmin): lost motion at its worst crank position and the smallest
-    play over the positions (negative: the unit binds there)."""
-
-    worst_arcmin: np.ndarray
-    least_play_arcmin: np.ndarray
-    rated_torque_Nm: float
-    lost_motion_pct: float
-    samples: int
-
-    def band_arcmin(self, coverage: float = 0.95) -> tuple[float, float]:
-        tail = 50.0 * (1.0 - coverage)
-        low, high = np.percentile(self.worst_arcmin, [tail, 100.0 - tail])
-        return float(low), float(high)
-
-    @property
-    def interference_fraction(self) -> float:
-        return float(np.mean(self.least_play_arcmin < 0.0))
+CycloidBatch = KindBatch
+"""The batch of this kind (analysis.models.kind_batch)."""
 
 
 def _pair(unit: Mapping[str, Any]) -> CompoundCycloidPair:

@@ -175,6 +175,22 @@ def _unit(rng: np.random.Generator, base: dict[str, Any]) -> dict[str, Any]:
     return unit
 
 
+def draw_runout(rng: np.random.Generator, config: PlantConfig
+                ) -> tuple[dict[str, Any], PlantConfig]:
+    """A runout effect's truth (true F_r of both members, mm, and the phases, deg) and the
+    unit data the lab inspected: within +-25 % of the true F_r (at least 0.005 mm)."""
+    truth = {"internal_mm": float(rng.uniform(0.012, 0.035)),
+             "external_mm": float(rng.uniform(0.0, 0.03)),
+             "beta_deg": float(rng.uniform(-180, 180)),
+             "internal_phase_deg": float(rng.uniform(-180, 180))}
+    config = config.with_changes(unit={
+        "runout_internal_mm": round(max(truth["internal_mm"] * rng.uniform(0.8, 1.25),
+                                        0.005), 3),
+        "runout_external_mm": round(max(truth["external_mm"] * rng.uniform(0.8, 1.25),
+                                        0.005), 3)})
+    return truth, config
+
+
 def make_case(index: int, kind: str, rng: np.random.Generator,
               base: PlantConfig | None = None, widened: bool = False,
               artifacts_rng: np.random.Generator | None = None) -> Case:
@@ -217,16 +233,7 @@ def make_case(index: int, kind: str, rng: np.random.Generator,
         truth = {"soft_twist_arcmin": float(rng.uniform(0.12, 0.4)),
                  "torque_scale_Nm": float(rng.uniform(0.6, 2.5))}
     elif kind == "runout":
-        truth = {"internal_mm": float(rng.uniform(0.012, 0.035)),
-                 "external_mm": float(rng.uniform(0.0, 0.03)),
-                 "beta_deg": float(rng.uniform(-180, 180)),
-                 "internal_phase_deg": float(rng.uniform(-180, 180))}
-        # the lab inspected this runout: unit data within +-25 % of the true F_r
-        config = config.with_changes(unit={
-            "runout_internal_mm": round(max(truth["internal_mm"] * rng.uniform(0.8, 1.25),
-                                            0.005), 3),
-            "runout_external_mm": round(max(truth["external_mm"] * rng.uniform(0.8, 1.25),
-                                            0.005), 3)})
+        truth, config = draw_runout(rng, config)
     elif kind == "bearing_clearance":
         truth = {"soft_stiffness_Nm_per_arcmin": float(rng.uniform(3.0, 9.0)),
                  "soft_stage_torque_Nm": float(rng.uniform(0.6, 2.0))}

@@ -36,6 +36,7 @@ from rig.validate import (
     Case,
     CaseResult,
     case_label,
+    draw_runout,
     simulate_campaign,
     with_artifacts,
 )
@@ -140,16 +141,7 @@ def make_kind_case(index: int, effect: str, kind: str, rng: np.random.Generator,
                  "torque_scale_Nm": float(rng.uniform(0.4, 1.0) * RATED_NM)}
         form = "exponential"
     elif effect == "runout":
-        truth = {"internal_mm": float(rng.uniform(0.012, 0.035)),
-                 "external_mm": float(rng.uniform(0.0, 0.03)),
-                 "beta_deg": float(rng.uniform(-180, 180)),
-                 "internal_phase_deg": float(rng.uniform(-180, 180))}
-        # the lab inspected this runout: unit data within +-25 % of the true F_r
-        config = config.with_changes(unit={
-            "runout_internal_mm": round(max(truth["internal_mm"] * rng.uniform(0.8, 1.25),
-                                            0.005), 3),
-            "runout_external_mm": round(max(truth["external_mm"] * rng.uniform(0.8, 1.25),
-                                            0.005), 3)})
+        truth, config = draw_runout(rng, config)
         form = "1x"
     elif effect == "bearing_clearance" and rng.random() < 0.5:
         post = {"smooth_takeup": {"clearance_arcmin": float(rng.uniform(0.1, 0.4)),

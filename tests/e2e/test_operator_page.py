@@ -272,7 +272,9 @@ def test_operator_page(tmp_path: Path):
 
         # 9: ± uncertainty, the nominal model beside the batch band, the cross-check shown
         expect(page.locator("#m-lost-u")).to_contain_text("±", timeout=10_000)
-        expect(page.locator("#m-stiffness-u")).to_contain_text("±")
+        # the stiffness with its ±, or why the worst run could not measure it (on a loaded
+        # PC the rows at the peak torque can be lost: never a bare dash)
+        expect(page.locator("#m-stiffness-u")).to_contain_text(re.compile(r"±|not measured: "))
         float(page.locator("#m-lost").inner_text())  # the value alone, as before
         expect(page.locator("#metrics")).to_contain_text("nominal model (no runout)")
         expect(page.locator("#m-model")).not_to_have_text("–")

@@ -170,7 +170,11 @@ const measurable = (v) => v !== null && v !== undefined && isFinite(v) && Number
 
 function withU(m, key, digits = 3) {   // ["4.304", " ± 0.001"] (the uncertainty when known)
   const v = m ? m[key] : null;
-  if (v === null || v === undefined || !isFinite(v)) return ["–", ""];
+  if (v === null || v === undefined || !isFinite(v)) {
+    // a metric the analysis could not measure says why (analysis.loop's errors)
+    const why = m && m.errors ? m.errors[key] : null;
+    return ["–", why ? " (not measured: " + why + ")" : ""];
+  }
   if (NON_NEGATIVE.has(key) && v < 0) return ["–", BELOW_ZERO];
   const u = m.uncertainty ? m.uncertainty[key] : null;
   return [fmt(v, digits), u !== null && u !== undefined && isFinite(u) ? " ± " + fmt(u, digits) : ""];

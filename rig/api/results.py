@@ -106,6 +106,12 @@ def result_row(run: Run, analysis: RunAnalysis | None, *,
         outcome = run_outcome(flat, limits)[0]
     else:  # as recorded, read as every view reads it (rig/outcome.py)
         outcome = recorded_outcome(run.meta, limits)
+    return _closed_row(row, run, outcome, d, error)
+
+
+def _closed_row(row: dict[str, Any], run: Run, outcome: Any, d: dict[str, Any],
+                error: str | None) -> dict[str, Any]:
+    """A row's outcome and its word, the analysis's errors (or ``error``) and the run's path."""
     row["outcome"] = outcome if isinstance(outcome, str) else None
     row["verdict"] = None if row["outcome"] is None else outcome_word(row["outcome"])
     problems = [f"{k}: {v}" for k, v in (d.get("errors") or {}).items()]
@@ -139,12 +145,7 @@ def te_result_row(run: Run, analysis: Any, *, campaign_meta: dict[str, Any] | No
         outcome = run_outcome(flat, limits)[0]
     else:
         outcome = recorded_outcome(run.meta, limits)
-    row["outcome"] = outcome if isinstance(outcome, str) else None
-    row["verdict"] = None if row["outcome"] is None else outcome_word(row["outcome"])
-    problems = [f"{k}: {v}" for k, v in (d.get("errors") or {}).items()]
-    row["error"] = error or ("; ".join(problems) or None)
-    row["path"] = None if run.path is None else str(run.path)
-    return row
+    return _closed_row(row, run, outcome, d, error)
 
 
 TEXT_COLUMNS = ("run_id", "label", "test_kind", "profile", "status", "outcome", "verdict",

@@ -27,6 +27,7 @@ from rig.errors import RigError
 from rig.outcome import campaign_outcome, run_outcome
 from rig.plans import Plan
 from rig.realtime import apply_realtime_priority
+from rig.simulated_tolerances import SIMULATED_HEARTBEAT_MS, SIMULATED_MISSED_PERIODS
 from rig.store import Store
 from simulators.plant.config import (
     DEFAULT_PLANT_TOML,
@@ -120,8 +121,6 @@ def open_session(*, rig: Path | None = None, simulated: bool = False,
         yield RigSession(devices, DevicesIO(devices), Path(rig), sim, plant, stale)
 
 
-SIMULATED_HEARTBEAT_MS = 500
-SIMULATED_MISSED_PERIODS = 400
 SIMULATED_SYNC_PERIOD_S = 0.004
 SIMULATED_STREAM_RATE_HZ = 250.0
 SIMULATED_STALE_TIMEOUT_S = 2.0

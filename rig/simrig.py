@@ -37,6 +37,7 @@ from typing import Any, Literal
 
 from rig.config import dump_rig_toml, rig_config_from_mapping
 from rig.errors import RigError
+from rig.simulated_tolerances import SIMULATED_HEARTBEAT_MS, SIMULATED_MISSED_PERIODS
 from simulators.encoder_node import EncoderNode
 from simulators.plant import GearPlant
 from simulators.plant.config import PlantConfig, load_plant_config
@@ -270,12 +271,14 @@ class SimulatedRig:
                     "bus_options": {"sleep_after_open": 0}},
         }
         for key, node in self.encoder_nodes.items():
-            # heartbeat 200 ms, missing after 3 periods, 250 SYNCs without a PDO: generous, so
-            # that a loaded development machine (simulator and drivers on 2 cores) is no fault
+            # heartbeat 500 ms, missing after 3 periods (1.5 s), 400 SYNCs without a PDO: the
+            # values the measuring path relaxes any simulated rig to, so that a loaded machine
+            # (simulator, drivers, a database restart and a browser on 2 cores) is no fault
             tables[key] = {"name": key.replace("_", " "), "node_id": node.node_id,
                            "counts_per_rev": config.rig.encoder_counts_per_rev,
-                           "heartbeat_ms": 200, "heartbeat_timeout_periods": 3.0,
-                           "missed_periods": 250, "timeout_s": 2.0}
+                           "heartbeat_ms": SIMULATED_HEARTBEAT_MS,
+                           "heartbeat_timeout_periods": 3.0,
+                           "missed_periods": SIMULATED_MISSED_PERIODS, "timeout_s": 2.0}
         tables["transducer"] = {"url": self.addresses["transducer"],
                                 "full_scale_Nm": TRANSDUCER_FULL_SCALE_NM,
                                 "stream_rate_Hz": self.stream_rate_Hz, **timeout}

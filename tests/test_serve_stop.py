@@ -150,3 +150,34 @@ def test_the_page_workers_are_ended_by_the_shutdown_even_mid_task() -> None:
     assert time.monotonic() - sent < 30  # not the 60 s analysis
     assert len(waiting) == 1 and isinstance(waiting[0], RigError), waiting
     assert "shutting down" in str(waiting[0])
+
+
+STARTING_WORKER = """
+import signal, sys, time
+signal.signal(signal.SIGINT, lambda *_: None)  # the server's own Ctrl-C handling
+from rig.web.workers import shutdown_workers, warm_up
+warm_up("preview", "analysis")
+print("submitted", flush=True)
+time.sleep(3.0)
+shutdown_workers()
+"""
+
+
+def test_a_ctrl_c_while_a_page_worker_is_still_starting_prints_no_traceback() -> None:
+    """A Ctrl-C reaches the whole process group; a page worker that is still importing
+    (spawned a moment before) used to die of it with a KeyboardInterrupt traceback on the
+    server's terminal (seen in a CI run). The worker now starts with SIGINT blocked and
+    ignores it once started: nothing is printed, and it still serves."""
+    proc = subprocess.Popen([sys.executable, "-c", STARTING_WORKER], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        assert proc.stdout.readline().strip() == "submitted"
+        for _ in range(5):  # during the workers' imports (about a second)
+            os.killpg(proc.pid, signal.SIGINT)
+            time.sleep(0.05)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err
+    assert "KeyboardInterrupt" not in err and "Traceback" not in err, err

@@ -19,7 +19,7 @@ import os
 import signal
 import threading
 from collections.abc import Callable
-from concurrent.futures import BrokenExecutor, CancelledError, ProcessPoolExecutor
+from concurrent.futures import BrokenExecutor, CancelledError, Future, ProcessPoolExecutor
 from typing import Any, TypeVar
 
 from rig.blas import worker_initializer
@@ -51,8 +51,11 @@ class PoolBusy(RigError):
 def _worker_start(increment: int) -> None:
     """In a new worker process: one BLAS thread, and a lower CPU priority by ``increment``.
     Ctrl-C is the server's to handle (it reaches every process of the terminal's group): the
-    worker ignores it and is stopped by :func:`shutdown_workers`."""
+    worker ignores it and is stopped by :func:`shutdown_workers`. The worker was started
+    with SIGINT blocked (:func:`_submit`), so that a Ctrl-C during its start-up (the imports
+    before this runs) stays pending; ignored now, unblocking it discards it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     worker_initializer()
     if increment:
         os.nice(increment)
@@ -86,6 +89,19 @@ def worker_pids(pool: str) -> list[int]:
         return sorted(processes)
 
 
+def _submit(pool: str, fn: Callable[..., Any], *args: Any) -> Future[Any]:
+    """Submit to ``pool``'s executor with SIGINT blocked in this thread: a worker process the
+    submission spawns inherits the mask through exec, so a Ctrl-C that reaches the process
+    group while the worker is still importing does not end it with a KeyboardInterrupt
+    traceback (Python only installs its SIGINT handler; the mask keeps the signal pending
+    until :func:`_worker_start` ignores it)."""
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        return _executor(pool).submit(fn, *args)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def _ready() -> bool:
     return True
 
@@ -93,7 +109,7 @@ def _ready() -> bool:
 def warm_up(*pools: str) -> None:
     """Start the pools' processes now (a first request then does not wait for imports)."""
     for pool in pools:
-        _executor(pool).submit(_ready)
+        _submit(pool, _ready)
 
 
 def _call(fn: Callable[..., T], *args: Any) -> tuple[bool, Any]:
@@ -116,7 +132,7 @@ def run_in_worker(fn: Callable[..., T], *args: Any, timeout_s: float = 600.0,
                            "second")
         _in_flight[pool] = _in_flight.get(pool, 0) + 1
     try:
-        ok, value = _executor(pool).submit(_call, fn, *args).result(timeout=timeout_s)
+        ok, value = _submit(pool, _call, fn, *args).result(timeout=timeout_s)
     except (BrokenExecutor, CancelledError) as exc:  # shutdown_workers stopped it
         raise RigError(f"the {pool} worker was stopped (the page is shutting down)") from exc
     finally:

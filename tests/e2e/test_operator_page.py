@@ -289,7 +289,10 @@ def test_operator_page(tmp_path: Path):
         shot(page, "web-result.png", full_page=True)
         # flagged beyond the set-up's share and ratio (tightened here to see them fire)
         page.fill(f("crosscheck_flag_pct"), "2")
-        ratio = float(re.search(r"ratio (\d+\.\d+)", page.locator("#m-asym").inner_text())[1])
+        asym = page.locator("#m-asym").inner_text()
+        found = re.search(r"ratio (\d+\.\d+)", asym)
+        assert found, f"no stiffness ratio shown: {asym!r}; run errors: {get_json(url + 'api/status')}"
+        ratio = float(found[1])
         assert 1.0 <= ratio < 1.3  # a healthy unit: not flagged at the default 1.3
         page.fill(f("asymmetry_flag_ratio"), "1")  # any asymmetry at all
         page.click("#preview")  # the metrics are drawn again against the new thresholds

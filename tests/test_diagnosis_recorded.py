@@ -1,0 +1,31 @@
+"""The diagnosis on campaigns recorded over the wire (tests/data/otw/README.md): the rig's
+own dynamics and artefacts, through the real sequencer, drivers and protocols.
+
+- a null whose only "evidence" was a candidate that closes 2 % of a gap barely above the
+  noise came out `unexplained` (now such evidence does not count for "there is a gap":
+  analysis.diagnosis, docs/diagnosis.md step 5);
+- a bearing clearance of the same recording schedule, which must still be found.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+DATA = Path(__file__).resolve().parent / "data" / "otw"
+
+
+def test_recorded_campaigns_are_diagnosed_as_their_labels(tmp_path: Path) -> None:
+    out = tmp_path / "summary.json"
+    proc = subprocess.run(
+        [sys.executable, "-m", "rig", "validate-diagnosis", "--jobs", "1", "--verbose",
+         "--cases-dir", str(DATA / "cases"), "--labels", str(DATA / "labels.json"),
+         "--json", str(out)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    summary = json.loads(out.read_text())
+    got = {r["case"]: r["verdict"] for r in summary["results"]}
+    assert got == {"otw-s2-c024": "none", "otw-s2-c005": "bearing_clearance"}, \
+        proc.stdout[-3000:]
+    assert summary["false_alarms"] == 0

@@ -291,7 +291,8 @@ def test_operator_page(tmp_path: Path):
         page.fill(f("crosscheck_flag_pct"), "2")
         asym = page.locator("#m-asym").inner_text()
         found = re.search(r"ratio (\d+\.\d+)", asym)
-        assert found, f"no stiffness ratio shown: {asym!r}; run errors: {get_json(url + 'api/status')}"
+        assert found, (f"no stiffness ratio shown: {asym!r}; "
+                       f"status: {get_json(url + 'api/status')}")
         ratio = float(found[1])
         assert 1.0 <= ratio < 1.3  # a healthy unit: not flagged at the default 1.3
         page.fill(f("asymmetry_flag_ratio"), "1")  # any asymmetry at all

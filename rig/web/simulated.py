@@ -1,6 +1,7 @@
 """The simulated rig behind ``rig serve --simulated``: the plant built around an example unit
-(rig/examples/units) with the effects of examples/campaigns/seed000-pair1.toml, started as its
-own process (``rig sim``) by :func:`rig.measure.open_session`."""
+(rig/examples/units) with the effects of examples/campaigns/seed000-pair1.toml, or a plant TOML
+(``--plant``: simulators/cycloid_plant.toml ...), started as its own process (``rig sim``) by
+:func:`rig.measure.open_session`."""
 
 from __future__ import annotations
 
@@ -44,6 +45,30 @@ def simulated_session_factory(unit_name: str = DEFAULT_UNIT
 
     plant = plant_config_for(example_unit(unit_name),
                              SimulationSection(seed=1, plant=SIMULATED_EFFECTS))
+
+    def factory() -> AbstractContextManager[Any]:
+        return open_session(simulated=True, plant=plant)
+
+    return factory
+
+
+def simulated_plant(path: str) -> Any:
+    """The plant of a plant TOML (``rig sim --config`` FILE: simulators/cycloid_plant.toml,
+    beveloid_plant.toml, default_plant.toml ...); RigError naming the file and what is wrong."""
+    from simulators.plant.config import PlantConfigError, load_plant_config
+
+    try:
+        return load_plant_config(path)
+    except PlantConfigError as exc:
+        raise RigError(f"--plant: {exc}") from exc
+
+
+def plant_session_factory(path: str) -> Callable[[], AbstractContextManager[Any]]:
+    """A factory of rig sessions on a new simulated rig running the plant TOML ``path``
+    (its unit of any kind, its effects, noise and rig tables as the file says)."""
+    from rig.measure import open_session
+
+    plant = simulated_plant(path)
 
     def factory() -> AbstractContextManager[Any]:
         return open_session(simulated=True, plant=plant)

@@ -23,6 +23,7 @@ from rig.web.auth import Operator, is_operator
 from rig.web.controller import ControlError, RigController, compute_preview
 from rig.web.models import (
     NAME_PATTERN,
+    UNIT_MODELS,
     CampaignFileName,
     CampaignSetup,
     CampaignUpload,
@@ -158,14 +159,15 @@ def input_lock(request: Request, body: InputLockRequest,
 
 
 @router.get("/units", response_model=list[UnitExample],
-            summary="Example units shipped with the package (seed 000 pairs)")
+            summary="Example units shipped with the package, of every unit kind the page "
+                    "takes (seed 000 pairs, the seed 002 cycloid, the seed 001 beveloid)")
 def units() -> list[dict[str, Any]]:
     folder = resources.files("rig.examples") / "units"
     out = []
     for item in sorted(folder.iterdir(), key=lambda p: p.name):
         if item.name.endswith(".json"):
             data = json.loads(item.read_text(encoding="utf-8"))
-            if data.get("kind", "internal_involute") == "internal_involute":
+            if data.get("kind", "internal_involute") in UNIT_MODELS:
                 out.append({"name": item.name[:-5], "unit": data})
     return out
 

@@ -139,8 +139,13 @@ def unit_design(req: RunRequest) -> dict[str, Any]:
     kind = str(unit.get("kind") or "internal_involute")
     names = MODEL_NAMES.get(kind, (kind, ""))
     _, pct = resolve_profile(req.profile, None)
+    try:
+        batch = batch_band(unit, req.plan.rated_torque_Nm, pct)
+    except Exception as exc:  # noqa: BLE001 (the run is measured: its result stands without)
+        log.warning("no batch band for the run's result: %s", exc)
+        batch = None
     return {"unit_kind": kind, "model_name": names[0], "band_source": names[1],
-            "batch": batch_band(unit, req.plan.rated_torque_Nm, pct)}
+            "batch": batch}
 
 
 def model_summary(req: RunRequest) -> tuple[dict[str, Any] | None, list[str]]:

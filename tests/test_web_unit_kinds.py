@@ -11,6 +11,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from rig.campaign import batch_band
+from rig.web.simulated import example_plant
 from tests.test_web_api import AUTH, REPO, client, store  # noqa: F401 (the API's fixtures)
 
 UNITS = REPO / "rig" / "examples" / "units"
@@ -88,3 +89,14 @@ def test_the_example_units_and_campaigns_of_every_kind(client: TestClient):  # n
         setup = client.get(f"/api/campaign-files/{name}").json()
         assert setup["request"]["unit"]["kind"] == kind, setup
         assert setup["request"]["unit"]["serial"] == name
+
+
+@pytest.mark.parametrize("name,kind", [("cycloid-seed002", "cycloid"),
+                                       ("beveloid-seed001", "beveloid"),
+                                       ("seed000-pair1", "internal_involute")])
+def test_rig_serve_builds_a_plant_around_every_example_unit(name: str, kind: str):
+    plant = example_plant(name)  # rig serve --simulated --unit NAME
+    assert plant.unit.get("kind", "internal_involute") == kind
+    assert plant.effects.friction.enabled
+    # the seed 000 pairs give their runouts, the other examples none (so none is simulated)
+    assert plant.effects.runout.enabled == (kind == "internal_involute")

@@ -37,14 +37,28 @@ def example_unit(name: str) -> dict[str, Any]:
     return json.loads((folder / f"{name}.json").read_text(encoding="utf-8"))
 
 
+def example_plant(unit_name: str = DEFAULT_UNIT) -> Any:
+    """The simulated plant around the example unit ``unit_name``: the default plant with
+    :data:`SIMULATED_EFFECTS`, the runout left off for a unit that gives no runouts (the
+    cycloid and beveloid examples)."""
+    from rig.campaign import SimulationSection
+    from rig.measure import plant_config_for
+
+    unit = example_unit(unit_name)
+    effects = dict(SIMULATED_EFFECTS["effects"])
+    if not all(isinstance(unit.get(k), int | float) for k in ("runout_internal_mm",
+                                                               "runout_external_mm")):
+        effects.pop("runout")
+    return plant_config_for(unit, SimulationSection(seed=1, plant={"effects": effects}))
+
+
 def simulated_session_factory(unit_name: str = DEFAULT_UNIT
                               ) -> Callable[[], AbstractContextManager[Any]]:
-    """A factory of rig sessions on a new simulated rig whose plant is ``unit_name``."""
-    from rig.campaign import SimulationSection
-    from rig.measure import open_session, plant_config_for
+    """A factory of rig sessions on a new simulated rig whose plant is ``unit_name``'s
+    (:func:`example_plant`)."""
+    from rig.measure import open_session
 
-    plant = plant_config_for(example_unit(unit_name),
-                             SimulationSection(seed=1, plant=SIMULATED_EFFECTS))
+    plant = example_plant(unit_name)
 
     def factory() -> AbstractContextManager[Any]:
         return open_session(simulated=True, plant=plant)

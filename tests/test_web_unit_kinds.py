@@ -82,7 +82,10 @@ def test_a_beveloid_unit_is_accepted_at_start(client: TestClient):  # noqa: F811
 
 
 def test_the_example_units_and_campaigns_of_every_kind(client: TestClient):  # noqa: F811
-    kinds = {u["name"]: u["unit"].get("kind") for u in client.get("/api/units").json()}
+    listed = client.get("/api/units").json()
+    assert listed[0]["name"] == "seed000-pair1"  # the page's default unit stays the first
+    assert [u["unit"].get("kind") for u in listed][-2:] == ["cycloid", "beveloid"]
+    kinds = {u["name"]: u["unit"].get("kind") for u in listed}
     assert kinds["cycloid-seed002"] == "cycloid" and kinds["beveloid-seed001"] == "beveloid"
     assert kinds["seed000-pair1"] == "internal_involute"
     for name, kind in (("cycloid-seed002", "cycloid"), ("beveloid-seed001", "beveloid")):

@@ -1103,6 +1103,7 @@ async function showStoredCampaign(campaignId) {
   const c = await api("GET", `/api/campaigns/${encodeURIComponent(campaignId)}`);
   showCampaign(c.campaign_id, c.summary);
   const s = c.summary || {};
+  if (designOf(s)) { live.design = designOf(s); live.batch = s.batch || null; }  // its own kind and band
   const causes = (s.failures || []).slice(0, 5);
   const result = `campaign ${esc(c.campaign_id)} ${esc(c.status)}: ${outcomeHtml(c.outcome)}` +
     (causes.length ? "<br>" + causes.map(esc).join("<br>") : "");

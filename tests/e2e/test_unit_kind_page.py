@@ -49,6 +49,7 @@ def test_operator_measures_a_cycloid_unit_and_sees_its_model_and_band(tmp_path):
         form = page.locator("#setup")
 
         # the kind: its example unit fills its own fields; the other kinds' are hidden
+        expect(page.locator("#unit-example option[value=cycloid-seed002]")).to_have_count(1)
         form.locator("select[name=unit_kind]").select_option("cycloid")
         expect(page.locator("#unit-example")).to_have_value("cycloid-seed002")
         expect(form.locator("input[name=height_coeff]")).to_be_visible()

@@ -266,7 +266,7 @@ def run_campaign(camp: CampaignFile, session: RigSession, store: Store, *,
 
     kind = str(unit.get("kind") or "internal_involute")
     summary["unit_kind"] = kind
-    summary["model_name"] = MODEL_NAMES.get(kind, (kind, ""))[0]
+    summary["model_name"], summary["band_source"] = MODEL_NAMES.get(kind, (kind, ""))
     status = "completed" if engine.state == "completed" else "aborted"
     reason = engine.stopping_reason
     summary["outcome"] = campaign_outcome([r["outcome"] for r in runs], status)

@@ -48,3 +48,13 @@ def test_serve_names_an_unknown_example_unit(tmp_path: Path):
             tmp_path=tmp_path)
     assert r.returncode == 2
     assert "no such example unit" in r.stderr and "seed000-pair1" in r.stderr
+
+
+def test_serve_names_a_bad_plant_file(tmp_path: Path):
+    r = rig("serve", "--simulated", "--plant", "no-such-plant.toml", "--store", "s",
+            tmp_path=tmp_path)
+    assert r.returncode == 2
+    assert "--plant:" in r.stderr and "no-such-plant.toml" in r.stderr
+    assert "cannot read plant config" in r.stderr
+    r = rig("serve", "--rig", "rig.toml", "--plant", "p.toml", "--store", "s", tmp_path=tmp_path)
+    assert r.returncode == 2 and "give it with --simulated" in r.stderr

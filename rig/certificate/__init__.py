@@ -412,6 +412,36 @@ def _position_figure(campaign: Campaign, runs: list[Run], limits: dict[str, Any]
     return out
 
 
+def _run_design(meta: dict[str, Any]) -> dict[str, Any]:
+    """A single run's unit kind, its nominal model (name, lost motion at the run's profile)
+    and its batch band (:func:`rig.campaign.batch_band` at the run's rated torque), as a
+    campaign's position figure names them."""
+    from analysis.loop import PROFILES
+    from analysis.models.by_kind import MODEL_NAMES
+    from rig.campaign import batch_band
+
+    unit = meta.get("unit") or {}
+    result = meta.get("result") or {}
+    kind = str(unit.get("kind") or "internal_involute")
+    names = MODEL_NAMES.get(kind, (f"nominal model of kind {kind}", "the design's tolerances"))
+    rated = (meta.get("test") or {}).get("rated_torque_Nm")
+    pct = result.get("lost_motion_pct") or PROFILES.get(result.get("profile") or "nabtesco", 3.0)
+    batch = None
+    if unit and isinstance(rated, int | float) and rated > 0:
+        try:
+            batch = batch_band(unit, float(rated), float(pct))
+        except (RigError, ValueError, TypeError) as exc:
+            log.warning("no batch band: %s", exc)
+    out: dict[str, Any] = {"kind": kind, "model_name": names[0], "band_source": names[1],
+                           "model": _fmt((result.get("model") or {}).get("lost_motion_arcmin"),
+                                         ".3f"),
+                           "band": None, "advice": _advice_text(batch)}
+    if batch and batch.get("band_95_arcmin"):
+        low, high = batch["band_95_arcmin"]
+        out["band"] = f"{low:.3f} .. {high:.3f} arcmin"
+    return out
+
+
 def _advice_text(batch: dict[str, Any] | None) -> str | None:
     """The compensation advice of a cycloid or beveloid batch band, in words (None: none)."""
     advice = (batch or {}).get("advice") or {}
@@ -557,7 +587,9 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
         ctx["diagnosis"] = None
         unit = meta.get("unit") or {}
         title = None
+        ctx["design"] = _run_design(meta) if te is None else None
     ctx.setdefault("te", None)
+    ctx.setdefault("design", None)
     ctx["metric_heads"] = [{"key": k, "label": label.strip(), "unit": u,
                             "limit": _limit_text(limits.get(LIMIT_OF_METRIC[k][0]),
                                                  LIMIT_OF_METRIC[k][1], u)

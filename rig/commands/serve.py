@@ -32,6 +32,11 @@ def register(app: typer.Typer) -> None:
         unit: Annotated[str, typer.Option(
             help="With --simulated: the example unit (rig/examples/units) the simulated "
                  "plant is built from.")] = "seed000-pair1",
+        plant: Annotated[Path | None, typer.Option(
+            "--plant", help="With --simulated: a plant TOML the simulated rig runs with `rig "
+                            "sim --config` instead of the --unit plant (simulators/"
+                            "cycloid_plant.toml, beveloid_plant.toml: docs/unit-kinds.md).")
+        ] = None,
     ) -> None:
         """Serve the control page: devices, plans, live loop, E-stop, results, history.
 
@@ -46,7 +51,7 @@ def register(app: typer.Typer) -> None:
         from rig.web.live import LiveHub
         from rig.web.server import bind, uvicorn_server
         from rig.web.settings import resolve_settings
-        from rig.web.simulated import example_unit
+        from rig.web.simulated import example_unit, simulated_plant
 
         if simulated == (rig is not None):
             raise RigError("say which rig: --simulated (start the simulated rig) or --rig FILE "
@@ -56,7 +61,12 @@ def register(app: typer.Typer) -> None:
         settings = resolve_settings(host, port, store_root=the_store.root, token=token,
                                     check_host=True)
         hub = LiveHub()
-        if simulated:
+        if plant is not None and not simulated:
+            raise RigError("--plant is the simulated rig's plant: give it with --simulated")
+        if plant is not None:
+            kind = simulated_plant(str(plant)).unit.get("kind", "internal_involute")
+            description = f"simulated rig (plant: {plant.name}, unit kind {kind})"
+        elif simulated:
             example_unit(unit)  # an unknown unit is refused here, before anything starts
             description = f"simulated rig (plant: example unit {unit})"
         else:
@@ -66,6 +76,7 @@ def register(app: typer.Typer) -> None:
         controller = EngineHost(EngineSpec(
             store=str(root), samples=None if samples is None else str(samples),
             simulated_unit=unit if simulated else None,
+            simulated_plant=None if plant is None else str(plant.resolve()),
             rig_path=None if rig is None else str(rig), description=description), the_store, hub)
         web_app = create_app(settings, controller)
 

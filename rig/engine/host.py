@@ -65,6 +65,8 @@ class EngineSpec:
     samples: str | None = None
     simulated_unit: str | None = None
     """The example unit of the simulated rig; None with ``rig_path``."""
+    simulated_plant: str | None = None
+    """A plant TOML the simulated rig runs instead of the example unit's plant."""
     rig_path: str | None = None
     description: str = ""
     log_file: str | None = None
@@ -147,6 +149,10 @@ def _serve_connection(conn: Connection, controller: Any, stop: threading.Event) 
 
 
 def _session_factory(spec: EngineSpec) -> Any:
+    if spec.simulated_plant is not None:
+        from rig.web.simulated import plant_session_factory
+
+        return plant_session_factory(spec.simulated_plant)
     if spec.simulated_unit is not None:
         from rig.web.simulated import simulated_session_factory
 

@@ -15,7 +15,11 @@ from collections.abc import AsyncIterator
 from importlib import resources
 
 from fastapi import FastAPI, Request
-from fastapi.exception_handlers import http_exception_handler
+from fastapi.exception_handlers import (
+    http_exception_handler,
+    request_validation_exception_handler,
+)
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, Response
 from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
@@ -27,6 +31,7 @@ from rig.web.controller import RigController
 from rig.web.guard import GuardMiddleware
 from rig.web.headers import SecurityHeadersMiddleware
 from rig.web.live import LiveHub
+from rig.web.models import plain_unit_loc
 from rig.web.ratelimit import RATE_LIMITED, RateLimitMiddleware
 from rig.web.settings import WebSettings
 from rig.web.workers import shutdown_workers, warm_up
@@ -95,6 +100,14 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
         if isinstance(exc.detail, str):
             exc.detail = redact_text(exc.detail)
         return await http_exception_handler(request, exc)
+
+    @app.exception_handler(RequestValidationError)
+    async def field_errors(request: Request, exc: RequestValidationError) -> Response:
+        """A 422 naming each wrong field by its path in the body; a unit's field as
+        ``body.unit.FIELD`` whatever the unit's kind (without pydantic's union tag)."""
+        errors = [{**e, "loc": plain_unit_loc(e.get("loc") or ())} for e in exc.errors()]
+        return await request_validation_exception_handler(
+            request, RequestValidationError(errors, body=exc.body))
 
     @app.get("/", include_in_schema=False)
     def index(request: Request) -> FileResponse:

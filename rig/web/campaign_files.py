@@ -23,6 +23,7 @@ from rig.campaign import CampaignError, CampaignFile, load_campaign
 from rig.toml_files import MAX_TOML_BYTES, describe_validation_error
 from rig.web.models import (
     NAME_PATTERN,
+    UNIT_MODELS,
     AxesSettings,
     LimitSettings,
     PlanSettings,
@@ -152,11 +153,16 @@ def setup_of(camp: CampaignFile, unit: dict[str, Any] | None, source: str,
         if te["directions"] != ["forward", "reverse"]:
             notes.append(f"te.directions = {te['directions']} is not set from the page (both "
                          "directions are turned)")
-    page_unit = None if unit is None else {k: v for k, v in unit.items()
-                                           if k in UnitData.model_fields}
-    if page_unit is not None:
+    # the unit as the page takes it: the keys of its kind's form (rig/web/models.py)
+    unit_model = None if unit is None else UNIT_MODELS.get(
+        str(unit.get("kind", "internal_involute")))
+    page_unit = None if unit is None or unit_model is None else {
+        k: v for k, v in unit.items() if k in unit_model.model_fields}
+    if page_unit is None:
+        request["unit"] = None
+    else:
         try:
-            UnitData.model_validate(page_unit)
+            unit_model.model_validate(page_unit)  # type: ignore[union-attr]
         except ValidationError:
             page_unit = request["unit"] = None  # the page says so and keeps its unit
     # what the page would send, checked now and said in words (a stand-in unit when the file

@@ -125,6 +125,29 @@ def compute_preview(req: RunRequest, facts: dict[str, Any]) -> dict[str, Any]:
     })
 
 
+def unit_design(req: RunRequest) -> dict[str, Any]:
+    """What a single run's result says of the unit's design, as a campaign's does
+    (rig/measure.py): ``unit_kind``, ``model_name`` and ``band_source`` (the names of
+    :data:`analysis.models.by_kind.MODEL_NAMES`) and ``batch``, the kind's batch band
+    (:func:`rig.campaign.batch_band`: arcmin at the plan's rated torque and profile; None when
+    the unit's data cannot give one)."""
+    from analysis.models.by_kind import MODEL_NAMES
+    from rig.analyse import resolve_profile
+    from rig.campaign import batch_band
+
+    unit = req.unit.mapping()
+    kind = str(unit.get("kind") or "internal_involute")
+    names = MODEL_NAMES.get(kind, (kind, ""))
+    _, pct = resolve_profile(req.profile, None)
+    try:
+        batch = batch_band(unit, req.plan.rated_torque_Nm, pct)
+    except Exception as exc:  # noqa: BLE001 (the run is measured: its result stands without)
+        log.warning("no batch band for the run's result: %s", exc)
+        batch = None
+    return {"unit_kind": kind, "model_name": names[0], "band_source": names[1],
+            "batch": batch}
+
+
 def model_summary(req: RunRequest) -> tuple[dict[str, Any] | None, list[str]]:
     """The reference nominal model's loop for the unit (arcmin, N*m/arcmin), or None."""
     from rig.analyse import nominal_model_for_unit, resolve_profile
@@ -136,8 +159,9 @@ def model_summary(req: RunRequest) -> tuple[dict[str, Any] | None, list[str]]:
     from analysis.models.by_kind import MODEL_NAMES
 
     kind = str(req.unit.mapping().get("kind") or "internal_involute")
-    out: dict[str, Any] = {"lost_motion_pct": pct, "kind": kind,
-                           "model_name": MODEL_NAMES.get(kind, (kind, ""))[0]}
+    names = MODEL_NAMES.get(kind, (kind, ""))
+    out: dict[str, Any] = {"lost_motion_pct": pct, "kind": kind, "model_name": names[0],
+                           "band_source": names[1]}
     for key in ("play_arcmin", "backlash_arcmin", "stiffness_Nm_per_arcmin"):
         value = getattr(model, key, None)
         out[key] = value if isinstance(value, int | float) else None
@@ -665,10 +689,12 @@ class RigController:
         failures = [c for r in runs for c in r["failures"]]
         if state == "aborted" and engine.stopping_reason:
             failures.append(f"run aborted: {engine.stopping_reason}")
-        return ({"kind": "run", "status": state, "reason": engine.stopping_reason,
-                 "passed": passed, "outcome": outcome, "limits": limits.model_dump(),
-                 "failures": failures, "runs": runs},
-                state, engine.stopping_reason)
+        result = {"kind": "run", "status": state, "reason": engine.stopping_reason,
+                  "passed": passed, "outcome": outcome, "limits": limits.model_dump(),
+                  "failures": failures, "runs": runs}
+        if req.test != TE_KIND:
+            result.update(unit_design(req))
+        return result, state, engine.stopping_reason
 
     def _measure_campaign(self, req: RunRequest, session: RigSession, tap: TapStore
                           ) -> tuple[dict[str, Any], str, str | None]:

@@ -8,9 +8,9 @@ and :class:`rig.campaign.Limits`.
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
 
 from rig import ids
 from rig.campaign import Limits
@@ -70,6 +70,115 @@ class UnitData(BaseModel):
     def mapping(self) -> dict[str, Any]:
         """The run.json ``unit`` object (unknown fields left out)."""
         return self.model_dump(exclude_none=True)
+
+
+class CycloidUnitData(BaseModel):
+    """A compound cycloid unit (``kind`` "cycloid", seed 002; mm, N*m): gear 2
+    (``z_internal``, eq. 1's profile with r0 = m z2, e1 = m h1, e2 = f1 e1 of eq. 15) fixed,
+    gear 1 (``z_external``) on the crank is the output. The keys of
+    :mod:`analysis.models.cycloid_nominal` (optional ones left out are assumed, and said so)
+    and the inspected tolerances the diagnosis and the plant read (docs/unit-kinds.md)."""
+
+    model_config = _strict
+
+    kind: Literal["cycloid"]
+    serial: str | None = Field(None, pattern=NAME_PATTERN, description="Serial number.")
+    z_internal: int = Field(ge=3, le=2000, description="Teeth of gear 2 (the internal gear).")
+    z_external: int = Field(ge=3, le=2000, description="Teeth of gear 1 (on the crank).")
+    module_mm: float = _length(0.01, 100.0)
+    height_coeff: float = Field(gt=0, le=1, allow_inf_nan=False, description="h1 of eq. 15.")
+    shape_coeff: float = _length(0.0, 1.0, description="f1 of eq. 15.")
+    eccentricity_mm: float | None = Field(None, gt=0, le=1000, allow_inf_nan=False)
+    shift_modification_mm: float | None = _length(-1.0, 1.0, default=None)
+    rotation_modification_mm: float | None = _length(-1.0, 1.0, default=None)
+    face_width_mm: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
+    reference_torque_Nm: float | None = Field(None, gt=0, le=100_000, allow_inf_nan=False)
+    runout_internal_mm: float | None = _length(0.0, 10.0, default=None)
+    runout_external_mm: float | None = _length(0.0, 10.0, default=None)
+    pitch_deviation_mm: float | None = _length(0.0, 10.0, default=None)
+    bearing_clearance_mm: list[Positive_mm] | None = Field(None, min_length=1, max_length=8)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> CycloidUnitData:
+        if self.z_internal <= self.z_external:
+            raise ValueError(f"z_internal ({self.z_internal}) must exceed z_external "
+                             f"({self.z_external})")
+        return self
+
+    def mapping(self) -> dict[str, Any]:
+        """The run.json ``unit`` object (unknown fields left out)."""
+        return self.model_dump(exclude_none=True)
+
+
+class BeveloidUnitData(BaseModel):
+    """A parallel-axis helical beveloid unit (``kind`` "beveloid", seed 001; mm, deg): the
+    pinion (``z_pinion``) is the input, the gear (``z_gear``) the output. The keys of
+    :mod:`analysis.models.beveloid_nominal` with the ranges of seed 001's gear
+    (:class:`analysis.models.seed001_surfaces.BeveloidGear`)."""
+
+    model_config = _strict
+
+    kind: Literal["beveloid"]
+    serial: str | None = Field(None, pattern=NAME_PATTERN, description="Serial number.")
+    z_pinion: int = Field(ge=5, le=2000, description="Teeth of the pinion (the input).")
+    z_gear: int = Field(ge=5, le=2000, description="Teeth of the gear (the output).")
+    module_mm: float = _length(0.01, 100.0, description="Normal module.")
+    pressure_angle_deg: float = _length(5.0, 35.0, description="Normal pressure angle.")
+    helix_angle_deg: float = Field(gt=-45, lt=45, allow_inf_nan=False,
+                                   description="Pinion's helix angle, + right hand.")
+    cone_angle_deg: float = Field(gt=-30, lt=30, allow_inf_nan=False,
+                                  description="Pinion's cone angle.")
+    face_width_mm: float = Field(gt=0, le=10_000, allow_inf_nan=False)
+    addendum_coeff: float | None = _length(0.0, 1.5, default=None)
+    center_distance_mm: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
+    axial_shift_mm: float | None = _length(-100.0, 100.0, default=None)
+    runout_internal_mm: float | None = _length(0.0, 10.0, default=None)
+    runout_external_mm: float | None = _length(0.0, 10.0, default=None)
+    runout_pinion_mm: float | None = _length(0.0, 10.0, default=None)
+    runout_gear_mm: float | None = _length(0.0, 10.0, default=None)
+    bearing_clearance_mm: list[Positive_mm] | None = Field(None, min_length=1, max_length=8)
+
+    def mapping(self) -> dict[str, Any]:
+        """The run.json ``unit`` object (unknown fields left out)."""
+        return self.model_dump(exclude_none=True)
+
+
+UNIT_MODELS: dict[str, type[BaseModel]] = {
+    "internal_involute": UnitData, "cycloid": CycloidUnitData, "beveloid": BeveloidUnitData}
+"""The page's unit of each kind :mod:`analysis.models.by_kind` has a nominal model for."""
+UNIT_KIND_MESSAGE = ("unit kind must be one of " + ", ".join(UNIT_MODELS)
+                     + " (absent: internal_involute)")
+
+
+def _unit_kind(value: Any) -> str | None:
+    kind = value.get("kind", "internal_involute") if isinstance(value, dict) else getattr(
+        value, "kind", None)
+    return kind if isinstance(kind, str) and kind in UNIT_MODELS else None
+
+
+AnyUnit = Annotated[
+    Union[  # noqa: UP007 (the tagged members of a discriminated union)
+        Annotated[UnitData, Tag("internal_involute")],
+        Annotated[CycloidUnitData, Tag("cycloid")],
+        Annotated[BeveloidUnitData, Tag("beveloid")],
+    ],
+    Discriminator(_unit_kind, custom_error_type="unit_kind",
+                  custom_error_message=UNIT_KIND_MESSAGE),
+]
+"""A unit of any kind, chosen by its ``kind`` (absent: ``internal_involute``). A field error's
+``loc`` holds the kind after ``unit`` (pydantic's tag); the page's API drops it
+(:func:`plain_unit_loc`), so a wrong field is named as for a seed 000 unit."""
+
+
+def plain_unit_loc(loc: tuple[Any, ...] | list[Any]) -> tuple[Any, ...]:
+    """``loc`` of a validation error without the unit kind's tag (``body.unit.cycloid.x`` ->
+    ``body.unit.x``)."""
+    out = list(loc)
+    for i in range(len(out) - 1):
+        if out[i] == "unit" and out[i + 1] in UNIT_MODELS:
+            del out[i + 1]
+            break
+    return tuple(out)
 
 
 class PlanSettings(BaseModel):
@@ -164,7 +273,7 @@ class RunRequest(BaseModel):
     calibration_override: str | None = Field(None, min_length=1, max_length=500)
     """Why the measurement may run with a sensor calibration past due (recorded in run.json);
     refused (409) without it while one is expired."""
-    unit: UnitData
+    unit: AnyUnit
     plan: PlanSettings
     position_deg: float | None = Field(None, ge=-3600, le=3600, allow_inf_nan=False)
     axes: AxesSettings = Field(default_factory=AxesSettings)
@@ -213,7 +322,9 @@ class PlanPreview(BaseModel):
     assumptions: list[str]
     model: dict[str, Any] | None
     batch: dict[str, Any] | None = None
-    """Where a production batch of this design lies (seed 000 tolerances, 95 % band)."""
+    """Where a production batch of this design lies (95 % band, from the unit kind's
+    tolerances: seed 000 Table 1, seed 002's modification budget, seed 001's installation
+    error budget)."""
 
 
 class Message(BaseModel):

@@ -1,6 +1,7 @@
 """The simulated rig behind ``rig serve --simulated``: the plant built around an example unit
-(rig/examples/units) with the effects of examples/campaigns/seed000-pair1.toml, started as its
-own process (``rig sim``) by :func:`rig.measure.open_session`."""
+(rig/examples/units) with the effects of examples/campaigns/seed000-pair1.toml, or a plant TOML
+(``--plant``: simulators/cycloid_plant.toml ...), started as its own process (``rig sim``) by
+:func:`rig.measure.open_session`."""
 
 from __future__ import annotations
 
@@ -36,14 +37,52 @@ def example_unit(name: str) -> dict[str, Any]:
     return json.loads((folder / f"{name}.json").read_text(encoding="utf-8"))
 
 
+def example_plant(unit_name: str = DEFAULT_UNIT) -> Any:
+    """The simulated plant around the example unit ``unit_name``: the default plant with
+    :data:`SIMULATED_EFFECTS`, the runout left off for a unit that gives no runouts (the
+    cycloid and beveloid examples)."""
+    from rig.campaign import SimulationSection
+    from rig.measure import plant_config_for
+
+    unit = example_unit(unit_name)
+    effects = dict(SIMULATED_EFFECTS["effects"])
+    if not all(isinstance(unit.get(k), int | float) for k in ("runout_internal_mm",
+                                                               "runout_external_mm")):
+        effects.pop("runout")
+    return plant_config_for(unit, SimulationSection(seed=1, plant={"effects": effects}))
+
+
 def simulated_session_factory(unit_name: str = DEFAULT_UNIT
                               ) -> Callable[[], AbstractContextManager[Any]]:
-    """A factory of rig sessions on a new simulated rig whose plant is ``unit_name``."""
-    from rig.campaign import SimulationSection
-    from rig.measure import open_session, plant_config_for
+    """A factory of rig sessions on a new simulated rig whose plant is ``unit_name``'s
+    (:func:`example_plant`)."""
+    from rig.measure import open_session
 
-    plant = plant_config_for(example_unit(unit_name),
-                             SimulationSection(seed=1, plant=SIMULATED_EFFECTS))
+    plant = example_plant(unit_name)
+
+    def factory() -> AbstractContextManager[Any]:
+        return open_session(simulated=True, plant=plant)
+
+    return factory
+
+
+def simulated_plant(path: str) -> Any:
+    """The plant of a plant TOML (``rig sim --config`` FILE: simulators/cycloid_plant.toml,
+    beveloid_plant.toml, default_plant.toml ...); RigError naming the file and what is wrong."""
+    from simulators.plant.config import PlantConfigError, load_plant_config
+
+    try:
+        return load_plant_config(path)
+    except PlantConfigError as exc:
+        raise RigError(f"--plant: {exc}") from exc
+
+
+def plant_session_factory(path: str) -> Callable[[], AbstractContextManager[Any]]:
+    """A factory of rig sessions on a new simulated rig running the plant TOML ``path``
+    (its unit of any kind, its effects, noise and rig tables as the file says)."""
+    from rig.measure import open_session
+
+    plant = simulated_plant(path)
 
     def factory() -> AbstractContextManager[Any]:
         return open_session(simulated=True, plant=plant)

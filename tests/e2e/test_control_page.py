@@ -41,10 +41,11 @@ def launch_browser(playwright):
 
 
 @contextlib.contextmanager
-def rig_serve(store: Path):
-    """``rig serve --simulated`` on a free port; yields (url, operator link)."""
+def rig_serve(store: Path, *options: str):
+    """``rig serve --simulated`` on a free port (with ``options``: ``--plant FILE`` ...);
+    yields (url, operator link)."""
     cmd = [sys.executable, "-c", "from rig.cli import main; main()", "serve", "--simulated",
-           "--port", "0", "--store", str(store), "--token", TOKEN]
+           "--port", "0", "--store", str(store), "--token", TOKEN, *options]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=store.parent, env={**os.environ, "PYTHONUNBUFFERED": "1"})
     stderr: list[str] = []

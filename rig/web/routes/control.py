@@ -23,6 +23,7 @@ from rig.web.auth import Operator, is_operator
 from rig.web.controller import ControlError, RigController, compute_preview
 from rig.web.models import (
     NAME_PATTERN,
+    UNIT_MODELS,
     CampaignFileName,
     CampaignSetup,
     CampaignUpload,
@@ -158,16 +159,20 @@ def input_lock(request: Request, body: InputLockRequest,
 
 
 @router.get("/units", response_model=list[UnitExample],
-            summary="Example units shipped with the package (seed 000 pairs)")
+            summary="Example units shipped with the package, of every unit kind the page "
+                    "takes (seed 000 pairs, the seed 002 cycloid, the seed 001 beveloid)")
 def units() -> list[dict[str, Any]]:
+    """The example units, the seed 000 pairs first, then the cycloid and the beveloid."""
     folder = resources.files("rig.examples") / "units"
     out = []
     for item in sorted(folder.iterdir(), key=lambda p: p.name):
         if item.name.endswith(".json"):
             data = json.loads(item.read_text(encoding="utf-8"))
-            if data.get("kind", "internal_involute") == "internal_involute":
+            if data.get("kind", "internal_involute") in UNIT_MODELS:
                 out.append({"name": item.name[:-5], "unit": data})
-    return out
+    # by kind (the seed 000 pairs first: the page's default unit is the first), then name
+    kinds = list(UNIT_MODELS)
+    return sorted(out, key=lambda u: kinds.index(u["unit"].get("kind", "internal_involute")))
 
 
 BAD_FILE = {400: {"model": ErrorBody, "description": "Not a valid campaign file (the message "

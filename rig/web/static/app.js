@@ -213,11 +213,10 @@ function showMetrics(m, model, partial = false) {
   const mm = (m && m.model) || model;
   $("m-model").textContent = fmt(mm && mm.lost_motion_arcmin);
   // the unit kind's own model and batch band are named (cycloid: seed 002, beveloid: seed 001)
-  const own = (live.model && live.model.kind) ? live.model : model;
-  if (own && own.kind && own.kind !== "internal_involute" && own.model_name) {
-    $("m-model-label").textContent = `nominal model (${own.model_name}): lost motion`;
-    $("m-batch-label").textContent = `batch band (95 %, ${own.kind})`;
-  }
+  const own = live.design || (model && model.kind ? model : null);
+  const labels = designLabels(own);
+  $("m-model-label").textContent = labels.model;
+  $("m-batch-label").textContent = labels.batch;
   const band = live.batch && live.batch.band_95_arcmin;
   $("m-batch").textContent = band ? `${fmt(band[0])} .. ${fmt(band[1])}` : "–";
   const flags = [];
@@ -245,6 +244,18 @@ function showMetrics(m, model, partial = false) {
   $("m-asym").classList.toggle("flag", flags.some((f) => f.startsWith("stiffness")));
   $("flags").innerHTML = flags.map((f) => `<div class="flag">⚠ ${esc(f)}</div>`).join("");
 }
+
+// The result panel's labels of the nominal model and the batch band for a unit design
+// ({kind, model_name, band_source}: a preview's model or a result's unit_kind): the seed 000
+// pair keeps its short labels, another kind is named with its model and its tolerances
+function designLabels(d) {
+  if (!d || !d.kind || d.kind === "internal_involute" || !d.model_name)
+    return { model: "nominal model (no runout): lost motion", batch: "batch band (95 %)" };
+  return { model: `nominal model, ${d.kind} (${d.model_name}): lost motion`,
+           batch: `batch band (95 %, ${d.kind}: ${d.band_source || "the kind's tolerances"})` };
+}
+const designOf = (r) => (r && r.unit_kind
+  ? { kind: r.unit_kind, model_name: r.model_name, band_source: r.band_source } : null);
 
 // ---------------------------------------------------------------- campaign: lost motion vs position
 let campaignPlot = null;
@@ -502,9 +513,15 @@ function renderResult(r) {
         ? fmt(x.lost_motion_arcmin) : "–"}`).join(", ");
   }
   if (r.batch) live.batch = r.batch;
+  if (designOf(r)) live.design = designOf(r);
   const band = r.batch && r.batch.band_95_arcmin;
+  if (r.kind !== "campaign" && r.unit_kind) {   // a run: its unit kind and nominal model
+    const ran = (r.runs || []).map((x) => x.model && x.model.lost_motion_arcmin).filter(measurable);
+    html += `<br>unit kind ${esc(r.unit_kind)}; nominal model (${esc(r.model_name)}): ` +
+      `${ran.length ? fmt(ran[ran.length - 1]) + " arcmin" : "not available"}`;
+  }
   if (band) {
-    html += `<br>production batch of this design (seed 000 tolerances, 95 %): ` +
+    html += `<br>production batch of this design (${esc(r.band_source || "seed 000 Table 1 tolerances")}, 95 %): ` +
       `${fmt(band[0])} .. ${fmt(band[1])} arcmin`;
   }
   el.innerHTML = html;
@@ -589,18 +606,46 @@ function connectLive() {
 
 // ---------------------------------------------------------------- set-up form
 let units = [];
-const UNIT_FIELDS = ["z_internal", "z_external", "module_mm", "pressure_angle_deg", "addendum_coeff",
-  "face_width_mm", "center_distance_mm", "m_value_internal_mm", "m_value_external_mm",
-  "runout_internal_mm", "runout_external_mm"];
+// Each unit kind's fields on the form (rig/web/models.py: UnitData, CycloidUnitData,
+// BeveloidUnitData), and its keys the form has no field for (kept from the example or the
+// campaign file the unit came from, sent with it)
+const UNIT_KIND_FIELDS = {
+  internal_involute: ["z_internal", "z_external", "module_mm", "pressure_angle_deg", "addendum_coeff",
+    "face_width_mm", "center_distance_mm", "m_value_internal_mm", "m_value_external_mm",
+    "runout_internal_mm", "runout_external_mm"],
+  cycloid: ["z_internal", "z_external", "module_mm", "height_coeff", "shape_coeff", "eccentricity_mm",
+    "shift_modification_mm", "rotation_modification_mm", "face_width_mm", "reference_torque_Nm",
+    "runout_internal_mm", "runout_external_mm"],
+  beveloid: ["z_pinion", "z_gear", "module_mm", "pressure_angle_deg", "helix_angle_deg", "cone_angle_deg",
+    "face_width_mm", "addendum_coeff", "center_distance_mm", "axial_shift_mm",
+    "runout_internal_mm", "runout_external_mm"],
+};
+const UNIT_KIND_EXTRA = {
+  internal_involute: ["clearance_coeff", "pin_diameter_mm", "bearing_clearance_mm"],
+  cycloid: ["pitch_deviation_mm", "bearing_clearance_mm"],
+  beveloid: ["runout_pinion_mm", "runout_gear_mm", "bearing_clearance_mm"],
+};
+const UNIT_FIELDS = [...new Set(Object.values(UNIT_KIND_FIELDS).flat())];
+const unitKindOf = (u) => (u && UNIT_KIND_FIELDS[u.kind || "internal_involute"] ? u.kind || "internal_involute" : null);
+
+// show the fields of the unit kind chosen on the form (the others are kept, hidden)
+function showUnitKind() {
+  const f = $("setup");
+  if (!UNIT_KIND_FIELDS[f.elements.unit_kind.value]) f.elements.unit_kind.value = "internal_involute";
+  f.dataset.unitKind = f.elements.unit_kind.value;
+}
 
 function fillUnit(u) {
   const f = $("setup");
+  const kind = unitKindOf(u) || "internal_involute";
+  f.elements.unit_kind.value = kind;
+  showUnitKind();
   for (const k of UNIT_FIELDS) {
-    const v = u[k];
+    const v = UNIT_KIND_FIELDS[kind].includes(k) ? u[k] : undefined;
     f.elements[k].value = v === undefined || v === null ? "" : (Array.isArray(v) ? v.join(", ") : v);
   }
-  live.unitExtra = { clearance_coeff: u.clearance_coeff, pin_diameter_mm: u.pin_diameter_mm,
-    bearing_clearance_mm: u.bearing_clearance_mm };
+  live.unitExtra = {};
+  for (const k of UNIT_KIND_EXTRA[kind]) live.unitExtra[k] = u[k];
 }
 
 const num = (v) => (v === "" || v === undefined ? null : Number(v));
@@ -608,12 +653,13 @@ const list = (v) => (v.trim() === "" ? null : v.split(/[,\s]+/).filter((x) => x)
 
 function request() {
   const f = $("setup").elements;
-  const unit = { kind: "internal_involute", serial: f.serial.value || null };
-  for (const k of UNIT_FIELDS) {
+  const unitKind = UNIT_KIND_FIELDS[f.unit_kind.value] ? f.unit_kind.value : "internal_involute";
+  const unit = { kind: unitKind, serial: f.serial.value || null };
+  for (const k of UNIT_KIND_FIELDS[unitKind]) {
     const v = f[k].value;
     unit[k] = k.startsWith("m_value") ? list(v) : num(v);
   }
-  Object.assign(unit, live.unitExtra || {});
+  for (const k of UNIT_KIND_EXTRA[unitKind]) if (live.unitExtra) unit[k] = live.unitExtra[k];
   for (const k of Object.keys(unit)) if (unit[k] === null || unit[k] === undefined) delete unit[k];
   const kind = f.kind.value;
   const body = {
@@ -658,6 +704,7 @@ async function previewPlan() {
   const p = await api("POST", "/api/plan/preview", body);
   live.model = p.model;
   live.batch = p.batch || null;
+  live.design = p.model && p.model.kind ? p.model : null;
   live.amplitudeNm = p.amplitude_Nm;
   live.bandNm = p.model ? p.model.lost_motion_pct / 100 * body.plan.rated_torque_Nm : null;
   const mins = (p.estimated_s / 60).toFixed(1);
@@ -666,9 +713,10 @@ async function previewPlan() {
     (p.torque_limit_Nm !== null ? `, rig limit ±${fmt(p.torque_limit_Nm, 2)} N·m` : "") +
     (p.fits ? ' <span class="pass">fits the rig</span>' : ' <span class="fail">does not fit</span>');
   if (p.problems.length) html += "<br>" + p.problems.map(esc).join("<br>");
-  if (p.model) html += `<br>nominal model (no runout): lost motion ${fmt(p.model.lost_motion_arcmin)} arcmin, ` +
+  if (p.model) html += `<br>${esc(designLabels(p.model).model)} ${fmt(p.model.lost_motion_arcmin)} arcmin, ` +
     `backlash ${fmt(p.model.backlash_arcmin)} arcmin, torsional stiffness ${fmt(p.model.stiffness_Nm_per_arcmin, 2)} N·m/arcmin`;
-  if (p.batch && p.batch.band_95_arcmin) html += `; production batch of this design (95 %): ` +
+  if (p.batch && p.batch.band_95_arcmin) html += `; production batch of this design (95 %` +
+    `${p.model && p.model.band_source ? ", " + esc(p.model.band_source) : ""}): ` +
     `${fmt(p.batch.band_95_arcmin[0])} .. ${fmt(p.batch.band_95_arcmin[1])} arcmin`;
   html += `<details><summary>steps</summary><pre>${esc(p.steps.join("\n"))}` +
     `${p.truncated ? "\n…" : ""}</pre></details>`;
@@ -785,6 +833,11 @@ const FIELD_NAMES = {
   addendum_coeff: "addendum coefficient", face_width_mm: "face width", center_distance_mm: "centre distance",
   m_value_internal_mm: "M value of the ring gear", m_value_external_mm: "M value of the pinion",
   runout_internal_mm: "runout of the ring gear", runout_external_mm: "runout of the pinion",
+  unit_kind: "unit kind", height_coeff: "height coefficient h1", shape_coeff: "shape coefficient f1",
+  eccentricity_mm: "eccentricity", shift_modification_mm: "shift modification Δ1",
+  rotation_modification_mm: "rotation modification Δ2", reference_torque_Nm: "reference torque",
+  z_pinion: "teeth of the pinion (z pinion)", z_gear: "teeth of the gear (z gear)",
+  helix_angle_deg: "helix angle", cone_angle_deg: "cone angle", axial_shift_mm: "axial shift",
   rated_torque_Nm: "rated torque", amplitude_pct: "amplitude", rate_Nm_per_s: "loading rate",
   cycles: "cycles", pre_cycles: "pre-cycles", steps_per_quarter: "steps per quarter",
   dwell_s: "dwell", extra_levels_pct: "extra levels", zero_band_Nm: "slow band",
@@ -839,6 +892,24 @@ const RULES = {
   positions_deg: listRule(undefined, undefined, false), repeats: rule("int", 1, 50),
   crosscheck_flag_pct: rule("gt", 0), asymmetry_flag_ratio: (v) => rule("ge", 1)(v),
 };
+// a unit field whose bounds differ by kind (rig/web/models.py); else RULES
+const UNIT_KIND_RULES = {
+  cycloid: {
+    height_coeff: (v) => rule("gt", 0)(v) || rule("ge", 0, 1)(v), shape_coeff: rule("ge", 0, 1),
+    eccentricity_mm: (v) => rule("gt", 0)(v, true) || rule("ge", 0, 1000)(v, true),
+    shift_modification_mm: (v) => rule("ge", -1, 1)(v, true),
+    rotation_modification_mm: (v) => rule("ge", -1, 1)(v, true),
+    reference_torque_Nm: (v) => rule("gt", 0)(v, true),
+  },
+  beveloid: {
+    z_pinion: rule("int", 5, 2000), z_gear: rule("int", 5, 2000),
+    pressure_angle_deg: rule("ge", 5, 35),
+    helix_angle_deg: (v) => rule("ge")(v) || (Math.abs(Number(v)) < 45 ? null : "must be between -45° and 45°"),
+    cone_angle_deg: (v) => rule("ge")(v) || (Math.abs(Number(v)) < 30 ? null : "must be between -30° and 30°"),
+    face_width_mm: rule("gt", 0), addendum_coeff: (v) => rule("ge", 0, 1.5)(v, true),
+    center_distance_mm: (v) => rule("gt", 0)(v, true), axial_shift_mm: (v) => rule("ge", -100, 100)(v, true),
+  },
+};
 let formProblems = 0;
 
 function fieldErrorEl(input) {
@@ -860,17 +931,23 @@ function setFieldError(input, text) {
 function validateForm() {
   const f = $("setup").elements;
   const campaign = f.kind.value === "campaign";
+  const unitKind = UNIT_KIND_FIELDS[f.unit_kind.value] ? f.unit_kind.value : "internal_involute";
+  const kindRules = UNIT_KIND_RULES[unitKind] || {};
   let problems = 0;
-  for (const [name, check] of Object.entries(RULES)) {
+  for (const name of new Set([...Object.keys(RULES), ...UNIT_FIELDS])) {
     const input = f[name];
     if (!input) continue;
     if (input.closest(".campaign-only") && !campaign) { setFieldError(input, ""); continue; }
+    // a unit field of another kind is not sent: not checked
+    if (UNIT_FIELDS.includes(name) && !UNIT_KIND_FIELDS[unitKind].includes(name)) { setFieldError(input, ""); continue; }
+    const check = kindRules[name] || RULES[name];
+    if (!check) continue;
     const why = check(input.value);
     setFieldError(input, why ? `${FIELD_NAMES[name] || name} ${why}` : "");
     if (why) problems++;
   }
-  // between fields: the ring has more teeth than the pinion (an internal pair)
-  if (!RULES.z_internal(f.z_internal.value) && !RULES.z_external(f.z_external.value) &&
+  // between fields: the ring has more teeth than the pinion (an internal pair, a cycloid)
+  if (unitKind !== "beveloid" && !RULES.z_internal(f.z_internal.value) && !RULES.z_external(f.z_external.value) &&
       Number(f.z_internal.value) <= Number(f.z_external.value)) {
     setFieldError(f.z_internal, `teeth of the ring gear must exceed the pinion's (${f.z_external.value})`);
     problems++;
@@ -887,7 +964,8 @@ function fieldProblem(d) {
   const loc = (d.loc || []).filter((x) => typeof x === "string" && x !== "body");
   const f = $("setup").elements;
   let name = [...loc].reverse().find((x) => f[x]);
-  if (!name && loc.includes("unit")) name = "z_internal";
+  // the unit as a whole: its kind unknown, or its tooth counts between them
+  if (!name && loc.includes("unit")) name = d.type === "unit_kind" ? "unit_kind" : "z_internal";
   const msg = String(d.msg || "").replace(/^Value error, /, "")
     .replace(/^Input should be greater than or equal to (.*)$/, "must be at least $1")
     .replace(/^Input should be greater than (.*)$/, "must be above $1")
@@ -929,6 +1007,7 @@ function restoreSetup() {
     else el.value = String(data[el.name]);
   }
   $("setup").className = $("setup").elements.kind.value === "campaign" ? "campaign" : "";
+  showUnitKind();
   return true;
 }
 
@@ -1024,6 +1103,7 @@ async function showStoredCampaign(campaignId) {
   const c = await api("GET", `/api/campaigns/${encodeURIComponent(campaignId)}`);
   showCampaign(c.campaign_id, c.summary);
   const s = c.summary || {};
+  if (designOf(s)) { live.design = designOf(s); live.batch = s.batch || null; }  // its own kind and band
   const causes = (s.failures || []).slice(0, 5);
   const result = `campaign ${esc(c.campaign_id)} ${esc(c.status)}: ${outcomeHtml(c.outcome)}` +
     (causes.length ? "<br>" + causes.map(esc).join("<br>") : "");
@@ -1085,6 +1165,11 @@ function wire() {
     $("setup").className = e.target.value === "campaign" ? "campaign" : "";
   });
   $("setup").elements.test.addEventListener("change", showTestFields);
+  $("setup").elements.unit_kind.addEventListener("change", (e) => {
+    // another kind: its example unit (the first of that kind) fills the unit's fields
+    const u = units.find((x) => unitKindOf(x.unit) === e.target.value);
+    if (u) { $("unit-example").value = u.name; fillUnit(u.unit); } else showUnitKind();
+  });
   $("unit-example").addEventListener("change", (e) => {
     const u = units.find((x) => x.name === e.target.value);
     if (u) fillUnit(u.unit);

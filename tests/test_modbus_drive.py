@@ -221,3 +221,45 @@ def test_rtu_config_needs_a_serial_url():
     config = LoadingDriveConfig.model_validate(
         {"transport": "rtu", "serial_url": "socket://127.0.0.1:15021", "torque_limit_Nm": 5})
     assert config.device_id == 2 and config.watchdog_s == 0.5
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def _enabled_drive(clock: _Clock):
+    from simulators.modbus.devices import LoadingDriveModel
+
+    drive = LoadingDriveModel(SineTestPlant(amplitude_Nm=0.0), 12.0, watchdog_s=0.5, now=clock)
+    control = LOADING_DRIVE_MAP["control"].address
+    assert drive.write_holding(control, [1]) is None and drive.enabled
+    return drive, control
+
+
+def test_the_simulators_own_stall_is_not_the_masters_silence():
+    """The drive's watchdog counts the master's silence: a real drive has its own CPU. When
+    the simulator process is starved for 1 s (its periodic check does not run) while the
+    master keeps writing, the writes wait in the socket; processed late, they must not trip
+    it (seen in a loaded CI run: WATCHDOG_TIMEOUT at a run's start). A master that really
+    goes silent while the simulator runs still trips it within the watchdog time."""
+    clock = _Clock()
+    drive, control = _enabled_drive(clock)
+    for _ in range(2):
+        clock.t += 0.005
+        drive.note_poll(0.005)
+    clock.t += 1.0  # the simulator starved: no poll, the master's keepalive queued
+    assert drive.write_holding(control, [1]) is None  # processed late: no trip
+    assert drive.enabled and not drive.watchdog_tripped
+    clock.t += 0.003
+    drive.note_poll(0.005)  # the check resumes; the stall before the write is not silence
+    assert drive.enabled and drive.master_silence_s() < 0.01
+    while clock.t < 1.6:  # now the master is silent and the simulator runs
+        clock.t += 0.005
+        drive.note_poll(0.005)
+    assert drive.watchdog_tripped and not drive.enabled
+    assert drive.fault == DriveFaultCode.WATCHDOG_TIMEOUT
+    assert 0.5 < drive.max_write_gap_s < 0.52

@@ -143,6 +143,10 @@ class LoadingDriveModel:
     - Watchdog: while enabled, if no *write* (setpoint, control or keepalive) has come for
       ``watchdog_s`` (s), the drive zeroes the setpoint, disables and latches fault 2.
       Reads do not feed it, so a monitoring client cannot keep a dead master's drive alive.
+      The silence is the master's, not the simulator's: a real drive has its own CPU, this
+      one shares the PC. Time this process could not run (its server's periodic check,
+      :meth:`note_poll`, woke late by that much) is not counted, so writes that waited in
+      the socket while the simulator was starved do not trip it.
     """
 
     def __init__(self, plant: Plant, torque_limit_Nm: float, watchdog_s: float = 0.5,
@@ -160,6 +164,9 @@ class LoadingDriveModel:
         self.watchdog_tripped = False
         self.keepalive_value = 0
         self.last_write_s = now()
+        self._poll_s: float | None = None  # the server's check period (s), once it polls
+        self._last_poll_s = self.last_write_s
+        self._stalled_s = 0.0  # this process's own stalls since the last write (s)
         self.max_write_gap_s = 0.0
         """The longest silence of the master while the drive was enabled (s): what a load
         test compares with the watchdog."""
@@ -178,12 +185,32 @@ class LoadingDriveModel:
         self.fault = code
         self._go_safe()
 
+    def note_poll(self, period_s: float) -> None:
+        """The server's periodic check (every ``period_s`` s) ran: a wake-up later than that
+        is time this process was starved, not the master's silence."""
+        now = self.now()
+        if self._poll_s is not None:
+            self._stalled_s += max(0.0, now - self._last_poll_s - period_s)
+        self._poll_s, self._last_poll_s = period_s, now
+        self.check_watchdog()
+
+    def master_silence_s(self) -> float:
+        """The master's silence since its last write (s): the time since it, less this
+        process's own stalls (those seen by :meth:`note_poll`, and the one it may be in now:
+        the time since the last check beyond its period)."""
+        now = self.now()
+        pending = 0.0
+        if self._poll_s is not None:
+            pending = max(0.0, now - self._last_poll_s - self._poll_s)
+        return max(0.0, now - self.last_write_s - self._stalled_s - pending)
+
     def check_watchdog(self) -> bool:
         """Trip the watchdog if the master has been silent too long; True if it tripped now."""
-        if self.enabled and self.now() - self.last_write_s > self.watchdog_ms / 1000.0:
+        silence = self.master_silence_s()
+        if self.enabled and silence > self.watchdog_ms / 1000.0:
             self.watchdog_tripped = True
             self.watchdog_trips += 1
-            self.max_write_gap_s = max(self.max_write_gap_s, self.now() - self.last_write_s)
+            self.max_write_gap_s = max(self.max_write_gap_s, silence)
             self._latch(DriveFaultCode.WATCHDOG_TIMEOUT)
             return True
         return False
@@ -233,8 +260,12 @@ class LoadingDriveModel:
             return parts
         now = self.now()
         if self.enabled:
-            self.max_write_gap_s = max(self.max_write_gap_s, now - self.last_write_s)
+            self.max_write_gap_s = max(self.max_write_gap_s, self.master_silence_s())
         self.last_write_s = now
+        # the stall this write ends (if any) is counted by the next poll: only its part
+        # after this write is silence to forgive
+        self._stalled_s = -(max(0.0, now - self._last_poll_s - self._poll_s)
+                            if self._poll_s is not None else 0.0)
         for reg, chunk in parts:
             if reg.name == "setpoint":
                 value = float_from_words(chunk)

@@ -191,7 +191,7 @@ class ModbusRigServer:
 
     async def _watch(self) -> None:
         while True:
-            self.drive.check_watchdog()
+            self.drive.note_poll(WATCHDOG_POLL_S)
             await asyncio.sleep(WATCHDOG_POLL_S)
 
     def _drop_connections(self) -> None:

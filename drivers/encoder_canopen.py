@@ -202,6 +202,58 @@ class _BusErrorListener(can.Listener):
             notifier.exception = None  # handled: canopen must not re-raise it on every send
 
 
+class SyncProducer:
+    """The SYNC producer (COB-ID 0x80, CiA 301): one SYNC every ``period_s`` on its own thread.
+
+    Unlike python-can's cyclic task it never catches up: after the PC was busy (this thread
+    got no CPU for several periods) it sends the next SYNC at once and goes on from there,
+    leaving the missed ones out. A catch-up burst (python-can sends every missed message back
+    to back) makes the encoders sample many times at one instant, faster than the bus carries
+    their answers; PDOs are lost and the SYNC each answer belongs to is misjudged, so the
+    output and input encoders' samples were paired wrongly or not at all (rows lost, false
+    count jumps on a loaded PC). ``before_send()`` is called just before each SYNC (its time
+    is logged then: an earlier bound of the instant the encoders sample); ``on_error(exc)``
+    on a send error, returning False stops the producer."""
+
+    def __init__(self, bus: can.BusABC, lock: threading.RLock | threading.Lock,
+                 period_s: float, before_send: Callable[[], None],
+                 on_error: Callable[[Exception], bool]) -> None:
+        self.period_s = float(period_s)
+        self.skipped = 0
+        """SYNCs left out because this thread came too late for them (count)."""
+        self._bus, self._lock = bus, lock
+        self._before_send, self._on_error = before_send, on_error
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="can-sync", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        msg = can.Message(arbitration_id=SYNC_COB_ID, is_extended_id=False, data=b"")
+        due = time.perf_counter()
+        while not self._stop.is_set():
+            try:
+                self._before_send()
+                with self._lock:
+                    self._bus.send(msg)
+            except Exception as exc:  # the link: its owner decides (on_error)
+                if not self._on_error(exc):
+                    return
+            due += self.period_s
+            now = time.perf_counter()
+            if now - due > self.period_s:  # late by more than a period: no burst
+                missed = int((now - due) / self.period_s)
+                self.skipped += missed
+                due += missed * self.period_s
+            delay = due - time.perf_counter()
+            if delay > 0:
+                self._stop.wait(delay)
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout=1.0)
+
+
 class EncoderNetwork:
     """One CAN bus shared by N encoders: python-can bus, canopen ``Network``, SYNC producer."""
 
@@ -218,7 +270,7 @@ class EncoderNetwork:
         self.sync_log: collections.deque[tuple[int, float]] = collections.deque(maxlen=1024)
         self.protocol_error_count = 0
         self.last_protocol_error = ""
-        self._sync_task: can.broadcastmanager.ThreadBasedCyclicSendTask | None = None
+        self._sync_task: SyncProducer | None = None
         self._connected = False
 
     @property
@@ -246,19 +298,16 @@ class EncoderNetwork:
         period = self.config.sync_period_s
         if period is None or self._sync_task is not None:
             return
-        bus = self.canopen.bus
-        sync = can.Message(arbitration_id=SYNC_COB_ID, is_extended_id=False, data=b"")
-        self._sync_task = can.broadcastmanager.ThreadBasedCyclicSendTask(
-            bus, self.canopen.send_lock, sync, period,
-            on_error=self._on_sync_error, modifier_callback=self._count_sync,
-        )
+        self._sync_task = SyncProducer(self.canopen.bus, self.canopen.send_lock, period,
+                                       before_send=self._count_sync,
+                                       on_error=self._on_sync_error)
 
     def stop_sync(self) -> None:
         if self._sync_task is not None:
             self._sync_task.stop()
             self._sync_task = None
 
-    def _count_sync(self, msg: can.Message) -> None:
+    def _count_sync(self) -> None:
         self.syncs_sent += 1
         self.sync_log.append((self.syncs_sent, time.monotonic()))
 

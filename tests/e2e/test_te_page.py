@@ -92,7 +92,8 @@ def test_operator_measures_the_transmission_error(tmp_path: Path):
         page.fill("input[name=te_revolutions]", "1")
         page.fill("input[name=te_pp_max_arcsec]", "2000")
         page.click("#preview")
-        expect(page.locator("#preview-out")).to_contain_text("turn input forward at 240 rpm")
+        expect(page.locator("#preview-out")).to_contain_text("turn input forward at 240 rpm",
+                                                        timeout=30_000)
 
         page.click("#lock")
         expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)

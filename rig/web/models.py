@@ -34,20 +34,41 @@ def _length(min_value: float, max_value: float, **kw: Any) -> Any:
     return Field(ge=min_value, le=max_value, allow_inf_nan=False, **kw)
 
 
-class UnitData(BaseModel):
+class _UnitBase(BaseModel):
+    """What every unit kind's model shares: strict fields and the run.json mapping."""
+
+    model_config = _strict
+
+    def mapping(self) -> dict[str, Any]:
+        """The run.json ``unit`` object (unknown fields left out)."""
+        return self.model_dump(exclude_none=True)
+
+
+class _InternalPairBase(_UnitBase):
+    """An internal gear pair's tooth counts (seed 000's ring and pinion, seed 002's gear 2 and
+    gear 1): the internal gear has more teeth."""
+
+    serial: str | None = Field(None, pattern=NAME_PATTERN, description="Serial number.")
+    z_internal: int = Field(ge=3, le=2000, description="Teeth of the internal gear.")
+    z_external: int = Field(ge=3, le=2000, description="Teeth of the external gear.")
+    module_mm: float = _length(0.01, 100.0)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> _InternalPairBase:
+        if self.z_internal <= self.z_external:
+            raise ValueError(f"z_internal ({self.z_internal}) must exceed z_external "
+                             f"({self.z_external})")
+        return self
+
+
+class UnitData(_InternalPairBase):
     """The unit under test: the seed 000 fields of run.json ``unit`` (mm, deg).
 
     Optional fields left out are unknown to the model (not zero); run-format.md says how the
     reference nominal model uses each one.
     """
 
-    model_config = _strict
-
     kind: Literal["internal_involute"] = "internal_involute"
-    serial: str | None = Field(None, pattern=NAME_PATTERN, description="Serial number.")
-    z_internal: int = Field(ge=3, le=2000, description="Teeth of the internal gear (ring).")
-    z_external: int = Field(ge=3, le=2000, description="Teeth of the external gear.")
-    module_mm: float = _length(0.01, 100.0)
     pressure_angle_deg: float | None = Field(None, gt=0, lt=45, allow_inf_nan=False)
     addendum_coeff: float | None = _length(0.0, 2.0, default=None)
     clearance_coeff: float | None = _length(0.0, 1.0, default=None)
@@ -60,32 +81,15 @@ class UnitData(BaseModel):
     runout_external_mm: float | None = _length(0.0, 10.0, default=None)
     bearing_clearance_mm: list[Positive_mm] | None = Field(None, min_length=1, max_length=8)
 
-    @model_validator(mode="after")
-    def _consistent(self) -> UnitData:
-        if self.z_internal <= self.z_external:
-            raise ValueError(f"z_internal ({self.z_internal}) must exceed z_external "
-                             f"({self.z_external})")
-        return self
 
-    def mapping(self) -> dict[str, Any]:
-        """The run.json ``unit`` object (unknown fields left out)."""
-        return self.model_dump(exclude_none=True)
-
-
-class CycloidUnitData(BaseModel):
+class CycloidUnitData(_InternalPairBase):
     """A compound cycloid unit (``kind`` "cycloid", seed 002; mm, N*m): gear 2
     (``z_internal``, eq. 1's profile with r0 = m z2, e1 = m h1, e2 = f1 e1 of eq. 15) fixed,
     gear 1 (``z_external``) on the crank is the output. The keys of
     :mod:`analysis.models.cycloid_nominal` (optional ones left out are assumed, and said so)
     and the inspected tolerances the diagnosis and the plant read (docs/unit-kinds.md)."""
 
-    model_config = _strict
-
     kind: Literal["cycloid"]
-    serial: str | None = Field(None, pattern=NAME_PATTERN, description="Serial number.")
-    z_internal: int = Field(ge=3, le=2000, description="Teeth of gear 2 (the internal gear).")
-    z_external: int = Field(ge=3, le=2000, description="Teeth of gear 1 (on the crank).")
-    module_mm: float = _length(0.01, 100.0)
     height_coeff: float = Field(gt=0, le=1, allow_inf_nan=False, description="h1 of eq. 15.")
     shape_coeff: float = _length(0.0, 1.0, description="f1 of eq. 15.")
     eccentricity_mm: float | None = Field(None, gt=0, le=1000, allow_inf_nan=False)
@@ -98,25 +102,12 @@ class CycloidUnitData(BaseModel):
     pitch_deviation_mm: float | None = _length(0.0, 10.0, default=None)
     bearing_clearance_mm: list[Positive_mm] | None = Field(None, min_length=1, max_length=8)
 
-    @model_validator(mode="after")
-    def _consistent(self) -> CycloidUnitData:
-        if self.z_internal <= self.z_external:
-            raise ValueError(f"z_internal ({self.z_internal}) must exceed z_external "
-                             f"({self.z_external})")
-        return self
 
-    def mapping(self) -> dict[str, Any]:
-        """The run.json ``unit`` object (unknown fields left out)."""
-        return self.model_dump(exclude_none=True)
-
-
-class BeveloidUnitData(BaseModel):
+class BeveloidUnitData(_UnitBase):
     """A parallel-axis helical beveloid unit (``kind`` "beveloid", seed 001; mm, deg): the
     pinion (``z_pinion``) is the input, the gear (``z_gear``) the output. The keys of
     :mod:`analysis.models.beveloid_nominal` with the ranges of seed 001's gear
     (:class:`analysis.models.seed001_surfaces.BeveloidGear`)."""
-
-    model_config = _strict
 
     kind: Literal["beveloid"]
     serial: str | None = Field(None, pattern=NAME_PATTERN, description="Serial number.")
@@ -137,10 +128,6 @@ class BeveloidUnitData(BaseModel):
     runout_pinion_mm: float | None = _length(0.0, 10.0, default=None)
     runout_gear_mm: float | None = _length(0.0, 10.0, default=None)
     bearing_clearance_mm: list[Positive_mm] | None = Field(None, min_length=1, max_length=8)
-
-    def mapping(self) -> dict[str, Any]:
-        """The run.json ``unit`` object (unknown fields left out)."""
-        return self.model_dump(exclude_none=True)
 
 
 UNIT_MODELS: dict[str, type[BaseModel]] = {

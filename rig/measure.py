@@ -70,7 +70,8 @@ def write_plant_toml(config: PlantConfig, path: Path) -> Path:
     """Write ``config`` as a plant TOML that :func:`load_plant_config` reads back."""
     data = config.model_dump(exclude={"source"})
     tables = {name: data[name] for name in ("unit", "rig", "housing", "noise", "effects",
-                                            "measurement", "cycloid", "beveloid")}
+                                            "measurement", "cycloid", "beveloid",
+                                            "planetary")}
     path.write_text(dump_rig_toml(tables, "plant written by rig measure / rig campaign run"),
                     encoding="utf-8")
     return path

@@ -313,7 +313,9 @@ class GearPlant:
             return params
 
     def true_transmission_error(self, brake_torque_Nm: float, points_per_input_rev: int = 720,
-                                orders: list[int] | None = None) -> dict:
+                                orders: list[int] | None = None, *,
+                                output_window_deg: tuple[float, float] | None = None,
+                                points_per_output_rev: int | None = None) -> dict:
         """Quasi-static truth of a transmission error run (docs/run-format.md): the unit's TE
         (arcsec) over one output revolution from the input angle now, in each direction,
         under a brake torque of magnitude ``brake_torque_Nm`` (N*m) against the output's
@@ -334,7 +336,13 @@ class GearPlant:
         minus reverse mean: play plus twice the elastic twist), ``te_orders`` (per output
         revolution, ``TE ~ A cos(k theta_out + phase)`` with ``theta_out`` the output angle,
         rad; default orders: the eccentricities' ``ratio`` and ``ratio + 1``),
-        ``encoder_eccentricity`` and ``injected`` (every injected value)."""
+        ``encoder_eccentricity`` and ``injected`` (every injected value).
+
+        A ``planetary`` unit (seed 003) has its own truth,
+        :func:`simulators.plant.planetary.planetary_true_transmission_error`: the output turns
+        with the input, TE is seed 003 eq. (11) of the unit's drawn errors, over one output
+        revolution from now or over the output angles ``output_window_deg`` (the revolution an
+        analysis used), ``points_per_output_rev`` points."""
         torque = abs(float(brake_torque_Nm))
         if not math.isfinite(torque):
             raise ValueError(f"brake torque must be finite, got {brake_torque_Nm!r}")
@@ -342,6 +350,19 @@ class GearPlant:
             self._advance()
             model = self._scratch()
         geo = model.geometry
+        if geo.kind == "planetary":
+            from simulators.plant.planetary import planetary_true_transmission_error
+
+            return planetary_true_transmission_error(
+                geo, play_rad=model.play_rad(), elastic_rad=model.compliance(torque)[0],
+                start_input_deg=model.input_deg,
+                output_offset_deg=self.config.rig.output_offset_deg, brake_torque_Nm=torque,
+                output_window_deg=output_window_deg,
+                **({"points_per_output_rev": points_per_output_rev}
+                   if points_per_output_rev else {}))
+        if output_window_deg is not None or points_per_output_rev is not None:
+            raise ValueError("output_window_deg and points_per_output_rev are for a planetary "
+                             "unit's truth")
         ratio = model.ratio
         n = int(round(ratio * points_per_input_rev))
         start = model.input_deg

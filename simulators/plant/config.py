@@ -250,6 +250,18 @@ class BeveloidConfig(_Strict):
     """Points per mesh cycle of the eq. (11) transmission error (TCA)."""
 
 
+class PlanetaryConfig(_Strict):
+    """A ``planetary`` unit (seed 003's paper train) as made: one unit's error values and
+    initial phases by seed 003 source name (``E_s_I``: machining eccentricity of the stage I
+    sun, ``A_c_III``, ``f_p_II``, ...; :func:`analysis.models.seed003_planetary.error_sources`).
+    A source left out is 0. ``simulators.plant.planetary.draw_unit`` draws a unit."""
+
+    errors_um: dict[str, float] = Field(default_factory=dict)
+    """Eccentricities (E, A: magnitudes >= 0) and tooth errors (f: signed), um."""
+    phases_deg: dict[str, float] = Field(default_factory=dict)
+    """Initial phases of the eccentricities (eq. 12), deg; tooth errors have none."""
+
+
 class NoiseConfig(_Strict):
     """Sensor noise: Gaussian, seeded (same seed and calls -> same numbers)."""
 
@@ -270,6 +282,7 @@ class PlantConfig(_Strict):
     measurement: MeasurementConfig = MeasurementConfig()
     cycloid: CycloidConfig = CycloidConfig()
     beveloid: BeveloidConfig = BeveloidConfig()
+    planetary: PlanetaryConfig = PlanetaryConfig()
     source: str = "<memory>"
 
     def nominal(self) -> PlantConfig:
@@ -282,7 +295,8 @@ class PlantConfig(_Strict):
         return self.model_copy(update={
             "effects": effects, "noise": noise,
             "cycloid": CycloidConfig(mesh_phases=self.cycloid.mesh_phases),
-            "beveloid": BeveloidConfig(te_points_per_cycle=self.beveloid.te_points_per_cycle)})
+            "beveloid": BeveloidConfig(te_points_per_cycle=self.beveloid.te_points_per_cycle),
+            "planetary": PlanetaryConfig()})
 
     def with_effect(self, name: str, enabled: bool = True, **params: Any) -> PlantConfig:
         """A copy with effect ``name`` switched (and any of its parameters replaced)."""
@@ -303,11 +317,11 @@ class PlantConfig(_Strict):
 
     def with_changes(self, **sections: dict[str, Any]) -> PlantConfig:
         """A copy with keys of ``rig``/``housing``/``noise``/``measurement``/``unit``/
-        ``cycloid``/``beveloid`` replaced, validated."""
+        ``cycloid``/``beveloid``/``planetary`` replaced, validated."""
         data = self.model_dump()
         for section, values in sections.items():
             if section not in ("rig", "housing", "noise", "unit", "measurement", "cycloid",
-                               "beveloid"):
+                               "beveloid", "planetary"):
                 raise PlantConfigError(f"{self.source}: cannot change section {section!r}")
             data[section] = {**data[section], **values}
         return plant_config_from_mapping(data, self.source)

@@ -116,7 +116,8 @@ def _checked(key: str, index: int, value: Any) -> float:
 
 def geometry_for(config: UnitAndEffects) -> MeshGeometry:
     """The plant geometry of the unit's ``kind`` (run-format.md ``unit.kind``):
-    ``internal_involute`` (default, seed 000), ``cycloid`` (seed 002), ``beveloid`` (seed 001).
+    ``internal_involute`` (default, seed 000), ``cycloid`` (seed 002), ``beveloid`` (seed 001),
+    ``planetary`` (seed 003).
     Raises ValueError naming the key."""
     unit = config.unit
     kind = unit.get("kind", "internal_involute") if isinstance(unit, Mapping) else None
@@ -128,9 +129,13 @@ def geometry_for(config: UnitAndEffects) -> MeshGeometry:
         from simulators.plant.beveloid import BeveloidGeometry
 
         return BeveloidGeometry.from_config(config)
+    if kind == "planetary":
+        from simulators.plant.planetary import PlanetaryGeometry
+
+        return PlanetaryGeometry.from_config(config)
     if kind not in (None, "internal_involute"):
         raise ValueError(f"key unit.kind: {kind!r} has no plant (known: internal_involute, "
-                         "cycloid, beveloid)")
+                         "cycloid, beveloid, planetary)")
     return MeshGeometry.from_config(config)
 
 

@@ -4,9 +4,10 @@ Every campaign run measured on the simulated rig, and every run generated offlin
 this block in its run.json (``generator``): the unit's kind, every value injected (the
 switchable effects switched on, with all their parameters, and the kind's own deviations:
 ``[cycloid]`` modification and eccentricity errors, ``[beveloid]`` installation errors of
-seed 001 eq. 8), and the plant's quasi-static truth at the run's lock angle and housing
-temperature (:meth:`simulators.plant.GearPlant.true_parameters`,
-``true_lost_motion_arcmin``). Angles arcmin, torques N*m.
+seed 001 eq. 8, ``[planetary]`` seed 003 error values and phases), and the plant's
+quasi-static truth at the run's lock angle and housing temperature
+(:meth:`simulators.plant.GearPlant.true_parameters`, ``true_lost_motion_arcmin``). Angles
+arcmin, torques N*m.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 from simulators.plant.config import PlantConfig
 
-_KIND_SECTIONS = {"cycloid": "cycloid", "beveloid": "beveloid"}
+_KIND_SECTIONS = {"cycloid": "cycloid", "beveloid": "beveloid", "planetary": "planetary"}
 
 
 def injected_values(config: PlantConfig) -> dict[str, Any]:

@@ -103,7 +103,8 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
 REALTIME_SOURCES = ("SimulatedRig", "simulated_rig", "simulated_page", "lab_rig", "rig_serve",
                     "--simulated", "EncoderNode", "SlcanAdapter", "TransducerSimulator",
                     "RigModbusServer", "serve_until_signalled", "\"sim\", ", "open_session",
-                    "run_load_scenario", "rig.validate.wire", "sync_playwright")
+                    "run_load_scenario", "rig.validate.wire", "sync_playwright",
+                    "simulated=True")
 REALTIME_RERUNS = 1
 REALTIME_RERUN_DELAY_S = 2.0
 _realtime_modules: dict[str, bool] = {}

@@ -251,8 +251,8 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
     completed, ``load_completed_in_a_row`` counts them from the first. ``cli_campaign``: a
     campaign file run with ``rig campaign run FILE --simulated`` (its own simulated rig)
     beside them, under the same load (``load_cli_campaign_completed``). ``plan``: keys of
-    the page's plan set over the default for the measured campaigns (the test's shorter
-    plan).
+    the page's plan set over the default for the earlier and the measured campaigns (the
+    test's shorter plan).
 
     ``realtime_priority``: SCHED_FIFO for the simulated devices and, through the rig
     configuration they write (``[rig] realtime_priority``), for the engine process.
@@ -271,7 +271,7 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
         client = stack.enter_context(httpx.Client(base_url=url, timeout=30))
         # the earlier campaign (no load): the one the page is asked to diagnose
         earlier = _measure(client, _campaign_body("earlier", list(positions),
-                                                  steps_per_quarter), timeout_s)
+                                                  steps_per_quarter, plan), timeout_s)
         if earlier["state"] != "completed":
             raise RuntimeError(f"the earlier campaign did not complete: {earlier}")
         earlier_id = earlier["last_result"]["campaign_id"]

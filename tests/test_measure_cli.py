@@ -6,6 +6,9 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
@@ -38,17 +41,28 @@ def _rig(*args: str, cwd: Path) -> subprocess.CompletedProcess:
     return subprocess.run([*RIG, *args], capture_output=True, text=True, cwd=cwd, timeout=120)
 
 
-def test_campaign_json_and_exit_codes_pass_and_fail(tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def tiny_campaigns(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """The tiny campaign measured twice into one store, with a limit it passes (9', exit 0)
+    and one it fails (1', exit 1): each code's process result and --json document. Measured
+    once for the tests of this module that read them."""
+    tmp_path = tmp_path_factory.mktemp("tiny")
     store = tmp_path / "store"
-    results = {}
+    procs, docs = {}, {}
     for limit, code in (("9.0", 0), ("1.0", 1)):
         camp = tmp_path / f"tiny-{code}.toml"
         camp.write_text(TINY.replace("LIMIT", limit))
         out = tmp_path / f"r{code}.json"
-        res = _rig("campaign", "run", str(camp), "--simulated", "--store", str(store),
-                   "--json", str(out), cwd=tmp_path)
-        assert res.returncode == code, res.stderr[-2000:]
-        results[code] = json.loads(out.read_text())
+        procs[code] = _rig("campaign", "run", str(camp), "--simulated", "--store", str(store),
+                           "--json", str(out), cwd=tmp_path)
+        assert procs[code].returncode == code, procs[code].stderr[-2000:]
+        docs[code] = json.loads(out.read_text())
+    return {"tmp": tmp_path, "store": store, "procs": procs, "docs": docs}
+
+
+def test_campaign_json_and_exit_codes_pass_and_fail(tiny_campaigns: dict[str, Any]) -> None:
+    tmp_path, store = tiny_campaigns["tmp"], tiny_campaigns["store"]
+    results = tiny_campaigns["docs"]
     doc = results[1]
     assert doc["passed"] is False and "above the limit 1" in doc["failures"][0]
     assert results[0]["passed"] is True and results[0]["failures"] == []
@@ -68,6 +82,29 @@ def test_campaign_json_and_exit_codes_pass_and_fail(tmp_path: Path) -> None:
     again = _rig("analyse", doc["path"], "--json", str(tmp_path / "a.json"), cwd=tmp_path)
     assert again.returncode == 0, again.stderr
     assert json.loads((tmp_path / "a.json").read_text())["runs"][0]["run_id"] == run["run_id"]
+
+
+def test_every_record_carries_limits_and_outcome(tiny_campaigns: dict[str, Any]) -> None:
+    """OK / not OK with the limits in every record (issue 11, defects 3 and 4): the verdict
+    read back from run.json, campaign.json, ``--json`` and the printed tables."""
+    docs = tiny_campaigns["docs"]
+    for code, res in tiny_campaigns["procs"].items():
+        assert ("outcome: OK" if code == 0 else "outcome: NOT OK") in res.stdout + res.stderr
+        assert "FAIL" not in res.stdout + res.stderr  # one word for it: NOT OK (issue 21)
+        if code == 1:
+            assert "│ NOT OK" in res.stderr, res.stderr  # the runs table's outcome column
+            assert "  NOT OK: lost motion" in res.stderr  # each run as it finishes
+    for code, outcome in ((0, "ok"), (1, "not_ok")):
+        doc = docs[code]
+        assert doc["outcome"] == outcome
+        assert doc["limits"]["lost_motion_arcmin_max"] == (9.0 if code == 0 else 1.0)
+        (run,) = doc["runs"]
+        assert run["outcome"] == outcome and run["limits"] == doc["limits"]
+        run_json = json.loads((Path(run["path"]) / "run.json").read_text())
+        assert run_json["outcome"] == outcome and run_json["limits"] == doc["limits"]
+        campaign_json = json.loads((Path(doc["path"]) / "campaign.json").read_text())
+        assert campaign_json["outcome"] == outcome
+        assert campaign_json["limits"] == doc["limits"]
 
 
 def test_bad_input_exits_2_naming_file_and_key(tmp_path: Path) -> None:

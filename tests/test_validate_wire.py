@@ -3,9 +3,10 @@ drivers and simulated devices (``rig sim`` around the time-domain plant with the
 dynamics on and one withheld effect or none), diagnosed blind and graded; the recordings
 kept for ``--cases-dir/--labels``.
 
-Two short cases (a null campaign and a friction campaign) on real simulated rigs, one after
-the other. The verdicts' quality is not judged here (the grading is); the truth, the
-recorded artefacts and the report's structure are.
+Two short cases (a null campaign and a friction campaign) on real simulated rigs, recorded
+at the same time (``--jobs 2``: the test runs alone, so it has both cores; the pool's path
+is the one a lab's validation run takes). The verdicts' quality is not judged here (the
+grading is); the truth, the recorded artefacts and the report's structure are.
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ def test_cases_draw_the_rigs_dynamics_at_the_issues_sizes():
 
 def test_two_cases_recorded_over_the_wire_are_diagnosed_blind_and_graded(tmp_path):
     keep, out = tmp_path / "kept", tmp_path / "otw.json"
-    res = rig("validate-diagnosis", "--over-the-wire", "--cases", "2", "--short",
+    res = rig("validate-diagnosis", "--over-the-wire", "--cases", "2", "--short", "--jobs", "2",
               "--keep", str(keep), "--json", str(out), "--verbose", cwd=tmp_path)
     assert res.returncode == 0, res.stderr[-3000:]
     summary = json.loads(out.read_text())
@@ -89,7 +90,8 @@ def test_two_cases_recorded_over_the_wire_are_diagnosed_blind_and_graded(tmp_pat
         assert plant["measurement"]["torque_lag_s"] > 0
         assert plant["effects"]["friction"]["coulomb_torque_Nm"] >= 0.15
 
-    # and they grade again from the folder, as any labelled set does
+    # and they grade again from the folder, as any labelled set does (in this process, not
+    # the pool: the same verdicts whichever way they are diagnosed)
     again = tmp_path / "again.json"
     res = rig("validate-diagnosis", "--cases-dir", str(keep / "cases"),
               "--labels", str(keep / "labels.json"), "--json", str(again), cwd=tmp_path)

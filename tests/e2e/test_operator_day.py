@@ -85,10 +85,11 @@ def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
         page.goto(link)
         expect(page.locator("#state")).to_have_text("idle", timeout=90_000)
         page.fill("#setup input[name=operator]", "A. Operator")
-        # the shortest loop for both runs (2 steps a quarter, no pre-cycle): what is checked
-        # here is the page around the runs, not the loop
+        # the shortest loop for both runs (2 steps a quarter, no pre-cycle, the play crossed
+        # at 1 N*m/s): what is checked here is the page around the runs, not the loop
         page.fill("#setup input[name=steps_per_quarter]", "2")
         page.fill("#setup input[name=pre_cycles]", "0")
+        page.fill("#setup input[name=zero_rate_Nm_per_s]", "1")
 
         # one completed run for the history, with a limit it fails (a seed 000 pair: 4')
         page.fill("#setup input[name=lost_motion_arcmin_max]", "1")

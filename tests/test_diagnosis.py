@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
 import numpy as np
 import pytest
 
-from analysis.diagnosis import diagnose, heldout_separation, play_tiebreak, separated
+from analysis.diagnosis import (
+    diagnose,
+    heldout_separation,
+    play_tiebreak,
+    quantisation_floor_arcmin,
+    separated,
+)
 from analysis.diagnosis.data import RunInput, landed_blocks, prepare_run, transit_mask
 from analysis.diagnosis.fit import build_stack, fit, fit_profile
 from analysis.effects import (
@@ -68,6 +75,19 @@ def test_the_first_block_after_a_play_crossing_is_where_the_switch_is_unsure() -
     assert np.flatnonzero(got).tolist() == [14, 15, 16, 17]
     assert not landed_blocks([(0, 30)], np.ones(30, dtype=bool), np.zeros(29, dtype=bool),
                              4).any()
+
+
+def test_the_quantisation_floor_is_one_encoder_count_over_sqrt_12() -> None:
+    """A run read through an encoder of 2^20 counts per turn (1.236 arcsec): the floor under
+    which a systematic gap is the encoder's own error is q / sqrt(12) = 0.357 arcsec; an
+    unquantised run has none."""
+    q = 360.0 * 60.0 / 2**20  # arcmin
+    base = _run(0, LoopParams(NOM.play_arcmin, NOM.stiffness_Nm_per_arcmin), noise=0.0)
+    coarse = dataclasses.replace(base, twist_arcmin=np.round(base.twist_arcmin / q) * q)
+    floor = quantisation_floor_arcmin([prepare_run(coarse)])
+    assert floor * 60.0 == pytest.approx(q * 60.0 / math.sqrt(12.0), rel=0.02)
+    assert quantisation_floor_arcmin([prepare_run(_run(1, LoopParams(
+        NOM.play_arcmin, NOM.stiffness_Nm_per_arcmin)))]) < 1e-3 * floor
 
 
 def test_calibration_and_candidate_fits_recover_parameters() -> None:

@@ -2,14 +2,21 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
 import numpy as np
 import pytest
 
-from analysis.diagnosis import diagnose, heldout_separation, play_tiebreak, separated
-from analysis.diagnosis.data import RunInput, prepare_run, transit_mask
+from analysis.diagnosis import (
+    diagnose,
+    heldout_separation,
+    play_tiebreak,
+    quantisation_floor_arcmin,
+    separated,
+)
+from analysis.diagnosis.data import RunInput, landed_blocks, prepare_run, transit_mask
 from analysis.diagnosis.fit import build_stack, fit, fit_profile
 from analysis.effects import (
     LoopParams,
@@ -53,6 +60,34 @@ def test_transit_samples_are_left_out() -> None:
     assert jump.tolist() == [False, True, True, True, False, False]
     # the samples at the start and end of the flight are partly in flight: left out too
     assert keep.tolist() == [True, False, False, False, False, True, True]
+
+
+def test_the_first_block_after_a_play_crossing_is_where_the_switch_is_unsure() -> None:
+    """A crossing: kept rows 0-9, in flight 10-12 (jumps), kept again from 13. With blocks of
+    4 the rows 13-16 are the landing block; the first segment (no crossing before it) and
+    the rest of the second are not."""
+    keep = np.ones(30, dtype=bool)
+    keep[9:14] = False
+    jump = np.zeros(29, dtype=bool)
+    jump[9:13] = True
+    segments = [(0, 9), (14, 30)]
+    got = landed_blocks(segments, keep, jump, 4)
+    assert np.flatnonzero(got).tolist() == [14, 15, 16, 17]
+    assert not landed_blocks([(0, 30)], np.ones(30, dtype=bool), np.zeros(29, dtype=bool),
+                             4).any()
+
+
+def test_the_quantisation_floor_is_one_encoder_count_over_sqrt_12() -> None:
+    """A run read through an encoder of 2^20 counts per turn (1.236 arcsec): the floor under
+    which a systematic gap is the encoder's own error is q / sqrt(12) = 0.357 arcsec; an
+    unquantised run has none."""
+    q = 360.0 * 60.0 / 2**20  # arcmin
+    base = _run(0, LoopParams(NOM.play_arcmin, NOM.stiffness_Nm_per_arcmin), noise=0.0)
+    coarse = dataclasses.replace(base, twist_arcmin=np.round(base.twist_arcmin / q) * q)
+    floor = quantisation_floor_arcmin([prepare_run(coarse)])
+    assert floor * 60.0 == pytest.approx(q * 60.0 / math.sqrt(12.0), rel=0.02)
+    assert quantisation_floor_arcmin([prepare_run(_run(1, LoopParams(
+        NOM.play_arcmin, NOM.stiffness_Nm_per_arcmin)))]) < 1e-3 * floor
 
 
 def test_calibration_and_candidate_fits_recover_parameters() -> None:

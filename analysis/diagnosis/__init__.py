@@ -840,7 +840,11 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
     # over-the-wire null: clearance "significant" at 8e-7, shrink 0.02, lack of fit p = 0.02)
     any_effect = any(fap.get(n, 1.0) <= alpha and c.heldout_runs > 0 and not c.screened_out
                      and shrink(c) >= MATERIAL_SHRINK for n, c in models.items())
-    attribute = not ((sys0 <= threshold and not material) or not (any_effect or systematic))
+    # the encoder's own quantisation error follows the twist (it lines up with the loading),
+    # so a systematic gap under one reading's quantisation RMS (q / sqrt 12) is the encoder's,
+    # not the unit's, unless a candidate with evidence closes a material part of it
+    floor = max(threshold, quantisation_floor_arcmin(prepared))
+    attribute = not ((sys0 <= floor and not material) or not (any_effect or systematic))
     flanks = flank_asymmetry(stack, base)
     if not attribute and flanks is not None and flanks.finding(alpha, STIFFNESS_TOLERANCE,
                                                                 threshold):
@@ -1058,6 +1062,15 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
         report["kind_physics"] = _clean(stack.physics.to_dict())
         report["not_testable"] = dict(stack.physics.not_testable)
     return Diagnosis(report=report, stack=stack, base=base, models=models)
+
+
+def quantisation_floor_arcmin(runs: Sequence[PreparedRun]) -> float:
+    """RMS quantisation error of one output-encoder reading, ``q / sqrt(12)`` (arcmin), the
+    median over the runs of the count read from the data's grid
+    (:func:`analysis.diagnosis.data.resolution_of`); 0 when no grid is found."""
+    qs = [r.measurement.get("twist_resolution_arcsec") for r in runs]
+    qs = [q for q in qs if q is not None and math.isfinite(q) and q > 0]
+    return float(np.median(qs)) / ARCSEC / math.sqrt(12.0) if qs else 0.0
 
 
 def series_compliance(f: LinearFit, k_nom: float) -> dict[str, Any] | None:

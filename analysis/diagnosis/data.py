@@ -95,7 +95,8 @@ class PreparedRun:
     #: Torque zero, friction and drift read at the play crossings (None: not readable).
     crossing: CrossingZero | None = field(default=None, repr=False)
     #: Blocks just after a burst of restamped rows (analysis.diagnosis.measurement.
-    #: after_restamped): where the unit switched flank is not known to the torque noise.
+    #: after_restamped) or the first block after a play crossing (:func:`landed_blocks`):
+    #: where the unit switched flank is not known to the torque noise.
     time_unsure: np.ndarray | None = field(default=None, repr=False)
     #: The torque zero taken out of ``torque_Nm`` (N*m per block; zeros when none).
     zero_removed_Nm: np.ndarray | None = field(default=None, repr=False)
@@ -200,6 +201,20 @@ def transit_mask(twist_arcmin: np.ndarray, torque_Nm: np.ndarray, sigma_arcmin: 
     keep[:-1] &= ~jump
     keep[1:] &= ~jump
     return keep, jump
+
+
+def landed_blocks(segments: list[tuple[int, int]], keep: np.ndarray, jump: np.ndarray,
+                  block: int) -> np.ndarray:
+    """Rows (True) of the first block after each play crossing: the twist jumped across the
+    play just before it (the in-flight rows are left out), so the unit has landed on the
+    other flank, while the torque read there is at the crossing, inside its noise band. When
+    within that block it switched is not known to the torque noise (like the blocks after a
+    burst of restamped rows: :func:`analysis.diagnosis.fit.run_float_masks`)."""
+    out = np.zeros(keep.size, dtype=bool)
+    for a, b in segments:
+        if a > 0 and jump[:a].any() and (jump[a - 1] or not keep[a - 1]):
+            out[a:min(b, a + block)] = True
+    return out
 
 
 def _segments(keep: np.ndarray, jump: np.ndarray) -> list[tuple[int, int]]:
@@ -327,6 +342,7 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
     segments = _segments(keep, jump | gaps)
     n_keep = int(sum(b - a for a, b in segments))
     block = max(1, int(round(n_keep / target_points)))
+    unsure = unsure | landed_blocks(segments, keep, jump, block)
     thr = max(8.0 * sigma_t, 0.02 * amplitude)
     direction, since = direction_and_reversal(t, torque, thr)
     tb = _block_means(torque, segments, block)

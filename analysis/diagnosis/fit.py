@@ -234,10 +234,12 @@ def run_floating(run: PreparedRun, nl: dict[str, float]) -> np.ndarray:
 
 def run_float_masks(run: PreparedRun, nl: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
     """(floating, across): ``floating`` as :func:`run_floating`; ``across`` the floating
-    points just after a burst of rows stamped on arrival (``run.time_unsure``) whose chain
+    points just after a burst of rows stamped on arrival or in the first block after a play
+    crossing (``run.time_unsure``; :func:`analysis.diagnosis.data.landed_blocks`) whose chain
     torque, inside its noise band, already points away from the flank last touched. The
-    crossing inside the burst was not observed at its torque, so the unit may already have
-    switched: it may lie anywhere in the play (:func:`censor_floating`). Elsewhere the centre
+    crossing inside the burst (or the block) was not observed at its torque, so the unit may
+    already have switched: it may lie anywhere in the play (:func:`censor_floating`).
+    Elsewhere the centre
     rule holds: a unit held on the other flank at zero torque shows a torque-sensor offset."""
     torque = run.torque_Nm - nl.get("torque_offset_Nm", 0.0)
     g = chain_torque_Nm(torque, nl.get("friction_Nm", 0.0), run.start_flank)

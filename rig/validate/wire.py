@@ -125,8 +125,11 @@ def withheld_effect(effect: str, rng: np.random.Generator) -> dict[str, Any]:
         return {"enabled": True, "model": "dahl",
                 "coulomb_torque_Nm": _u(rng, 0.015, 0.04) * RATED_NM}
     if effect == "stiffness_nonlinearity":
+        # a contact hardening over the whole loaded range, as our generator draws it
+        # (rig/validate widen): a scale of 0.4-1 rated torque. A take-up that ends at a tenth
+        # of rated is a clearance's shape: both fit it equally (docs/diagnosis.md)
         return {"enabled": True, "soft_twist_arcmin": _u(rng, 0.3, 0.6),
-                "torque_scale_Nm": _u(rng, 1.0, 2.5)}
+                "torque_scale_Nm": _u(rng, 0.4, 1.0) * RATED_NM}
     if effect == "runout":
         return {"enabled": True, "beta_deg": _u(rng, 0.0, 360.0)}
     if effect == "bearing_clearance":

@@ -487,3 +487,24 @@ def test_unloading_branch_split_at_the_command_turn_reaches_the_peak_just_after_
     r = analyse_loop(t, short, dead_zone_twist(short, PLAY, K), rated_torque_Nm=RATED,
                      command_Nm=short)
     assert "does not reach" in r.errors["stiffness_pos_Nm_per_arcmin"]
+
+
+def test_a_measured_torque_that_turns_before_the_command_column_splits_at_its_own_tip():
+    """Rows whose command column is stamped late (seen in CI under load: the unloading branch
+    began at 9.66 N*m after a dwell at 10 N*m, and the page showed no stiffness): the measured
+    torque leaves the peak dwell 10 samples before the command column turns. The turn moves
+    to the measured torque's tip (analysis.loop.branches.at_measured_tips), the branches meet
+    there, and the stiffness is the clean loop's."""
+    command = step_dwell_profile(RATED, 0.5, 40)
+    lead = 10
+    torque = np.concatenate((command[lead:], np.full(lead, command[-1])))
+    twist = dead_zone_twist(torque, PLAY, K)
+    t = np.arange(torque.size) * 1e-3
+    clean = analyse_loop(t, command, dead_zone_twist(command, PLAY, K), rated_torque_Nm=RATED,
+                         command_Nm=command)
+    r = analyse_loop(t, torque, twist, rated_torque_Nm=RATED, command_Nm=command)
+    assert r.errors.get("stiffness_pos_Nm_per_arcmin") is None, r.errors
+    assert r.metrics["stiffness_pos_Nm_per_arcmin"].value == pytest.approx(
+        clean.metrics["stiffness_pos_Nm_per_arcmin"].value, rel=1e-6)
+    assert r.metrics["backlash_arcmin"].value == pytest.approx(
+        clean.metrics["backlash_arcmin"].value, rel=1e-6)

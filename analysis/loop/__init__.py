@@ -72,6 +72,7 @@ from analysis.errors import AnalysisError, MetricUnavailable
 from analysis.loop.area import loop_area_J
 from analysis.loop.branches import (
     Branches,
+    at_measured_tips,
     default_threshold_Nm,
     split_branches,
     white_noise_std,
@@ -401,14 +402,16 @@ def _reach_T3(torque: np.ndarray, branches: Branches) -> float:
 
 def _branches(torque: np.ndarray, threshold_Nm: float, command_Nm: np.ndarray | None):
     """Branches of the run: from the torque command when one is recorded for every sample
-    and it moves (noise-free, so 1 % of its amplitude marks a reversal), else from the
-    measured torque with ``threshold_Nm``."""
+    and it moves (noise-free, so 1 % of its amplitude marks a reversal; each turn then moved
+    to the measured torque's extremum next to it, the loop's tip), else from the measured
+    torque with ``threshold_Nm``."""
     if command_Nm is not None:
         cmd = np.asarray(command_Nm, dtype=float)
         if cmd.shape == torque.shape and np.all(np.isfinite(cmd)):
             span = float(np.max(cmd) - np.min(cmd)) if cmd.size else 0.0
             if span > 2.0 * threshold_Nm:
-                return split_branches(cmd, threshold_Nm=max(0.005 * span, 1e-9))
+                return at_measured_tips(
+                    split_branches(cmd, threshold_Nm=max(0.005 * span, 1e-9)), torque)
     return split_branches(torque, threshold_Nm=threshold_Nm)
 
 

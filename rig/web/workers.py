@@ -20,6 +20,7 @@ import signal
 import threading
 from collections.abc import Callable
 from concurrent.futures import BrokenExecutor, CancelledError, Future, ProcessPoolExecutor
+from multiprocessing import resource_tracker
 from typing import Any, TypeVar
 
 from rig.blas import worker_initializer
@@ -94,7 +95,11 @@ def _submit(pool: str, fn: Callable[..., Any], *args: Any) -> Future[Any]:
     submission spawns inherits the mask through exec, so a Ctrl-C that reaches the process
     group while the worker is still importing does not end it with a KeyboardInterrupt
     traceback (Python only installs its SIGINT handler; the mask keeps the signal pending
-    until :func:`_worker_start` ignores it)."""
+    until :func:`_worker_start` ignores it). The resource tracker is started first: when
+    multiprocessing starts it during a spawn it *unblocks* SIGINT on its way out (it blocks
+    and then unblocks its signals instead of restoring the mask), and the worker spawned
+    next would start unprotected."""
+    resource_tracker.ensure_running()
     old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         return _executor(pool).submit(fn, *args)

@@ -698,10 +698,16 @@ function request() {
   return body;
 }
 
+// previews answered out of order (a cold analysis worker under load) must not overwrite a
+// newer one: only the latest request's answer is shown
+let previewSeq = 0;
+
 async function previewPlan() {
   if (!validateForm()) throw new Error("fix the set-up fields marked in red");
   const body = request();
+  const seq = ++previewSeq;
   const p = await api("POST", "/api/plan/preview", body);
+  if (seq !== previewSeq) return p;
   live.model = p.model;
   live.batch = p.batch || null;
   live.design = p.model && p.model.kind ? p.model : null;

@@ -156,13 +156,13 @@ def column_names(stack: Stack, effects: Sequence[str], teeth: Sequence[int]) -> 
 
 
 def run_columns(stack: Stack, run: PreparedRun, effects: Sequence[str], nl: dict[str, float],
-                teeth: Sequence[int]) -> np.ndarray:
+                teeth: Sequence[int], chain: RunChain | None = None) -> np.ndarray:
     """Columns (see :func:`column_names`) of one run: the composed loop of analysis.effects
-    written as ``twist = X beta + offset``."""
-    torque = run.torque_Nm - nl.get("torque_offset_Nm", 0.0)
-    g = chain_torque_Nm(torque, nl.get("friction_Nm", 0.0), run.start_flank)
-    s = flank_sign(g, flank_band_Nm(run), run.start_flank)
-    tau = np.abs(g)
+    written as ``twist = X beta + offset``. ``chain``: the run's :class:`RunChain` for ``nl``
+    when already known."""
+    c = chain if chain is not None else run_chain(run, nl)
+    s = c.flank
+    tau = np.abs(c.chain_torque_Nm)
     cols = [s / 2.0, s * tau]
     if stack.physics is not None:
         cols = kind_play_and_flank_columns(stack.physics, run.input_angle_deg, s, tau)
@@ -232,6 +232,45 @@ def run_floating(run: PreparedRun, nl: dict[str, float]) -> np.ndarray:
     return run_float_masks(run, nl)[0]
 
 
+@dataclass(frozen=True, eq=False)
+class RunChain:
+    """What the torque offset and friction of ``nl`` make of one run's torque: the chain
+    torque (N*m), the flank in contact (+1/-1) and the float masks of
+    :func:`run_float_masks`."""
+
+    run: PreparedRun
+    chain_torque_Nm: np.ndarray
+    flank: np.ndarray
+    floating: np.ndarray
+    across: np.ndarray
+
+
+def run_chain(run: PreparedRun, nl: dict[str, float]) -> RunChain:
+    """The run's :class:`RunChain` under the torque offset and friction of ``nl``."""
+    torque = run.torque_Nm - nl.get("torque_offset_Nm", 0.0)
+    g = chain_torque_Nm(torque, nl.get("friction_Nm", 0.0), run.start_flank)
+    band = flank_band_Nm(run)
+    kept = flank_sign(g, band, run.start_flank)
+    floating = np.abs(g) < band
+    if run.time_unsure is None or not run.time_unsure.any():
+        across = np.zeros(floating.size, dtype=bool)
+    else:
+        across = floating & run.time_unsure & (g * kept < 0)
+    return RunChain(run, g, kept, floating, across)
+
+
+def cached_chain(stack: Stack, i: int, nl: dict[str, float]) -> RunChain:
+    """:func:`run_chain` of run i, memoised per stack, run, torque offset and friction (the
+    only parameters it depends on: a grid over any other parameter reuses it)."""
+    run = stack.runs[i]
+    key = ("chain", i, nl.get("torque_offset_Nm", 0.0), nl.get("friction_Nm", 0.0))
+    hit = stack.cache.get(key)
+    if hit is None or hit.run is not run:  # a stack made with other runs may share the cache
+        hit = run_chain(run, nl)
+        stack.cache[key] = hit
+    return hit
+
+
 def run_float_masks(run: PreparedRun, nl: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
     """(floating, across): ``floating`` as :func:`run_floating`; ``across`` the floating
     points just after a burst of rows stamped on arrival or in the first block after a play
@@ -241,14 +280,8 @@ def run_float_masks(run: PreparedRun, nl: dict[str, float]) -> tuple[np.ndarray,
     already have switched: it may lie anywhere in the play (:func:`censor_floating`).
     Elsewhere the centre
     rule holds: a unit held on the other flank at zero torque shows a torque-sensor offset."""
-    torque = run.torque_Nm - nl.get("torque_offset_Nm", 0.0)
-    g = chain_torque_Nm(torque, nl.get("friction_Nm", 0.0), run.start_flank)
-    band = flank_band_Nm(run)
-    floating = np.abs(g) < band
-    if run.time_unsure is None or not run.time_unsure.any():
-        return floating, np.zeros(floating.size, dtype=bool)
-    kept = flank_sign(g, band, run.start_flank)
-    return floating, floating & run.time_unsure & (g * kept < 0)
+    c = run_chain(run, nl)
+    return c.floating, c.across
 
 
 def censor_floating(r: np.ndarray, X: np.ndarray, beta: np.ndarray, floating: np.ndarray,
@@ -277,9 +310,14 @@ def censor_floating(r: np.ndarray, X: np.ndarray, beta: np.ndarray, floating: np
 
 
 def teeth_of(stack: Stack) -> list[int]:
-    return sorted({int(tooth_pair_phase(r.input_angle_deg or 0.0, stack.z_internal,
-                                        stack.z_external))
-                   for r in stack.runs})
+    """The tooth pairs (phase indices) the runs' input angles engage, memoised per stack."""
+    hit = stack.cache.get("teeth")
+    if hit is None or hit[0] is not stack.runs:  # a stack with other runs may share the cache
+        hit = (stack.runs, sorted({int(tooth_pair_phase(r.input_angle_deg or 0.0,
+                                                        stack.z_internal, stack.z_external))
+                                   for r in stack.runs}))
+        stack.cache["teeth"] = hit
+    return list(hit[1])
 
 
 def bounds_and_prior(stack: Stack, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray,
@@ -317,16 +355,25 @@ class LinearFit:
         return float(self.beta[self.names.index(name)]) if name in self.names else default
 
 
-def _centre(values: np.ndarray, weights: np.ndarray, run: np.ndarray, n_runs: int
-            ) -> np.ndarray:
-    """Subtract each run's weighted mean (columns of a 2-D array, or a 1-D array)."""
+def _run_starts(run: np.ndarray) -> np.ndarray | None:
+    """First point of each run when the runs are stacked one after another, else None."""
+    if run.size and np.all(run[1:] >= run[:-1]):
+        return np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+    return None
+
+
+def _centre(values: np.ndarray, weights: np.ndarray, run: np.ndarray, n_runs: int,
+            starts: np.ndarray | None | bool = False) -> np.ndarray:
+    """Subtract each run's weighted mean (columns of a 2-D array, or a 1-D array).
+    ``starts``: :func:`_run_starts` of ``run`` when already known."""
     wsum = np.bincount(run, weights, minlength=n_runs)
     wsum[wsum == 0] = 1.0
     if values.ndim == 1:
         means = np.bincount(run, weights * values, minlength=n_runs) / wsum
         return values - means[run]
-    if run.size and np.all(run[1:] >= run[:-1]):  # runs stacked one after another
-        starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+    if starts is False:
+        starts = _run_starts(run)
+    if starts is not None:  # runs stacked one after another
         sums = np.zeros((n_runs, values.shape[1]))
         sums[run[starts]] = np.add.reduceat(weights[:, None] * values, starts, axis=0)
     else:
@@ -354,11 +401,12 @@ def _solve(X: np.ndarray, y: np.ndarray, sig: np.ndarray, run: np.ndarray, n_run
     A = None
     X0 = X
     flt = floating if floating is not None and floating.any() else None
+    starts = _run_starts(run)
     for _ in range(iterations if fixed is None else 2):
         ww = w * inv_var
         if fixed is None:
             sw = np.sqrt(ww)
-            A = np.vstack([_centre(X, ww, run, n_runs) * sw[:, None], pr])
+            A = np.vstack([_centre(X, ww, run, n_runs, starts) * sw[:, None], pr])
             b = np.concatenate([_centre(y, ww, run, n_runs) * sw, np.zeros(pr.shape[0])])
             scale = np.sqrt((A**2).sum(axis=0))
             scale[scale == 0] = 1.0
@@ -413,9 +461,9 @@ def fit(stack: Stack, effects: Sequence[str], runs: Sequence[int] | None = None,
     fixed_beta = None
     if fixed is not None:
         fixed_beta = np.array([fixed.get(nm, 0.0) for nm in names])
-    masks = [run_float_masks(stack.runs[i], nl) for i in idx]
-    floating = np.concatenate([m[0] for m in masks])
-    across = np.concatenate([m[1] for m in masks])
+    chains = [cached_chain(stack, i, nl) for i in idx]
+    floating = np.concatenate([c.floating for c in chains])
+    across = np.concatenate([c.across for c in chains])
     beta, obj, chi2, r, cov = _solve(X, y, sig, run, len(idx), lo, hi, prior, fixed_beta,
                                      want_cov=want_cov, floating=floating, across=across)
     fitres = LinearFit(tuple(names), beta, nl, obj, chi2, int(y.size), cov=cov)
@@ -431,7 +479,8 @@ def cached_columns(stack: Stack, i: int, effects: Sequence[str], nl: dict[str, f
            tuple(sorted(nl.items())))
     hit = stack.cache.get(key)
     if hit is None:
-        hit = run_columns(stack, stack.runs[i], effects, nl, teeth)
+        hit = run_columns(stack, stack.runs[i], effects, nl, teeth,
+                          cached_chain(stack, i, nl))
         stack.cache[key] = hit
     return hit
 

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from analysis.diagnosis import Candidate, curvature_effect, series_compliance
-from analysis.diagnosis.fit import LinearFit, censor_floating
+from analysis.diagnosis.data import PreparedRun
+from analysis.diagnosis.fit import LinearFit, censor_floating, flank_band_Nm, run_chain
 from analysis.effects import (
     LoopParams,
     play_at_arcmin,
@@ -181,3 +182,41 @@ def test_no_lag_is_read_from_a_coarse_encoders_staircase() -> None:
     twist = np.round(twist / q) * q
     sigma = math.hypot(0.1 / 60, resolution_of(twist) / math.sqrt(12.0))
     assert channel_lag_samples(t, torque + rng.normal(0, 0.005, n), twist, sigma) == 0
+
+
+def _falling_run(torque: list[float], sigma_torque: float = 1e-4) -> PreparedRun:
+    """A prepared run whose torque falls through zero from the upper flank (block means)."""
+    n = len(torque)
+    t = np.arange(n, dtype=float)
+    return PreparedRun(
+        run_id="falling", torque_Nm=np.array(torque), twist_arcmin=np.zeros(n),
+        temperature_C=None, t_s=t, branch=-np.ones(n), since_reversal_s=t,
+        sigma_arcmin=0.01, sigma_torque_Nm=sigma_torque, raw_sigma_arcmin=0.01, block=1,
+        n_raw=n, n_transit=0, rated_torque_Nm=20.0, amplitude_Nm=1.0, input_angle_deg=None,
+        mean_temperature_C=None, start_flank=1, nominal=None, lost_motion_arcmin=math.nan,
+        raw=None)  # type: ignore[arg-type]
+
+
+def test_a_run_with_less_friction_than_the_campaigns_floats_where_its_flank_is_unknown() -> None:
+    # coming down from the upper flank with the campaign's friction F = 0.05 N*m the chain
+    # torque is T + F (the stop operator); a run's own friction may be as low as F - spread
+    torque = [1.0, 0.5, 0.03, 0.001, -0.001, -0.01, -0.03, -0.06, -0.5, -1.0]
+    run = _falling_run(torque)
+    band = flank_band_Nm(run)
+    assert band == pytest.approx(3 * 1e-4 + 1e-4 * 20.0)  # three torque sigmas + 1e-4 rated
+    plain = run_chain(run, {"friction_Nm": 0.05})
+    np.testing.assert_allclose(plain.chain_torque_Nm, np.array(torque) + 0.05, atol=1e-12)
+    # one friction known exactly: the unit floats only where T + F is inside the band
+    assert np.flatnonzero(plain.floating).tolist() == []
+    assert plain.flank.tolist() == [1, 1, 1, 1, 1, 1, 1, -1, -1, -1]
+    assert not plain.across.any()
+    spread = run_chain(run, {"friction_Nm": 0.05, "friction_spread_Nm": 0.05})
+    # with no friction the chain torque is T itself: from T < band the flank kept by F is no
+    # longer certain (floating), and from T < -band the unit may already lie on the lower
+    # flank (across); the model's flank and chain torque stay those of F
+    assert np.flatnonzero(spread.floating).tolist() == [3, 4, 5, 6]
+    assert np.flatnonzero(spread.across).tolist() == [5, 6]
+    assert spread.flank.tolist() == plain.flank.tolist()
+    # a spread larger than the friction goes no lower than no friction
+    wide = run_chain(run, {"friction_Nm": 0.05, "friction_spread_Nm": 1.0})
+    assert wide.floating.tolist() == spread.floating.tolist()

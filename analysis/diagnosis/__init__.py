@@ -676,7 +676,8 @@ def with_measurement_nuisance(prepared: list[PreparedRun], alpha: float
     if not used and zero_report.get("runs_read"):
         zero_report["treated_as"] = ("not taken out: the crossings' zeros do not improve the "
                                      "null model by more than they cost")
-    return replace(stack, nuisance_nl={"friction_Nm": f0}, cache={}, offset_veto=veto,
+    return replace(stack, nuisance_nl={"friction_Nm": f0, "friction_spread_Nm": f0}, cache={},
+                   offset_veto=veto,
                    nuisance_friction_max_Nm=FRICTION_ALLOWANCE * stack.rated_Nm), zero_report
 
 

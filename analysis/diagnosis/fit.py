@@ -246,16 +246,29 @@ class RunChain:
 
 
 def run_chain(run: PreparedRun, nl: dict[str, float]) -> RunChain:
-    """The run's :class:`RunChain` under the torque offset and friction of ``nl``."""
+    """The run's :class:`RunChain` under the torque offset and friction of ``nl``.
+
+    ``nl["friction_spread_Nm"]`` (the ordinary friction the null model carries): the
+    campaign's one friction is an estimate, and a run's own may be lower by up to that much
+    (the friction read at the play crossings of one over-the-wire null's runs: 0.016-0.040
+    N*m against the campaign's 0.046). Where the lower friction would already have moved the
+    chain off the flank the model keeps, the point floats; where it would have put the chain
+    on the other flank, the unit may lie anywhere up to that flank (``across``)."""
     torque = run.torque_Nm - nl.get("torque_offset_Nm", 0.0)
-    g = chain_torque_Nm(torque, nl.get("friction_Nm", 0.0), run.start_flank)
+    friction = nl.get("friction_Nm", 0.0)
+    g = chain_torque_Nm(torque, friction, run.start_flank)
     band = flank_band_Nm(run)
     kept = flank_sign(g, band, run.start_flank)
     floating = np.abs(g) < band
-    if run.time_unsure is None or not run.time_unsure.any():
-        across = np.zeros(floating.size, dtype=bool)
-    else:
-        across = floating & run.time_unsure & (g * kept < 0)
+    across = np.zeros(floating.size, dtype=bool)
+    spread = min(nl.get("friction_spread_Nm", 0.0), friction)
+    if spread > 0:
+        g_low = chain_torque_Nm(torque, friction - spread, run.start_flank)
+        off_flank = g_low * kept < band  # the lower friction leaves the kept flank
+        across = off_flank & (g_low * kept < -band)
+        floating = floating | off_flank
+    if run.time_unsure is not None and run.time_unsure.any():
+        across = across | (floating & run.time_unsure & (g * kept < 0))
     return RunChain(run, g, kept, floating, across)
 
 
@@ -263,7 +276,8 @@ def cached_chain(stack: Stack, i: int, nl: dict[str, float]) -> RunChain:
     """:func:`run_chain` of run i, memoised per stack, run, torque offset and friction (the
     only parameters it depends on: a grid over any other parameter reuses it)."""
     run = stack.runs[i]
-    key = ("chain", i, nl.get("torque_offset_Nm", 0.0), nl.get("friction_Nm", 0.0))
+    key = ("chain", i, nl.get("torque_offset_Nm", 0.0), nl.get("friction_Nm", 0.0),
+           nl.get("friction_spread_Nm", 0.0))
     hit = stack.cache.get(key)
     if hit is None or hit.run is not run:  # a stack made with other runs may share the cache
         hit = run_chain(run, nl)

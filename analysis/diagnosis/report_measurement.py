@@ -99,7 +99,9 @@ def measurement_report(runs: Sequence[RunInput], prepared: Sequence[PreparedRun]
     f0 = float(nl.get("friction_Nm", 0.0))
     out["ordinary_friction"] = {
         "what": "Coulomb friction every unit and rig has, up to 1 % of rated torque: carried "
-                "by the null model and every candidate",
+                "by the null model and every candidate; a run's own friction may be lower by "
+                "up to it, so near a play crossing where that decides the flank the point "
+                "floats in the play",
         "friction_Nm": f0,
         "share_of_rated": f0 / stack.rated_Nm if stack.rated_Nm > 0 else None,
         "gap_share": _share(msr, _msr(_null(stack, {}))) if f0 > 0 else 0.0,

@@ -619,7 +619,11 @@ def _run_objectives(stack: Stack) -> dict[str, float]:
     """Each run's share of the null model's robust objective (Huber, noise units), with the
     best ordinary friction."""
     f0 = _nuisance_friction(stack)[1]
-    null = fit(stack, ("backlash",), nl={"friction_Nm": f0})
+    # a run's own friction may be lower than the campaign's one (fit.run_chain), as in the
+    # null model the diagnosis goes on with: without it a lag that moves a play crossing's
+    # torque past the campaign's friction costs that crossing a whole play, and the lag
+    # that the loaded flanks want is refused (an over-the-wire null: 3 of 4 runs' 7 ms)
+    null = fit(stack, ("backlash",), nl={"friction_Nm": f0, "friction_spread_Nm": f0})
     out = {}
     for run in stack.runs:
         u = np.abs(null.residual[run.run_id]) / run.sigma_arcmin

@@ -291,7 +291,9 @@ def run_float_masks(run: PreparedRun, nl: dict[str, float]) -> tuple[np.ndarray,
     crossing (``run.time_unsure``; :func:`analysis.diagnosis.data.landed_blocks`) whose chain
     torque, inside its noise band, already points away from the flank last touched. The
     crossing inside the burst (or the block) was not observed at its torque, so the unit may
-    already have switched: it may lie anywhere in the play (:func:`censor_floating`).
+    already have switched: it may lie anywhere in the play (:func:`censor_floating`). With a
+    friction spread in ``nl`` the points whose flank a run's lower friction leaves float too,
+    and those it puts past the other side's band are ``across`` (:func:`run_chain`).
     Elsewhere the centre
     rule holds: a unit held on the other flank at zero torque shows a torque-sensor offset."""
     c = run_chain(run, nl)

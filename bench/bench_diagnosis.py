@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rig.diagnose import diagnose_campaign, diagnose_path
+from rig.results.diagnose import diagnose_campaign, diagnose_path
 from rig.validate import make_case, run_validation, simulate_campaign, summarise
 from simulators.plant.config import load_plant_config
 

@@ -1,7 +1,7 @@
 """``rig reanalyse`` at scale: 2,000 stored campaigns re-analysed on a local Dask cluster with
 1 and with 2 worker processes; the wall time of each and the speed-up.
 
-Each campaign is small and synthetic (:func:`rig.synthetic_runs.write_campaign`: the seed 000
+Each campaign is small and synthetic (:func:`rig.store.synthetic_runs.write_campaign`: the seed 000
 pair 1 unit, 2 positions, the dead-zone loop with 100 steps per quarter, 401 samples a run):
 per campaign 2 run analyses and 1 diagnosis. The store is SQLite in a temporary folder.
 ``BENCH_CAMPAIGNS`` changes the count. On a shared machine the speed-up is bounded by the
@@ -22,9 +22,9 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 def run() -> Iterator[dict[str, Any]]:
-    from rig.reanalyse import reanalyse
     from rig.store import Store
-    from rig.synthetic_runs import write_campaign
+    from rig.store.reanalyse import reanalyse
+    from rig.store.synthetic_runs import write_campaign
 
     n = int(os.environ.get("BENCH_CAMPAIGNS", "2000"))
     unit = json.loads((REPO / "rig/examples/units/seed000-pair1.json").read_text())

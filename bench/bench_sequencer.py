@@ -15,9 +15,9 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
-from rig.campaign import SimulationSection
-from rig.measure import measure_plan, open_session, plant_config_for, run_meta
+from rig.measurement.service import measure_plan, open_session, plant_config_for, run_meta
 from rig.plans import LoopParams, Plan, hysteresis_plan
+from rig.plans.campaign_file import SimulationSection
 from rig.plans.estimate import estimate
 from rig.plans.steps import Settle
 from rig.runformat import read_run

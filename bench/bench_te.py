@@ -34,11 +34,11 @@ from analysis.transmission import analyse_te
 from analysis.transmission import model_internal as mi
 from analysis.transmission.model import internal_prediction
 from analysis.transmission.synthetic import synthetic_te
-from rig.campaign import SimulationSection
-from rig.config import load_rig_config
-from rig.devices import open_rig
 from rig.engine.devices import DevicesIO
-from rig.measure import (
+from rig.hardware.config import load_rig_config
+from rig.hardware.devices import open_rig
+from rig.hardware.simrig import SimulatedRig
+from rig.measurement.service import (
     RigSession,
     measure_plan,
     plant_config_for,
@@ -47,8 +47,8 @@ from rig.measure import (
     write_plant_toml,
 )
 from rig.plans import TEParams, te_plan
+from rig.plans.campaign_file import SimulationSection
 from rig.runformat import read_run
-from rig.simrig import SimulatedRig
 from rig.store import Store
 from simulators.plant.config import load_plant_config
 

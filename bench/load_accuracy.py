@@ -26,7 +26,7 @@ from tempfile import TemporaryDirectory
 from typing import Any
 
 from bench.load_scenario import BUSY_SCRIPT
-from rig.simrig import DEVICE_PRIORITY_ENV, REALTIME_ENV
+from rig.hardware.simrig import DEVICE_PRIORITY_ENV, REALTIME_ENV
 
 __all__ = ["run_lost_motion_under_load"]
 
@@ -43,10 +43,10 @@ def run_lost_motion_under_load(*, busy: int = 3, repeats: int = 2,
                                realtime_priority: int | None = None) -> dict[str, Any]:
     """Measure ``repeats`` runs per loading mode under ``busy`` spinning processes; return
     ``load_lost_motion_error_pct`` (the worst run), each run's figures and the truth."""
-    from rig.campaign import SimulationSection
     from rig.engine import EngineOptions
-    from rig.measure import measure_plan, open_session, plant_config_for, run_meta
+    from rig.measurement.service import measure_plan, open_session, plant_config_for, run_meta
     from rig.plans import LoopParams, hysteresis_plan
+    from rig.plans.campaign_file import SimulationSection
     from rig.store import Store
     from simulators.clock import ManualClock
     from simulators.plant import GearPlant

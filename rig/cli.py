@@ -15,8 +15,8 @@ import typer
 
 from analysis.errors import AnalysisError
 from drivers.errors import DeviceError
-from rig.errors import RigError
-from rig.redact import redact_argv, redact_environment, redact_text
+from rig.core.errors import RigError
+from rig.core.redact import redact_argv, redact_environment, redact_text
 
 app = typer.Typer(
     name="rig",
@@ -79,7 +79,7 @@ def main() -> None:
     metrics that cannot be computed) are printed as one line on stderr and exit 2.
     """
     signal.signal(signal.SIGTERM, _terminate_like_ctrl_c)
-    from rig.logs import configure_cli_logging
+    from rig.core.logs import configure_cli_logging
 
     configure_cli_logging()
     try:
@@ -130,8 +130,8 @@ def _write_crash_log() -> Path:
     ``~/.cache/backlash-rig/logs``, else the temporary folder); its path. The file is the
     user's alone (mode 0600) and holds no secret: the command line, the rig's and libpq's
     environment variables and the traceback with every password and token as ``***``
-    (rig/redact.py)."""
-    from rig.logs import log_dir, write_private
+    (rig/core/redact.py)."""
+    from rig.core.logs import log_dir, write_private
 
     folder = log_dir()
     stamp = time.strftime("%Y%m%dT%H%M%S")

@@ -42,7 +42,7 @@ from drivers.transducer.protocol import (
     frame_line,
     max_stream_rate_Hz,
 )
-from simulators.modbus.test_plant import SineTestPlant
+from simulators.modbus.plant_backdoor import SineTestPlant
 from simulators.plant.api import Plant
 
 Transport = Literal["pty", "tcp"]
@@ -57,7 +57,7 @@ DEFAULT_RATE_HZ = 100.0
 @dataclass
 class SineTorqueSource(SineTestPlant):
     """A transducer on a calibration bench: the closed-form plant of
-    :class:`~simulators.modbus.test_plant.SineTestPlant` with a 5 N*m, 0.5 Hz sine at 22 deg C.
+    :class:`~simulators.modbus.plant_backdoor.SineTestPlant` with a 5 N*m, 0.5 Hz sine at 22 deg C.
 
     Drive disabled: ``torque = offset_Nm + amplitude_Nm * sin(2 pi frequency_Hz t)`` (N*m);
     drive enabled: the commanded torque plus ``offset_Nm`` (an ideal drive).

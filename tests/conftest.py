@@ -30,11 +30,11 @@ def repo_root() -> Path:
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    from rig.blas import ONE_THREAD_ENV
+    from rig.core.blas import ONE_THREAD_ENV
 
     os.environ.update(ONE_THREAD_ENV)
     if os.environ.get("PYTEST_XDIST_WORKER") is not None:
-        from rig.blas import worker_initializer
+        from rig.core.blas import worker_initializer
 
         worker_initializer()
 

@@ -96,10 +96,10 @@ __all__ = ["SEED000_UNIT", "te_run", "truth_pp_arcsec", "write_te_run", "math"]
 def store_te_unit(store: Any, serial: str, *, scale: float = 1.0, design: str = "TE-DESIGN",
                   limits: dict[str, Any] | None = None, seed: int = 0) -> str:
     """One unit's TE test recorded in ``store`` as the rig records it: a campaign of one run,
-    the samples appended, ``result`` the TE analysis (:func:`rig.te.analyse_te_run`), the
+    the samples appended, ``result`` the TE analysis (:func:`rig.results.te.analyse_te_run`), the
     outcome against ``limits``; returns the campaign id."""
-    from rig.outcome import LIMIT_KEYS, campaign_outcome, run_outcome
-    from rig.te import analyse_te_run
+    from rig.results.outcome import LIMIT_KEYS, campaign_outcome, run_outcome
+    from rig.results.te import analyse_te_run
 
     run = te_run(f"{serial}-te", scale=scale, samples_per_output_rev=4000, seed=seed)
     unit = {**run.unit, "serial": serial, "design": design}

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from analysis.models.nominal import reference_nominal_model
-from rig.analyse import METRIC_KEYS, analyse_run
 from rig.examples import RUNS_DIR
+from rig.results.analyse import METRIC_KEYS, analyse_run
 from rig.runformat import Run, read_run, write_run
 
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]

@@ -1,4 +1,4 @@
-"""One BLAS thread wherever the product runs work in parallel (rig/blas.py, issue 20 point 5).
+"""One BLAS thread wherever the product runs work in parallel (rig/core/blas.py, issue 20 point 5).
 
 Each test first gives this process a BLAS with two threads and clears the variables the
 test workers inherit (tests/conftest.py), so what a worker reports is what the product set up
@@ -16,7 +16,7 @@ import pytest
 import scipy.linalg  # noqa: F401  (and scipy's)
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from rig.blas import ONE_THREAD_ENV, blas_threads, limit_blas_threads
+from rig.core.blas import ONE_THREAD_ENV, blas_threads, limit_blas_threads
 from rig.validate.cases import parallel_map
 
 pytestmark = pytest.mark.alone  # pools of two processes
@@ -65,7 +65,7 @@ def test_reanalyse_dask_workers_run_with_one_blas_thread(two_threads_here):
     import dask
     import distributed  # noqa: F401  (its configuration defaults loaded before the override)
 
-    from rig.reanalyse import _client
+    from rig.store.reanalyse import _client
 
     # without Dask's own default (its nanny sets these variables too): ours must do it
     with dask.config.set({"distributed.nanny.pre-spawn-environ": {}}):
@@ -93,7 +93,7 @@ def test_test_workers_and_their_subprocesses_start_with_one_blas_thread():
     for key, value in ONE_THREAD_ENV.items():
         assert os.environ.get(key) == value, key
     out = subprocess.run(
-        [sys.executable, "-c", "import json; from rig.blas import blas_threads; "
+        [sys.executable, "-c", "import json; from rig.core.blas import blas_threads; "
          "print(json.dumps(sorted(set(blas_threads().values()))))"],
         capture_output=True, text=True, timeout=60, check=True)
     assert out.stdout.strip() == "[1]"

@@ -1,4 +1,5 @@
-"""The [calibration] section of the rig configuration (rig/calibration.py): validated strictly
+"""The [calibration] section of the rig configuration (rig/hardware/calibration.py): validated
+strictly
 with errors naming file and key, recorded per run, an expired one refused unless overridden,
 and the override recorded; ``rig measure --operator/--calibration-override`` on the simulated
 rig (``rig sim``, real protocols) end to end."""
@@ -16,9 +17,9 @@ from pathlib import Path
 import pytest
 from pydantic import ValidationError
 
-from rig.calibration import CalibrationExpired, calibration_meta, expired
-from rig.campaign import CampaignError, campaign_from_mapping
-from rig.config import RigConfigError, load_rig_config
+from rig.hardware.calibration import CalibrationExpired, calibration_meta, expired
+from rig.hardware.config import RigConfigError, load_rig_config
+from rig.plans.campaign_file import CampaignError, campaign_from_mapping
 from rig.store import Store
 
 REPO = Path(__file__).resolve().parents[1]

@@ -8,14 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rig.campaign import (
+from rig.measurement.service import plant_config_for
+from rig.plans.campaign_file import (
     CampaignError,
     Limits,
     load_campaign,
     runout_signature,
     summarise,
 )
-from rig.measure import plant_config_for
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted(p for p in (ROOT / "examples" / "campaigns").glob("seed000-pair*.toml")

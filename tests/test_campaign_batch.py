@@ -6,8 +6,8 @@ import json
 
 from analysis.models.seed000_batch import lost_motion_batch
 from analysis.models.seed000_unit import InternalPairUnit
-from rig.campaign import batch_band
 from rig.examples import UNITS_DIR
+from rig.plans.campaign_file import batch_band
 
 PAIR1 = json.loads((UNITS_DIR / "seed000-pair1.json").read_text())
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from analysis.models.by_kind import MODEL_NAMES
-from rig.certificate import resolve_subject, write_certificate
+from rig.reports.certificate import resolve_subject, write_certificate
 from rig.runformat import read_campaign
 from tests.test_html_escaping import page_text
 

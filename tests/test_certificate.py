@@ -19,8 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from rig.certificate import CertificateError, resolve_subject, write_certificate
-from rig.certificate.header import software_version
+from rig.reports.certificate import CertificateError, resolve_subject, write_certificate
+from rig.reports.certificate.header import software_version
 from tests.test_html_escaping import page_text
 from tests.test_measure_cli import TINY
 
@@ -367,7 +367,7 @@ def test_a_metric_below_zero_is_never_printed_as_a_measurement(measured: dict):
     assert "below resolution (< 2.72e-05 J)" in text
     assert "-4.58e-06" not in text and "4.58e-06" not in text
     assert "a value below zero is no measurement" in text
-    from rig.certificate import below_zero_text
+    from rig.reports.certificate import below_zero_text
 
     assert below_zero_text("lost_motion_arcmin", -0.5, 0.01, ".3f", " arcmin") == \
         "below zero: no measurement"

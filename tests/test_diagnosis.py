@@ -137,7 +137,7 @@ def test_runout_from_the_model_is_found_located_and_shrunk() -> None:
 def test_report_keys_and_blindness_to_generator_labels(tmp_path) -> None:
     """The verdict comes from unit, test and samples only: scrambling or removing the
     generator's labels and true parameters changes nothing."""
-    from rig.diagnose import diagnose_campaign, report_dict
+    from rig.results.diagnose import diagnose_campaign, report_dict
 
     case = make_case(0, "bearing_clearance", np.random.default_rng(5), load_plant_config())
     campaign = simulate_campaign(case, samples=1500)

@@ -19,11 +19,11 @@ from typing import Any
 
 import pytest
 
-from rig.campaign import SimulationSection
-from rig.measure import measure_plan, open_session, plant_config_for, run_meta
+from rig.hardware.simrig import SimulatedRig
+from rig.measurement.service import measure_plan, open_session, plant_config_for, run_meta
 from rig.plans import LoopParams, hysteresis_plan
+from rig.plans.campaign_file import SimulationSection
 from rig.runformat import read_run
-from rig.simrig import SimulatedRig
 from rig.store import Store
 from simulators.plant.config import load_plant_config
 

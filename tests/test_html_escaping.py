@@ -42,7 +42,7 @@ def write_hostile_store(root: Path):
     carry hostile operator, labels, sensors, calibration and override reason. Returns
     (store, campaign id of the last unit, its first run id)."""
     from rig.store import Store
-    from rig.synthetic_runs import write_campaign
+    from rig.store.synthetic_runs import write_campaign
 
     st = Store(root)
     unit = {**UNIT, "name": hostile("unit name"), "notes": hostile("notes")}
@@ -119,8 +119,8 @@ DIAGNOSIS_FIELDS = ["serial 9", "design", "operator", "rig name", "campaign name
 
 
 def test_spc_page_escapes_design_and_serial(store):
-    from rig.spc import spc_report
-    from rig.spc.html import render_html
+    from rig.reports.spc import spc_report
+    from rig.reports.spc.html import render_html
 
     st, _, _ = store
     doc = spc_report(st, design=hostile("design"))
@@ -131,7 +131,7 @@ def test_spc_page_escapes_design_and_serial(store):
 
 
 def test_certificates_escape_every_field(store, tmp_path):
-    from rig.certificate import Subject, certificate_context, render_certificate
+    from rig.reports.certificate import Subject, certificate_context, render_certificate
 
     st, campaign_id, _ = store
     folder = st.get_campaign(campaign_id).path

@@ -26,8 +26,8 @@ import pytest
 from nptdms import ChannelObject, TdmsWriter
 
 import rig
-from rig.errors import RigError, RunFormatError
-from rig.ids import id_problem
+from rig.core.errors import RigError, RunFormatError
+from rig.core.ids import id_problem
 from rig.io import read as io_read
 from rig.io.exporter import export_run
 from rig.io.importer import import_run, store_imported, write_imported

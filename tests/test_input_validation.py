@@ -23,9 +23,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from analysis.errors import AnalysisError
-from rig.analyse import analyse_run
-from rig.campaign import CampaignError, load_campaign
-from rig.errors import RigError
+from rig.core.errors import RigError
+from rig.plans.campaign_file import CampaignError, load_campaign
+from rig.results.analyse import analyse_run
 from rig.runformat import read_run
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""The drive keepalive in its own process (rig/keepalive_process.py), against the simulated
+"""The drive keepalive in its own process (rig/hardware/keepalive_process.py), against the simulated
 rig in its own process (``rig sim``): the drive's watchdog and its Modbus server are the
 simulated devices', reached over Modbus TCP.
 
@@ -21,9 +21,9 @@ import pytest
 
 from drivers.loading_drive import LoadingDrive
 from drivers.modbus.link import ModbusLink
-from rig.config import RigConfig, load_rig_config
-from rig.devices import open_rig
-from rig.simrig import SimulatedRig
+from rig.hardware.config import RigConfig, load_rig_config
+from rig.hardware.devices import open_rig
+from rig.hardware.simrig import SimulatedRig
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -126,8 +126,8 @@ def test_a_silent_program_gets_no_keepalive_from_the_process(sim):
 
 KILLED_PROGRAM = textwrap.dedent("""
     import sys, time
-    from rig.config import load_rig_config
-    from rig.devices import open_rig
+    from rig.hardware.config import load_rig_config
+    from rig.hardware.devices import open_rig
     rig = open_rig(load_rig_config(sys.argv[1]))
     while rig.keepalives_sent < 3:
         rig.alive(); time.sleep(0.05)

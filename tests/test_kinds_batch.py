@@ -16,7 +16,7 @@ from analysis.models.beveloid_batch import (
 )
 from analysis.models.by_kind import nominal_model_for_unit
 from analysis.models.cycloid_batch import Seed002Tolerances, cycloid_advice, cycloid_batch
-from rig.campaign import batch_band
+from rig.plans.campaign_file import batch_band
 
 UNITS = Path(__file__).resolve().parents[1] / "rig" / "examples" / "units"
 

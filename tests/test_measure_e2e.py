@@ -10,12 +10,18 @@ import threading
 import pytest
 from typer.testing import CliRunner
 
-from rig.campaign import SimulationSection
 from rig.cli import app
 from rig.engine import EngineOptions
 from rig.engine.safety import PlanRejected
-from rig.measure import RigSession, measure_plan, open_session, plant_config_for, run_meta
+from rig.measurement.service import (
+    RigSession,
+    measure_plan,
+    open_session,
+    plant_config_for,
+    run_meta,
+)
 from rig.plans import LoopParams, hysteresis_plan
+from rig.plans.campaign_file import SimulationSection
 from rig.runformat import read_run
 from rig.store import Store
 from simulators.clock import ManualClock

@@ -10,13 +10,19 @@ import sys
 import threading
 import time
 
-from rig.campaign import SimulationSection
-from rig.config import load_rig_config
-from rig.devices import open_rig
-from rig.measure import measure_plan, open_session, plant_config_for, run_meta, write_plant_toml
+from rig.hardware.config import load_rig_config
+from rig.hardware.devices import open_rig
+from rig.hardware.simrig import SimulatedRig
+from rig.measurement.service import (
+    measure_plan,
+    open_session,
+    plant_config_for,
+    run_meta,
+    write_plant_toml,
+)
 from rig.plans import LoopParams, hysteresis_plan
+from rig.plans.campaign_file import SimulationSection
 from rig.runformat import read_run
-from rig.simrig import SimulatedRig
 from rig.store import RECOVERED_REASON, Store
 from simulators.plant.config import load_plant_config
 

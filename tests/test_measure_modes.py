@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from rig.campaign import SimulationSection
 from rig.engine import EngineOptions
-from rig.measure import measure_plan, open_session, plant_config_for, run_meta
+from rig.measurement.service import measure_plan, open_session, plant_config_for, run_meta
 from rig.plans import CampaignAxes, LoopParams, campaign_plan, hysteresis_plan
+from rig.plans.campaign_file import SimulationSection
 from rig.store import Store
 from simulators.clock import ManualClock
 from simulators.plant import GearPlant

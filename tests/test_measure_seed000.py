@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from rig.campaign import load_campaign
-from rig.measure import open_session, plant_config_for, run_campaign
+from rig.measurement.service import open_session, plant_config_for, run_campaign
+from rig.plans.campaign_file import load_campaign
 from rig.runformat import read_campaign
 from rig.store import Store
 from simulators.clock import ManualClock

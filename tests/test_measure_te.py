@@ -18,13 +18,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from rig.campaign import SimulationSection
-from rig.measure import measure_plan, open_session, plant_config_for, run_meta
+from rig.hardware.simrig import SimulatedRig
+from rig.measurement.service import measure_plan, open_session, plant_config_for, run_meta
 from rig.plans import TEParams, te_plan
+from rig.plans.campaign_file import SimulationSection
+from rig.results.te_curve import te_curves
 from rig.runformat import read_run
-from rig.simrig import SimulatedRig
 from rig.store import Store
-from rig.te_curve import te_curves
 from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 from simulators.plant.config import load_plant_config

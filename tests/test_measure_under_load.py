@@ -18,11 +18,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from rig.campaign import SimulationSection
 from rig.engine import EngineOptions
 from rig.engine.devices import DevicesIO
-from rig.measure import measure_plan, open_session, plant_config_for, run_meta
+from rig.measurement.service import measure_plan, open_session, plant_config_for, run_meta
 from rig.plans import LoopParams, hysteresis_plan
+from rig.plans.campaign_file import SimulationSection
 from rig.runformat import read_run
 from rig.store import Store
 from simulators.clock import ManualClock

@@ -16,8 +16,8 @@ from pymodbus.client import ModbusTcpClient
 from drivers.errors import DeviceDisconnected, DeviceFault, DeviceOutOfRange, DeviceTimeout
 from drivers.loading_drive import LoadingDrive, LoadingDriveConfig
 from drivers.modbus.map import LOADING_DRIVE_MAP, DriveFaultCode, encode_float32
+from simulators.modbus.plant_backdoor import SineTestPlant
 from simulators.modbus.server import ModbusRigServer
-from simulators.modbus.test_plant import SineTestPlant
 
 TIMEOUT_S = 1.0
 BOUND_S = 10.0

@@ -1,7 +1,7 @@
 """The Modbus torque sensor driver against the simulated sensor, over TCP, RTU on a TCP
 socket and RTU on a real pty pair (socat), plus an outside client (mbpoll).
 
-The plant is :class:`simulators.modbus.test_plant.SineTestPlant`, whose torque is a closed
+The plant is :class:`simulators.modbus.plant_backdoor.SineTestPlant`, whose torque is a closed
 form, so the values that come over the wire are checked against numbers.
 """
 
@@ -29,8 +29,8 @@ from drivers.modbus.link import ModbusLink
 from drivers.modbus.map import SensorStatus
 from drivers.modbus.torque_sensor import ModbusTorqueSensor, ModbusTorqueSensorConfig
 from simulators.clock import ManualClock
+from simulators.modbus.plant_backdoor import SineTestPlant
 from simulators.modbus.server import ModbusRigServer
-from simulators.modbus.test_plant import SineTestPlant
 
 TIMEOUT_S = 1.0
 BOUND_S = 10.0  # generous bound on "an error comes in bounded time" (loaded 2-core CI)

@@ -17,10 +17,10 @@ from pathlib import Path
 
 import pytest
 
-from rig.campaign import SimulationSection
-from rig.measure import measure_plan, open_session, plant_config_for, run_meta
-from rig.outcome import campaign_outcome, run_outcome
+from rig.measurement.service import measure_plan, open_session, plant_config_for, run_meta
 from rig.plans import LoopParams, hysteresis_plan
+from rig.plans.campaign_file import SimulationSection
+from rig.results.outcome import campaign_outcome, run_outcome
 from rig.store import Store
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -143,7 +143,7 @@ def test_a_late_torque_channel_is_found_from_the_loop_alone():
     flanks (analysis.diagnosis.data.channel_lag_samples), and the run has no verdict."""
     import numpy as np
 
-    from rig.analyse import analyse_run
+    from rig.results.analyse import analyse_run
     from rig.runformat import read_run
 
     run = read_run(ROOT / "rig/examples/runs/pair3-pos000")
@@ -201,7 +201,7 @@ def test_campaign_outcome_without_limits():
 
 
 def test_one_vocabulary_and_the_filter_words():
-    from rig.outcome import OUTCOME_WORDS, OUTCOMES, outcome_word, parse_outcome
+    from rig.results.outcome import OUTCOME_WORDS, OUTCOMES, outcome_word, parse_outcome
 
     assert OUTCOMES == ("ok", "not_ok", "incomplete", "no_limits")
     assert [outcome_word(o) for o in OUTCOMES] == ["OK", "NOT OK", "INCOMPLETE", "NO LIMITS"]
@@ -239,13 +239,13 @@ def test_one_vocabulary_and_the_filter_words():
     ({"status": "completed", "outcome": "pass"}, "pass"),  # another lab's own word
 ])
 def test_older_and_foreign_records_are_read_in_the_one_vocabulary(meta, expected):
-    from rig.outcome import recorded_outcome
+    from rig.results.outcome import recorded_outcome
 
     assert recorded_outcome(meta) == expected
 
 
 def test_an_old_campaign_ok_without_limits_reads_no_limits():
-    from rig.outcome import recorded_campaign_outcome
+    from rig.results.outcome import recorded_campaign_outcome
 
     assert recorded_campaign_outcome("ok", {"lost_motion_arcmin_max": None},
                                      ["no_limits", "no_limits"], "completed") == "no_limits"

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from drivers.errors import DeviceFault, DeviceOutOfRange
-from rig.config import load_rig_config
-from rig.devices import open_rig
-from rig.simrig import SimulatedRig
+from rig.hardware.config import load_rig_config
+from rig.hardware.devices import open_rig
+from rig.hardware.simrig import SimulatedRig
 from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 from simulators.plant.config import PlantConfigError, load_plant_config

@@ -20,7 +20,7 @@ import pytest  # noqa: E402
 
 import rig  # noqa: E402
 from analysis.errors import AnalysisError  # noqa: E402
-from rig.errors import RigError  # noqa: E402
+from rig.core.errors import RigError  # noqa: E402
 from rig.runformat import Run as RawRun  # noqa: E402
 from rig.runformat import write_run  # noqa: E402
 
@@ -168,13 +168,16 @@ def test_namespace_exports_and_submodules_stay_reachable() -> None:
     assert {"open", "analyse", "diagnose", "model", "connect", "Store", "Run",
             "Campaign"} <= set(rig.__all__)
     assert rig.Store is importlib.import_module("rig.store").Store
-    # rig.analyse / rig.diagnose: the API when called, the module for its attributes
-    from rig.analyse import analyse_run
+    # rig.analyse / rig.diagnose are the API functions; the services are rig.results' modules
+    from rig.results.analyse import analyse_run
+    from rig.results.diagnose import diagnose_path
 
-    assert rig.analyse.analyse_run is analyse_run
-    assert rig.diagnose.diagnose_path is importlib.import_module("rig.diagnose").diagnose_path
-    for name in ("rig", "rig.api", "rig.api.data", "rig.api.reports", "rig.api.results",
-                 "rig.api.store", "rig.api.connect", "rig.api.plots"):
+    assert callable(rig.analyse) and rig.analyse.__module__ == "rig.api.reports"
+    assert callable(rig.diagnose) and rig.diagnose.__module__ == "rig.api.reports"
+    assert importlib.import_module("rig.results.analyse").analyse_run is analyse_run
+    assert importlib.import_module("rig.results.diagnose").diagnose_path is diagnose_path
+    for name in ("rig", "rig.api", "rig.api.data", "rig.api.reports", "rig.results.table",
+                 "rig.store.frame", "rig.api.connect", "rig.api.plots"):
         module = importlib.import_module(name)
         exported = set(module.__all__)
         assert not exported & {"np", "pd", "pa", "dataclass", "Path", "Any"}, name

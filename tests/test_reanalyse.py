@@ -1,7 +1,7 @@
 """``rig reanalyse``: results written back with their version, old ones kept, unreadable runs
 named, resumable, on a local Dask cluster or a scheduler address.
 
-The runs are the reference dead-zone loop (rig.synthetic_runs), so the re-computed metrics
+The runs are the reference dead-zone loop (rig.store.synthetic_runs), so the re-computed metrics
 are known in closed form: backlash = play, stiffness = 30 N·m/arcmin, lost motion = play +
 2 * 3 % * 10 N·m / 30 N·m/arcmin = play + 0.02 arcmin.
 """
@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 
 from rig import __version__
-from rig.reanalyse import reanalyse
-from rig.synthetic_runs import write_campaign
+from rig.store.reanalyse import reanalyse
+from rig.store.synthetic_runs import write_campaign
 
 REPO = Path(__file__).resolve().parent.parent
 UNIT = json.loads((REPO / "rig/examples/units/seed000-pair1.json").read_text())

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from rig.redact import redact, redact_argv, redact_environment, redact_text
+from rig.core.redact import redact, redact_argv, redact_environment, redact_text
 
 SECRET = "S3cr3t-pw"
 TOKEN = "op-token-77aa"
@@ -77,7 +77,7 @@ def _env(tmp_path: Path, **extra: str) -> dict[str, str]:
 def pg_store(pg_server, tmp_path):
     """A PostgreSQL store with one campaign, named by a URL with ``?password=``."""
     from rig.store import Store
-    from rig.synthetic_runs import write_campaign
+    from rig.store.synthetic_runs import write_campaign
 
     url = f"{pg_server.create_schema()}&password={SECRET}"
     st = Store(url, samples=tmp_path / "samples")
@@ -145,7 +145,7 @@ except RuntimeError:
 
 LOGGING = """
 import logging
-from rig.logs import configure_cli_logging
+from rig.core.logs import configure_cli_logging
 path = configure_cli_logging()
 logging.getLogger("rig.store").warning("store database %s unreachable", URL)
 logging.getLogger("rig.store").info("PGPASSWORD=%s set", PW)

@@ -14,9 +14,9 @@ import pytest
 from drivers.errors import DeviceFault, DeviceOutOfRange, DeviceTimeout
 from drivers.modbus.map import encode_float32
 from drivers.rig_controls import CLIMATE_MAP, INPUT_MOTOR_MAP
-from rig.config import load_rig_config
-from rig.devices import open_rig
-from rig.simrig import SimulatedRig
+from rig.hardware.config import load_rig_config
+from rig.hardware.devices import open_rig
+from rig.hardware.simrig import SimulatedRig
 from simulators.plant.config import load_plant_config
 
 HOUSING_TAU_S = 1.0

@@ -9,7 +9,12 @@ from pathlib import Path
 
 import pytest
 
-from rig.config import RigConfigError, dump_rig_toml, load_rig_config, rig_config_from_mapping
+from rig.hardware.config import (
+    RigConfigError,
+    dump_rig_toml,
+    load_rig_config,
+    rig_config_from_mapping,
+)
 
 REPO = Path(__file__).resolve().parent.parent
 EXAMPLES = REPO / "examples" / "rigs"

@@ -12,9 +12,9 @@ import sys
 
 import pytest
 
-from rig.config import load_rig_config
-from rig.device_check import check_devices
-from rig.simrig import SimulatedRig
+from rig.hardware.config import load_rig_config
+from rig.hardware.device_check import check_devices
+from rig.hardware.simrig import SimulatedRig
 
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 

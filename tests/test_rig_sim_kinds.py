@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rig.config import load_rig_config
-from rig.devices import open_rig
+from rig.hardware.config import load_rig_config
+from rig.hardware.devices import open_rig
 from simulators.plant import GearPlant
 from simulators.plant.config import load_plant_config
 

@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rig.config import load_rig_config
-from rig.devices import open_rig
-from rig.simrig import SimulatedRig
+from rig.hardware.config import load_rig_config
+from rig.hardware.devices import open_rig
+from rig.hardware.simrig import SimulatedRig
 from simulators.plant import GearPlant
 from simulators.plant.config import load_plant_config
 
@@ -185,7 +185,7 @@ def test_a_simulator_started_by_a_killed_program_stops_too():
     import os
 
     parent = subprocess.Popen(
-        [sys.executable, "-c", "import time\nfrom rig.simrig import SimulatedRig\n"
+        [sys.executable, "-c", "import time\nfrom rig.hardware.simrig import SimulatedRig\n"
          "s = SimulatedRig(None, in_process=False)\ns.start()\n"
          "print(s.process.pid, flush=True)\ntime.sleep(600)"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

@@ -16,7 +16,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from rig.errors import RunFormatError
+from rig.core.errors import RunFormatError
 from rig.runformat import (
     Campaign,
     Run,

@@ -118,7 +118,7 @@ def test_the_page_workers_are_ended_by_the_shutdown_even_mid_task() -> None:
     Before, the workers were only asked to stop (``shutdown(wait=False)``): the server's exit
     then waited for them (the niced preview worker up to 2 s on a loaded machine), and for
     the analysis to finish."""
-    from rig.errors import RigError
+    from rig.core.errors import RigError
     from rig.web.workers import run_in_worker, shutdown_workers, warm_up, worker_pids
 
     warm_up("preview", "analysis")

@@ -81,7 +81,7 @@ def small_line(st) -> None:
     """Five units, two positions each; worst lost motion = max play + 0.02 (closed form:
     2 * 3 % * 10 N·m / 30 N·m/arcmin) = 2.02, 2.22, 2.12, 2.62, 2.32 arcmin; worst backlash
     = X; one run of another design that must stay out of the SYN-1 charts."""
-    from rig.synthetic_runs import write_campaign
+    from rig.store.synthetic_runs import write_campaign
 
     plays = [[2.0, 1.9], [2.1, 2.2], [2.1, 1.8], [2.6, 2.5], [2.3, 2.2]]
     for k, p in enumerate(plays):
@@ -182,7 +182,7 @@ def test_the_view_uses_the_newest_reanalysis(tmp_path):
     the quality view charts the newest (by hand: unit P-3's run at 2.62 re-analysed to 2.40
     leaves its other run, 2.52, the worst; the centre line moves from 2.26 to 2.24), and says
     how many runs it took from there."""
-    from rig.spc import spc_report
+    from rig.reports.spc import spc_report
     from rig.store import Store
 
     st = Store(tmp_path / "store")
@@ -226,10 +226,10 @@ def test_spc_charts_of_lost_motion_backlash_stiffness_have_no_negative_lcl(tmp_p
     """Units of a near-zero-backlash design (backlash = play 0.1, 1.0, 0.2, 0.9, 0.1 arcmin,
     lost motion 0.02 more): both charts' centre - 3 sigma is below 0 (above); the LCL is 0
     on the JSON and on the page, which says why. Stiffness (30 for all) stays two-sided."""
-    from rig.spc import spc_report
-    from rig.spc.html import render_html
+    from rig.reports.spc import spc_report
+    from rig.reports.spc.html import render_html
     from rig.store import Store
-    from rig.synthetic_runs import write_campaign
+    from rig.store.synthetic_runs import write_campaign
 
     st = Store(tmp_path / "store")
     for k, play in enumerate([0.1, 1.0, 0.2, 0.9, 0.1]):
@@ -255,10 +255,10 @@ def test_each_unit_test_is_charted_against_its_own_campaigns_limits(tmp_path):
     chart's sigma_within 0.275 / 1.128 (3 sigma = 0.825 / 1.128): limit 3, mean 2.12:
     Cpk = 0.88 * 1.128 / 0.825 = 1.2032; limit 2, mean 2.47: Cpk = -0.47 * 1.128 / 0.825 =
     -0.6426182."""
-    from rig.spc import spc_report
-    from rig.spc.html import render_html
+    from rig.reports.spc import spc_report
+    from rig.reports.spc.html import render_html
     from rig.store import Store
-    from rig.synthetic_runs import write_campaign
+    from rig.store.synthetic_runs import write_campaign
 
     st = Store(tmp_path / "store")
     plays = [[2.0, 1.9], [2.1, 2.2], [2.1, 1.8], [2.6, 2.5], [2.3, 2.2]]
@@ -296,8 +296,8 @@ def test_the_x_axis_is_the_test_order_and_each_point_names_its_serial(tmp_path):
     import numpy as np
     from matplotlib.colors import to_rgb
 
-    from rig.spc import spc_report
-    from rig.spc.html import POINT_COLOUR, draw_chart, hover_targets, render_html
+    from rig.reports.spc import spc_report
+    from rig.reports.spc.html import POINT_COLOUR, draw_chart, hover_targets, render_html
     from rig.store import Store
 
     st = Store(tmp_path / "store")
@@ -324,10 +324,10 @@ def test_the_x_axis_is_the_test_order_and_each_point_names_its_serial(tmp_path):
 def test_the_heading_names_the_design(tmp_path):
     """Units whose runs record no design name are named by their gear data (and can be
     asked for by that name); runs without any unit data say so, never "Design (none)"."""
-    from rig.spc import spc_report
-    from rig.spc.html import render_html
+    from rig.reports.spc import spc_report
+    from rig.reports.spc.html import render_html
     from rig.store import Store
-    from rig.synthetic_runs import write_campaign
+    from rig.store.synthetic_runs import write_campaign
 
     st = Store(tmp_path / "store")
     for k, play in enumerate([2.0, 2.2, 2.1]):
@@ -351,9 +351,9 @@ def test_the_heading_names_the_design(tmp_path):
 def test_a_run_outside_campaigns_is_judged_by_its_own_run_json_limits(tmp_path):
     """Two campaigns with a lost-motion limit of 3 arcmin, then one run measured on its own
     (no campaign) with 2.5 in its run.json: its point carries 2.5, not a campaign's 3."""
-    from rig.spc import spc_report
+    from rig.reports.spc import spc_report
     from rig.store import Store
-    from rig.synthetic_runs import COLUMNS, closed_form_metrics, loop_samples, write_campaign
+    from rig.store.synthetic_runs import COLUMNS, closed_form_metrics, loop_samples, write_campaign
 
     st = Store(tmp_path / "store")
     for k, play in enumerate([2.0, 2.2]):

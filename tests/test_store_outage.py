@@ -20,10 +20,10 @@ from typing import Any
 
 import pytest
 
-from rig.campaign import SimulationSection, campaign_from_mapping
-from rig.measure import open_session, plant_config_for, run_campaign
+from rig.hardware.simrig import SimulatedRig
+from rig.measurement.service import open_session, plant_config_for, run_campaign
+from rig.plans.campaign_file import SimulationSection, campaign_from_mapping
 from rig.runformat import RUN_JSON, SAMPLES_PARQUET
-from rig.simrig import SimulatedRig
 from rig.store import Store
 from simulators.plant.config import load_plant_config
 

@@ -179,7 +179,7 @@ def test_rig_runs_json_on_postgresql_lists_every_run_once(pg_url, tmp_path):
 def test_the_pages_history_reads_either_back_end(make_store, tmp_path, monkeypatch):
     from fastapi.testclient import TestClient
 
-    from rig.synthetic_runs import write_campaign
+    from rig.store.synthetic_runs import write_campaign
     from rig.web import create_app
     from rig.web.settings import TOKEN_ENV, resolve_settings
 

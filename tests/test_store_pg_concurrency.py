@@ -4,7 +4,8 @@ Four simulated rigs (``rig campaign run --simulated``, each with its own devices
 real protocols) measure campaigns into one store at once, one of them killed mid-run.
 
 The database-restart test records through the ordinary Store API
-(:func:`rig.synthetic_runs.write_campaign`: runs of the reference dead-zone loop, samples paced
+(:func:`rig.store.synthetic_runs.write_campaign`: runs of the reference dead-zone loop, samples
+paced
 like a rig's). The server is a real throw-away PostgreSQL cluster (tests/pg_server.py).
 """
 
@@ -49,7 +50,7 @@ positions_deg = [90.0]
 WRITER = """
 import sys
 from rig.store import Store
-from rig.synthetic_runs import write_campaign
+from rig.store.synthetic_runs import write_campaign
 
 url, samples, serial, n_runs, seconds = sys.argv[1:6]
 st = Store(url, samples=samples, reconnect_s=60)

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 import rig
-from rig.campaign import CampaignError, campaign_from_mapping
-from rig.outcome import run_outcome
+from rig.plans.campaign_file import CampaignError, campaign_from_mapping
+from rig.results.outcome import run_outcome
+from rig.results.te import analyse_te_run, reversal_calibration
 from rig.runformat import read_run, write_run
-from rig.te import analyse_te_run, reversal_calibration
 from tests.te_runs import SEED000_UNIT, store_te_unit, te_run, truth_pp_arcsec, write_te_run
 
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
@@ -158,7 +158,7 @@ def test_certificate_of_a_te_campaign(tmp_path: Path) -> None:
 
 
 def test_spc_charts_te_peak_to_peak(tmp_path: Path) -> None:
-    from rig.spc import spc_report
+    from rig.reports.spc import spc_report
     from rig.store import Store
 
     st = Store(tmp_path / "store")
@@ -173,7 +173,7 @@ def test_spc_charts_te_peak_to_peak(tmp_path: Path) -> None:
     assert [p["verdict"] for p in te["points"]][3] == "NOT OK"
     assert te["chart"]["individuals"]["centre"] == pytest.approx(np.mean(values))
     assert d["metrics"]["lost_motion_arcmin"]["points"] == []
-    from rig.spc.html import render_html
+    from rig.reports.spc.html import render_html
 
     page = render_html(spc_report(st))
     assert 'data-metric="te_pp_arcsec"' in page and page.count("data:image/png;base64,") == 1
@@ -207,7 +207,7 @@ def test_encoder_eccentricity_calibrated_by_reversal_is_removed(tmp_path: Path) 
     """A 20 arcsec encoder-mounting eccentricity: in one run it is the output's order 1; the
     reversal (coupling indexed by 180 deg) finds it, the rig configuration's calibration
     carries it, and a later run's TE no longer shows it."""
-    from rig.calibration import CalibrationEntry
+    from rig.hardware.calibration import CalibrationEntry
 
     ecc = {"ecc_arcsec": 20.0, "ecc_phase_deg": 50.0}
     write_run(te_run("a", index_deg=0.0, **ecc), tmp_path / "a")
@@ -243,8 +243,8 @@ def test_encoder_eccentricity_calibrated_by_reversal_is_removed(tmp_path: Path) 
 
 
 def test_reanalyse_of_a_stored_te_run(tmp_path: Path) -> None:
-    from rig.reanalyse import plan, run_job
     from rig.store import Store
+    from rig.store.reanalyse import plan, run_job
 
     st = Store(tmp_path / "store")
     store_te_unit(st, "R-1", limits={"te_pp_max_arcsec": 400.0})

@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rig.campaign import CampaignError, campaign_from_mapping, load_campaign
-from rig.measure import plant_config_for, write_plant_toml
+from rig.measurement.service import plant_config_for, write_plant_toml
+from rig.plans.campaign_file import CampaignError, campaign_from_mapping, load_campaign
+from rig.results.te_curve import te_curves
 from rig.runformat import read_run
-from rig.te_curve import te_curves
 from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
-from rig.campaign import load_campaign
-from rig.measure import plant_config_for
+from rig.measurement.service import plant_config_for
+from rig.plans.campaign_file import load_campaign
 from rig.runformat import read_run
 from simulators.clock import ManualClock
 from simulators.plant import GearPlant

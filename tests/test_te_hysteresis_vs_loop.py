@@ -17,10 +17,10 @@ from pathlib import Path
 import pytest
 from test_measure_te import PARAMS, UNIT
 
-from rig.analyse import analyse_run
-from rig.campaign import SimulationSection
-from rig.measure import measure_plan, open_session, plant_config_for, run_meta
+from rig.measurement.service import measure_plan, open_session, plant_config_for, run_meta
 from rig.plans import LoopParams, hysteresis_plan, te_plan
+from rig.plans.campaign_file import SimulationSection
+from rig.results.analyse import analyse_run
 from rig.runformat import read_run
 from rig.store import Store
 from simulators.clock import ManualClock

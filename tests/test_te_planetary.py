@@ -1,6 +1,6 @@
 """Seed 003 measured, not only computed (issue 22 "done when"): the simulated planetary plant
 (simulators/plant/planetary.py, the paper train with one drawn unit's errors) turned forward
-and back in simulated time under a brake torque, its readings analysed by rig/te.py as a
+and back in simulated time under a brake torque, its readings analysed by rig/results/te.py as a
 recorded run would be. The unit drawn inside the tolerances measures its plant's truth and
 falls inside seed 003's Monte Carlo band, unflagged; the unit made outside them falls above
 the band and is flagged."""
@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rig.results.te import analyse_te_run
 from rig.runformat import Run
-from rig.te import analyse_te_run
 from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 from simulators.plant.config import PlantConfigError, load_plant_config

@@ -13,8 +13,8 @@ import sys
 import tomllib
 from pathlib import Path
 
+from rig.results.te import analyse_te_run
 from rig.runformat import read_run
-from rig.te import analyse_te_run
 from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 from simulators.plant.config import load_plant_config

@@ -1,7 +1,7 @@
 """The TE analysis against the simulated plant's truth (issue 22 "done when", without the
 sequencer): the plant (simulators/plant, te-rig's kinematic error, tooth pitch deviations,
 runout and encoder eccentricity) turned forward and back in simulated time under a brake
-torque, its output and input readings analysed by rig/te.py as a recorded run would be, and
+torque, its output and input readings analysed by rig/results/te.py as a recorded run would be, and
 compared with ``GearPlant.true_transmission_error``."""
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ import pytest
 from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
 from analysis.transmission import model_internal as mi
+from rig.results.te import analyse_te_run, reversal_calibration
 from rig.runformat import Run
-from rig.te import analyse_te_run, reversal_calibration
 from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 from simulators.plant.config import load_plant_config

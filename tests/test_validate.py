@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from rig.diagnose import diagnose_campaign
+from rig.results.diagnose import diagnose_campaign
 from rig.runformat import read_run_or_campaign, write_campaign
 from rig.validate import (
     COARSE_COUNTS,

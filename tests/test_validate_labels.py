@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from rig.errors import RigError
+from rig.core.errors import RigError
 from rig.validate.cases import generator_name, record, summarise_graded, summary_line
 from rig.validate.labels import grade, label_from_dict, read_labels
 

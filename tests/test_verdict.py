@@ -1,7 +1,7 @@
 """One verdict vocabulary everywhere (issue 21, items 3, 13, 14, 20 and 22): ``rig runs`` (table
 and ``--json``), ``rig spc`` with a NaN in the index, ``Store.runs(outcome=...)`` and the
 page's history API. The stores are written through the ordinary store API by
-:func:`rig.synthetic_runs.write_campaign` (closed-form dead-zone loops, recorded with limits
+:func:`rig.store.synthetic_runs.write_campaign` (closed-form dead-zone loops, recorded with limits
 and outcomes as a measured campaign records them); the commands run as processes.
 """
 
@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from rig.store import Store
-from rig.synthetic_runs import write_campaign
+from rig.store.synthetic_runs import write_campaign
 
 ROOT = Path(__file__).resolve().parents[1]
 UNIT = json.loads((ROOT / "rig/examples/units/seed000-pair1.json").read_text())

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from rig.analyse import analyse_run
+from rig.results.analyse import analyse_run
 from rig.runformat import Run, read_campaign, read_run, runs_equal, samples_csv_bytes
 from rig.store import Store
 from rig.web import create_app

@@ -10,7 +10,7 @@ import json
 import pytest
 from fastapi.testclient import TestClient
 
-from rig.campaign import batch_band
+from rig.plans.campaign_file import batch_band
 from rig.web.simulated import example_plant
 from tests.test_web_api import AUTH, REPO, client, store  # noqa: F401 (the API's fixtures)
 

@@ -20,9 +20,9 @@ import numpy as np
 
 from analysis.transmission import model_internal as mi
 from analysis.transmission.synthetic import synthetic_te
+from rig.reports.te_plots import plot_te
+from rig.results.te import analyse_te_run, reversal_calibration
 from rig.runformat import Run, read_run, write_run
-from rig.te import analyse_te_run, reversal_calibration
-from rig.te_plots import plot_te
 
 ROOT = Path(__file__).resolve().parents[2]
 UNIT = json.loads((ROOT / "rig/examples/units/seed000-pair1.json").read_text())

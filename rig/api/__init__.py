@@ -14,7 +14,7 @@ from pathlib import Path
 from rig.api.connect import Connection, connect, read_stored_campaign
 from rig.api.data import TWIST_COLUMN, Campaign, Run
 from rig.api.reports import Analysis, Diagnosis, Model, analyse, diagnose, model
-from rig.errors import RigError
+from rig.core.errors import RigError
 from rig.runformat import is_campaign, read_campaign, read_run
 from rig.store import Store, UnknownIdError, default_store_root, is_database_url
 

@@ -1,6 +1,7 @@
 """Measuring from a script: ``with rig.connect(simulated=True) as r: r.campaign(...)``.
 
-The services of ``rig campaign run`` and ``rig measure`` (:mod:`rig.measure`) do the work:
+The services of ``rig campaign run`` and ``rig measure`` (:mod:`rig.measurement.service`) do the
+work:
 the same plan, engine, store and verdicts. A simulated rig is started (its own process) for
 each campaign or run with that campaign's unit as its plant, as ``--simulated`` does; a real
 rig (``rig=`` a rig TOML) is opened once for the whole ``with`` block.
@@ -16,12 +17,11 @@ from typing import Any
 from pydantic import ValidationError
 
 from rig.api.data import Campaign, Run
-from rig.campaign import CampaignFile, Limits, campaign_from_mapping, load_campaign
+from rig.core.errors import RigError, RunFormatError
+from rig.core.json_files import finite_for_json, read_json_file
 from rig.engine import EngineOptions
 from rig.engine.events import ProgressEvent
-from rig.errors import RigError, RunFormatError
-from rig.json_files import finite_for_json, read_json_file
-from rig.measure import (
+from rig.measurement.service import (
     RigSession,
     measure_plan,
     open_session,
@@ -31,6 +31,7 @@ from rig.measure import (
     run_result,
 )
 from rig.plans import LoopParams, hysteresis_plan
+from rig.plans.campaign_file import CampaignFile, Limits, campaign_from_mapping, load_campaign
 from rig.runformat import CAMPAIGN_JSON, read_campaign
 from rig.runformat import Campaign as RawCampaign
 from rig.store import Store, default_store_root

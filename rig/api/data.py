@@ -16,7 +16,6 @@ import pandas as pd
 import pyarrow as pa
 
 from rig import runformat as rf
-from rig.analyse import TWIST_COLUMN, sample_twist_arcmin
 from rig.api.plots import axes_or_new, draw_positions_table
 from rig.api.reports import (
     Analysis,
@@ -27,7 +26,8 @@ from rig.api.reports import (
     model,
     one_run_campaign,
 )
-from rig.api.results import results_frame
+from rig.results.analyse import TWIST_COLUMN, sample_twist_arcmin
+from rig.results.table import results_frame
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -94,7 +94,7 @@ class Run:
     @property
     def twist_arcmin(self) -> np.ndarray:
         """Output twist in arcmin, as ``rig analyse`` computes it (uses ``test.ratio``),
-        centred on the loop (:func:`rig.analyse.sample_twist_arcmin`)."""
+        centred on the loop (:func:`rig.results.analyse.sample_twist_arcmin`)."""
         if self._twist is None:
             self._twist = sample_twist_arcmin(self.raw)
         return self._twist
@@ -116,7 +116,7 @@ class Run:
         the output angle: columns ``output_angle_deg`` (deg, the grid over one revolution),
         ``te_forward_arcsec`` and ``te_reverse_arcsec`` (arcsec, revolution-averaged, each
         centred on its mean; docs/transmission-error.md)."""
-        from rig.te import analyse_te_run
+        from rig.results.te import analyse_te_run
 
         return analyse_te_run(self.raw, with_model=False).te_frame()
 
@@ -125,7 +125,7 @@ class Run:
         return analyse(self, **options)
 
     def results(self, **options: Any) -> pd.DataFrame:
-        """The tidy results table: one row (:mod:`rig.api.results`)."""
+        """The tidy results table: one row (:mod:`rig.results.table`)."""
         return results_frame(one_run_campaign(self.raw), **options)
 
     def model(self) -> Model:
@@ -204,7 +204,7 @@ class Campaign:
         return diagnose(self)
 
     def results(self, **options: Any) -> pd.DataFrame:
-        """The tidy results table: one row per run (:mod:`rig.api.results`)."""
+        """The tidy results table: one row per run (:mod:`rig.results.table`)."""
         return results_frame(self.raw, **options)
 
     def plot(self, ax: Axes | None = None, **options: Any) -> Axes:

@@ -1,7 +1,7 @@
 """Plot helpers of the Python API: draw into the caller's matplotlib axes, or a new figure.
 
-The drawings are those of the reports (:func:`rig.plots.draw_loops`,
-:func:`rig.certificate.plots.draw_positions`); pyplot is only used to make a new figure when
+The drawings are those of the reports (:func:`rig.reports.loop_plots.draw_loops`,
+:func:`rig.reports.certificate.plots.draw_positions`); pyplot is only used to make a new figure when
 no axes are given, so the caller's backend (a notebook's inline one) is respected.
 """
 
@@ -36,8 +36,8 @@ def draw_positions_table(ax: Axes | None, results: pd.DataFrame, *,
                          model_arcmin: float | None = None,
                          title: str | None = None) -> Axes:
     """Lost motion (arcmin, with its uncertainty) against the input angle (deg) of a results
-    table (:mod:`rig.api.results`), with the nominal model, the batch band and the limit."""
-    from rig.certificate.plots import draw_positions
+    table (:mod:`rig.results.table`), with the nominal model, the batch band and the limit."""
+    from rig.reports.certificate.plots import draw_positions
 
     points = []
     for row in results.to_dict("records"):

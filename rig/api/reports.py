@@ -18,13 +18,13 @@ import pandas as pd
 from analysis.diagnosis import Diagnosis as DiagnosisResult
 from analysis.errors import AnalysisError
 from analysis.models.seed000 import Seed000Design, design_chain
-from rig.analyse import RunAnalysis, analyse_run
-from rig.api.results import result_row, rows_frame
-from rig.diagnose import diagnose_campaign, diagnose_path, report_dict
-from rig.errors import RigError
-from rig.json_files import finite_for_json
-from rig.run_meta_check import unit_problems
+from rig.core.errors import RigError
+from rig.core.json_files import finite_for_json
+from rig.results.analyse import RunAnalysis, analyse_run
+from rig.results.diagnose import diagnose_campaign, diagnose_path, report_dict
+from rig.results.table import result_row, rows_frame
 from rig.runformat import CAMPAIGN_FORMAT, Campaign, Run, is_campaign, read_run_or_campaign
+from rig.runformat.meta_check import unit_problems
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -57,7 +57,7 @@ def as_campaign(source: Any) -> tuple[Campaign, bool]:
 class Analysis:
     """Loop metrics of a run or campaign beside the model (``rig analyse``).
 
-    ``runs``: one :class:`rig.analyse.RunAnalysis` per run (twist in arcmin, the
+    ``runs``: one :class:`rig.results.analyse.RunAnalysis` per run (twist in arcmin, the
     :class:`analysis.loop.LoopResult`, the model). ``to_dict()``: the ``--json`` document.
     """
 
@@ -76,7 +76,7 @@ class Analysis:
         return finite_for_json(payload)
 
     def to_pandas(self) -> pd.DataFrame:
-        """The tidy results table of these analyses (see :mod:`rig.api.results`)."""
+        """The tidy results table of these analyses (see :mod:`rig.results.table`)."""
         return rows_frame([result_row(item.run, item, campaign_meta=self.campaign.meta)
                            for item in self.runs])
 
@@ -84,11 +84,11 @@ class Analysis:
         """The loops (torque in N·m vs twist in arcmin) with the model, into ``ax`` (a new
         figure if None); returns the axes."""
         from rig.api.plots import axes_or_new
-        from rig.plots import draw_loops
-        from rig.te import TERunAnalysis
+        from rig.reports.loop_plots import draw_loops
+        from rig.results.te import TERunAnalysis
 
         if isinstance(self.runs[0], TERunAnalysis):
-            from rig.te_plots import draw_te
+            from rig.reports.te_plots import draw_te
 
             return draw_te(axes_or_new(ax), self.runs[0])
         title = None if self.single else f"Hysteresis loops: campaign {self.campaign.name}"
@@ -147,9 +147,10 @@ class Model:
 def analyse(run_or_path: Any, **options: Any) -> Analysis:
     """Loop metrics of a run or campaign (a path, ``rig.open(...)``, or a rig.runformat
     object), as ``rig analyse``; of a transmission error run, its TE analysis
-    (:class:`rig.te.TERunAnalysis`). ``options`` (hysteresis runs): ``profile`` ("nabtesco" ±3 %,
+    (:class:`rig.results.te.TERunAnalysis`). ``options`` (hysteresis runs): ``profile``
+    ("nabtesco" ±3 %,
     "harmonic-drive" ±4 %), ``percent``, ``rated_torque_Nm``, ``hd_T1_Nm``, ``hd_T2_Nm``."""
-    from rig.te import analyse_te_run, is_te_run
+    from rig.results.te import analyse_te_run, is_te_run
 
     campaign, single = as_campaign(run_or_path)
     return Analysis(campaign, [analyse_te_run(run) if is_te_run(run) else
@@ -170,7 +171,7 @@ def model(unit_mapping_or_path: Any) -> Model:
     or run.json file, or a run from ``rig.open``; as ``rig model``."""
     source = unit_mapping_or_path
     if isinstance(source, str | Path):
-        from rig.commands.model import load_unit_mapping
+        from rig.runformat.unit_file import load_unit_mapping
 
         where, mapping = str(source), load_unit_mapping(Path(source))
     elif isinstance(source, Mapping):

@@ -12,7 +12,7 @@ from rich.markup import escape
 from rich.table import Table
 
 if TYPE_CHECKING:
-    from rig.analyse import RunAnalysis
+    from rig.results.analyse import RunAnalysis
 
 
 def _num(value: Any, digits: int = 3) -> str:
@@ -161,10 +161,10 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Compute lost motion, backlash, stiffness, loop area and torque offset, with the model;
         of a transmission error run, its TE figures, orders and the seeds' band."""
-        from rig.analyse import analyse_run
-        from rig.json_output import JsonOutput
+        from rig.commands.output import JsonOutput
+        from rig.results.analyse import analyse_run
+        from rig.results.te import analyse_te_run, is_te_run
         from rig.runformat import is_campaign, read_run_or_campaign
-        from rig.te import analyse_te_run, is_te_run
 
         json_out = JsonOutput(json_file)
         console = Console(stderr=json_out.to_stdout)
@@ -212,13 +212,13 @@ def register(app: typer.Typer) -> None:
             console.print(f"metrics written to {json_out.where}")
         if plot is not None:
             if items:
-                from rig.plots import plot_loops
+                from rig.reports.loop_plots import plot_loops
 
                 title = None if single else f"Hysteresis loops: campaign {campaign.name}"
                 plot_loops(items, plot, title=title)
                 console.print(f"loop picture written to {plot}")
             else:
-                from rig.te_plots import plot_te
+                from rig.reports.te_plots import plot_te
 
                 plot_te(te_items[0], plot)
                 console.print(f"TE picture written to {plot}")

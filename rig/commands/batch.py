@@ -33,8 +33,8 @@ def register(app: typer.Typer) -> None:
         """
         from analysis.models.seed000_batch import lost_motion_batch
         from analysis.models.seed000_unit import InternalPairUnit
-        from rig.commands.model import load_unit_mapping
-        from rig.json_output import JsonOutput
+        from rig.commands.output import JsonOutput
+        from rig.runformat.unit_file import load_unit_mapping
 
         json_out = JsonOutput(json_file)
         unit, _ = InternalPairUnit.from_mapping(load_unit_mapping(unit_file))

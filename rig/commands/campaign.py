@@ -74,9 +74,9 @@ def register(app: typer.Typer) -> None:
         ] = False,
     ) -> None:
         """Run a campaign; write its runs and campaign.json under the store's campaigns/."""
-        from rig.campaign import load_campaign
-        from rig.errors import RigError
-        from rig.measure import open_session, plant_config_for, run_campaign
+        from rig.core.errors import RigError
+        from rig.measurement.service import open_session, plant_config_for, run_campaign
+        from rig.plans.campaign_file import load_campaign
         from rig.plans.estimate import estimate
         from rig.store import Store
 

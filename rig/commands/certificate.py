@@ -28,7 +28,7 @@ def register(app: typer.Typer) -> None:
         their uncertainties against the limits, OK / NOT OK / INCOMPLETE / NO LIMITS; for a
         campaign the lost motion against position with the batch band and the diagnosis
         verdict if one was made. --store is read only when RUN_OR_CAMPAIGN is not a folder."""
-        from rig.certificate import CertificateError, resolve_subject, write_certificate
+        from rig.reports.certificate import CertificateError, resolve_subject, write_certificate
 
         if pdf is None and html is None:
             raise CertificateError("give --pdf FILE and/or --html FILE: nothing to write")

@@ -17,7 +17,7 @@ def _fmt(value: float | None, digits: int = 6) -> str:
 
 
 def _table(reports: list, title: str) -> Table:
-    from rig.device_check import DeviceReport
+    from rig.hardware.device_check import DeviceReport
 
     table = Table(title=title)
     for column in ("device", "samples", "rate Hz", "expected Hz", "lost", "late", "last",
@@ -47,8 +47,8 @@ def register(app: typer.Typer) -> None:
 
         Exit 0 when every device is healthy, 1 when one has errors, 2 on a bad configuration.
         """
-        from rig.config import RigConfigError, load_rig_config
-        from rig.device_check import check_devices
+        from rig.hardware.config import RigConfigError, load_rig_config
+        from rig.hardware.device_check import check_devices
 
         err = Console(stderr=True)
         try:

@@ -36,8 +36,8 @@ def register(app: typer.Typer) -> None:
                                           help="Worker processes of the self-check.")] = 2,
     ) -> None:
         """Where model and measurement disagree, which unmodelled effect, how far it shrinks."""
-        from rig.diagnose import diagnose_path, report_dict
-        from rig.json_output import JsonOutput
+        from rig.commands.output import JsonOutput
+        from rig.results.diagnose import diagnose_path, report_dict
 
         json_out = JsonOutput(json_file)
         console = Console(stderr=json_out.to_stdout)
@@ -45,7 +45,7 @@ def register(app: typer.Typer) -> None:
             camp, result = diagnose_path(campaign, alpha=alpha)
             report = report_dict(camp, result)
         if self_check:
-            from rig.report_html import self_check_words
+            from rig.reports.diagnosis_html import self_check_words
             from rig.validate.like import self_check as run_self_check
 
             with console.status(f"self-check on {self_check} campaigns like this one..."):
@@ -79,8 +79,8 @@ def register(app: typer.Typer) -> None:
             json_out.write(report, ensure_ascii=True)
             console.print(f"report written to {json_out.where}")
         if html_file is not None:
-            from rig.certificate.header import header_for_campaign
-            from rig.report_html import write_html
+            from rig.reports.certificate.header import header_for_campaign
+            from rig.reports.diagnosis_html import write_html
 
             write_html(report, result, html_file, header=header_for_campaign(camp))
             console.print(f"HTML report written to {html_file}")

@@ -81,7 +81,7 @@ def _print_run(out: Console, data: dict[str, Any]) -> None:
 
 
 def _print_te(out: Console, data: dict[str, Any]) -> None:
-    """A transmission error run's raw figures (rig/te_curve.py: nothing removed)."""
+    """A transmission error run's raw figures (rig/results/te_curve.py: nothing removed)."""
     raw = data.get("te_raw") or {}
 
     def f(key: str, unit: str) -> str:
@@ -106,14 +106,15 @@ TESTS = {"lost-motion": "lost_motion", "transmission-error": "transmission_error
 
 
 OUTCOME_STYLE = {"ok": "green", "not_ok": "red", "incomplete": "yellow"}
-"""How the CLI colours an outcome's word (the words: rig/outcome.py)."""
+"""How the CLI colours an outcome's word (the words: rig/results/outcome.py)."""
 
 
 def outcome_markup(code: str | None) -> str:
-    """The outcome's word (rig/outcome.py, the one vocabulary) in its colour, rich markup."""
+    """The outcome's word (rig/results/outcome.py, the one vocabulary) in its colour, rich
+    markup."""
     from rich.markup import escape
 
-    from rig.outcome import outcome_word
+    from rig.results.outcome import outcome_word
 
     word = escape(outcome_word(code))
     style = OUTCOME_STYLE.get(code or "")
@@ -124,7 +125,7 @@ def print_outcome(out: Console, result: dict[str, Any]) -> None:
     """``outcome: WORD (what it means)`` and each cause on its own indented line."""
     from rich.markup import escape
 
-    from rig.outcome import OUTCOME_MEANINGS
+    from rig.results.outcome import OUTCOME_MEANINGS
 
     code = result.get("outcome")
     meaning = OUTCOME_MEANINGS.get(code or "")
@@ -139,7 +140,7 @@ def exit_code(code: str | None) -> int:
 
 
 def write_json(path: Path, payload: dict[str, Any]) -> None:
-    from rig.json_files import finite_for_json
+    from rig.core.json_files import finite_for_json
 
     text = json.dumps(finite_for_json(payload), indent=2, allow_nan=False,
                       ensure_ascii=False) + "\n"
@@ -226,10 +227,16 @@ def register(app: typer.Typer) -> None:
         transmission-error the transmission error in both directions, into the store."""
         from pydantic import ValidationError
 
-        from rig.campaign import Limits
-        from rig.errors import RigError
-        from rig.measure import measure_plan, open_session, plant_config_for, run_meta, run_result
+        from rig.core.errors import RigError
+        from rig.measurement.service import (
+            measure_plan,
+            open_session,
+            plant_config_for,
+            run_meta,
+            run_result,
+        )
         from rig.plans import LoopParams, hysteresis_plan
+        from rig.plans.campaign_file import Limits
         from rig.plans.estimate import estimate
         from rig.store import Store
         from simulators.plant.config import PlantConfigError, load_plant_config
@@ -239,7 +246,7 @@ def register(app: typer.Typer) -> None:
             raise RigError(f"--test: expected one of {', '.join(TESTS)}, got {test!r}")
         unit_data: dict[str, Any] = {}
         if unit is not None:
-            from rig.json_files import read_json_file
+            from rig.core.json_files import read_json_file
 
             unit_data = read_json_file(unit, RigError, "unit data")
             if not isinstance(unit_data, dict):
@@ -286,8 +293,8 @@ def register(app: typer.Typer) -> None:
             if not unit_data:
                 unit_data = dict(plant_cfg.unit)
         if rig is not None:  # an expired calibration is refused before the rig is opened
-            from rig.calibration import calibration_meta
-            from rig.config import load_rig_config
+            from rig.hardware.calibration import calibration_meta
+            from rig.hardware.config import load_rig_config
 
             calibration_meta(load_rig_config(rig).calibration, calibration_override)
         st = Store(store, samples=samples)
@@ -295,7 +302,7 @@ def register(app: typer.Typer) -> None:
                 progress_bar(out, est.total_s) as on_event:
             from analysis.loop import PROFILES
             from rig.engine import EngineOptions
-            from rig.measure import simulated_truth
+            from rig.measurement.service import simulated_truth
 
             options = EngineOptions(profile=profile, stale_timeout_s=session.stale_timeout_s,
                                     limits=limits.model_dump(),
@@ -332,7 +339,7 @@ def _te_plan(rated_torque: float, speed: float, brake: float, revolutions: float
     """The transmission error plan of ``rig measure --test transmission-error``."""
     from pydantic import ValidationError
 
-    from rig.errors import RigError
+    from rig.core.errors import RigError
     from rig.plans import TEParams, te_plan, unit_ratio
 
     if ratio is None:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
 from rich.console import Console
@@ -11,23 +11,7 @@ from rich.table import Table
 
 from analysis.errors import AnalysisError
 from analysis.models.seed000 import Seed000Design, design_chain, format_arcmin
-from rig.errors import RigError, RunFormatError
-from rig.json_files import read_json_file
-
-
-def load_unit_mapping(path: Path) -> dict[str, Any]:
-    """The ``unit`` object from a unit file or a whole run.json (errors name file, line, col)."""
-    data = read_json_file(path, RigError, "unit file")
-    if isinstance(data, dict) and isinstance(data.get("unit"), dict):
-        data = data["unit"]
-    if not isinstance(data, dict):
-        raise RunFormatError(path, "expected a JSON object (a unit or a run.json)")
-    from rig.run_meta_check import unit_problems
-
-    problems = unit_problems(data)
-    if problems:
-        raise RigError(f"{path}: {problems[0]}")
-    return data
+from rig.runformat.unit_file import load_unit_mapping
 
 
 def _mm(value: float | None, digits: int = 4) -> str:
@@ -96,7 +80,7 @@ def register(app: typer.Typer) -> None:
         ] = None,
     ) -> None:
         """Seed 000 design chain (eqs. 1-16) and the reference nominal model of a gear unit."""
-        from rig.json_output import JsonOutput
+        from rig.commands.output import JsonOutput
 
         out = JsonOutput(json_out)
         console = Console(stderr=out.to_stdout)

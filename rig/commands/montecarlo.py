@@ -25,7 +25,7 @@ from analysis.models.seed003_montecarlo import (
     spectrum,
 )
 from analysis.models.seed003_planetary import PaperReading, paper_train
-from rig.errors import RigError
+from rig.core.errors import RigError
 
 FORMAT = "rig-montecarlo/1"
 SIGNS = ("printed", "consistent")
@@ -167,7 +167,7 @@ def register(app: typer.Typer) -> None:
             stage3_planet_row=_choice(planet_row, PLANET_ROWS, "--planet-row"),  # type: ignore
         )
         check_sample_count(samples)
-        from rig.json_output import JsonOutput, json_to_stdout
+        from rig.commands.output import JsonOutput, json_to_stdout
 
         if (json_path is not None and not json_to_stdout(json_path)
                 and not json_path.parent.is_dir()):

@@ -38,9 +38,9 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
-        from rig.errors import RigError
-        from rig.reanalyse import reanalyse as run_reanalysis
+        from rig.core.errors import RigError
         from rig.store import Store
+        from rig.store.reanalyse import reanalyse as run_reanalysis
 
         if dask and workers:
             raise RigError("give --dask (a scheduler) or --workers (a local cluster), not both")

@@ -9,7 +9,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from rig.errors import RigError
+from rig.core.errors import RigError
 
 
 def register(app: typer.Typer) -> None:
@@ -29,7 +29,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Seed 004 Table 3: single-rotor and coupled critical speeds (r/min), paper vs ours."""
         from analysis.models.seed004_paper import Assumptions, table3
-        from rig.json_output import JsonOutput
+        from rig.commands.output import JsonOutput
 
         json_out = JsonOutput(json_file)
         console = Console(stderr=json_out.to_stdout)

@@ -1,5 +1,5 @@
 """``rig runs``: list the runs of a measurement store with their status, verdict (OK / NOT OK /
-INCOMPLETE / NO LIMITS, rig/outcome.py) and lost motion."""
+INCOMPLETE / NO LIMITS, rig/results/outcome.py) and lost motion."""
 
 from __future__ import annotations
 
@@ -47,8 +47,8 @@ def run_json(info: RunInfo) -> dict[str, Any]:
     """One run of ``rig runs --json``: the index row (:meth:`RunInfo.to_dict`) with its
     ``verdict`` (the displayed word of ``outcome``) and ``lost_motion_arcmin`` /
     ``lost_motion_arcmin_u`` (arcmin) beside; strict JSON (NaN, infinities as null)."""
-    from rig.json_files import finite_for_json
-    from rig.outcome import outcome_word
+    from rig.core.json_files import finite_for_json
+    from rig.results.outcome import outcome_word
 
     value, u = lost_motion(info)
     verdict = None if info.outcome is None else outcome_word(info.outcome)

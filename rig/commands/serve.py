@@ -43,11 +43,11 @@ def register(app: typer.Typer) -> None:
         Prints the page's address and the operator token; stops on Ctrl-C (the rig is left
         in its safe state).
         """
-        from rig.engine.host import EngineHost, EngineSpec
-        from rig.errors import RigError
-        from rig.process_exit import prepare_exit
+        from rig.core.errors import RigError
+        from rig.core.process_exit import prepare_exit
         from rig.store import Store, default_store_root
         from rig.web.app import create_app
+        from rig.web.engine_host import EngineHost, EngineSpec
         from rig.web.live import LiveHub
         from rig.web.server import bind, uvicorn_server
         from rig.web.settings import resolve_settings
@@ -71,7 +71,7 @@ def register(app: typer.Typer) -> None:
             description = f"simulated rig (plant: example unit {unit})"
         else:
             description = f"rig {rig}"
-        # The rig runs in the engine's own process (rig/engine/host.py): no page request,
+        # The rig runs in the engine's own process (rig/web/engine_host.py): no page request,
         # SSE client or analysis of this server can hold up its keepalive or acquisition.
         controller = EngineHost(EngineSpec(
             store=str(root), samples=None if samples is None else str(samples),

@@ -61,8 +61,8 @@ def register(app: typer.Typer) -> None:
         The first output line is one JSON object: the address of every device and
         "rig_config", the rig configuration file that connects to them.
         """
-        from rig.process_exit import prepare_exit
-        from rig.simrig import SimulatedRig, serve_until_signalled
+        from rig.core.process_exit import prepare_exit
+        from rig.hardware.simrig import SimulatedRig, serve_until_signalled
         from simulators.plant.config import PlantConfigError
 
         try:
@@ -77,7 +77,7 @@ def register(app: typer.Typer) -> None:
             for line in str(exc).splitlines():
                 print(f"rig: error: {line}", file=sys.stderr)
             raise typer.Exit(2) from exc
-        from rig.realtime import apply_realtime_priority
+        from rig.core.realtime import apply_realtime_priority
 
         apply_realtime_priority(sim_rig.realtime_priority or sim_rig.device_priority,
                                 what="simulated rig")

@@ -36,9 +36,9 @@ def register(app: typer.Typer) -> None:
         from rich.markup import escape
         from rich.table import Table
 
-        from rig.errors import RigError
-        from rig.spc import spc_report
-        from rig.spc.html import render_html
+        from rig.core.errors import RigError
+        from rig.reports.spc import spc_report
+        from rig.reports.spc.html import render_html
         from rig.store import Store
 
         st = Store(store, create=False, samples=samples)

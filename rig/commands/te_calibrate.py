@@ -22,9 +22,9 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Separate the output encoder's once-per-turn eccentricity from the unit's own TE by
         the reversal of two runs; print the rig configuration lines that remove it."""
-        from rig.json_output import JsonOutput
+        from rig.commands.output import JsonOutput
+        from rig.results.te import reversal_calibration
         from rig.runformat import read_run
-        from rig.te import reversal_calibration
 
         json_out = JsonOutput(json_file)
         console = Console(stderr=json_out.to_stdout)

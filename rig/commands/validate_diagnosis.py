@@ -20,7 +20,7 @@ from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
-from rig.errors import RigError
+from rig.core.errors import RigError
 
 console = Console()
 
@@ -256,7 +256,7 @@ def register(app: typer.Typer) -> None:
         """Diagnose labelled campaigns blind and grade them: per-effect confusion, false alarms,
         also recall/precision, median shrink, one summary line per generator. Without
         --cases-dir: campaigns from our own generator (rig/validate/)."""
-        from rig.json_output import JsonOutput
+        from rig.commands.output import JsonOutput
         from rig.validate.cases import generator_name, grade_folder, summarise_graded
 
         json_out = JsonOutput(json_file)

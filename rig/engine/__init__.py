@@ -31,14 +31,13 @@ from typing import Any
 import numpy as np
 
 from drivers.errors import DeviceError, DeviceFault, DeviceTimeout
+from rig.core.errors import RigError
 from rig.engine.events import EventHub, ProgressEvent
 from rig.engine.frozen import FrozenTwistWatch
 from rig.engine.io import RigIO
 from rig.engine.merge import ChannelMerger, ControlLog, ControlState, MergedRow
 from rig.engine.record import OpenRun, RunOutcome
 from rig.engine.safety import check_command, check_measured, preflight
-from rig.errors import RigError
-from rig.outcome import LIMIT_KEYS
 from rig.plans import TE_KIND, Plan, run_label
 from rig.plans.estimate import PlanEstimate, estimate
 from rig.plans.steps import (
@@ -58,6 +57,7 @@ from rig.plans.steps import (
     WaitTemperature,
     describe,
 )
+from rig.results.outcome import LIMIT_KEYS
 from rig.store import Store, StoreUnavailable
 
 log = logging.getLogger(__name__)
@@ -113,9 +113,9 @@ class EngineOptions:
     extra_meta: dict[str, Any] = field(default_factory=dict)
     run_meta: Callable[[dict[str, Any]], dict[str, Any]] | None = None
     """Extra run.json keys of one run from its ``test`` (e.g. the simulated plant's truth
-    under ``generator``, rig/measure.py); None: none."""
+    under ``generator``, rig/measurement/service.py); None: none."""
     limits: dict[str, Any] | None = None
-    """The limits of the runs (rig/outcome.py keys): run.json ``limits``, and ``outcome``
+    """The limits of the runs (rig/results/outcome.py keys): run.json ``limits``, and ``outcome``
     against them."""
 
 
@@ -1032,7 +1032,7 @@ def frozen_watch(meta: dict[str, Any], test: dict[str, Any], t0_mono_s: float = 
     """The frozen-twist watch of a run (rig/engine/frozen.py), from its sensors, rated torque
     and the unit's nominal model; None when the run says too little to judge. ``t0_mono_s``:
     the run's start (s, monotonic clock), for the times in its message."""
-    from rig.analyse import nominal_model_for_unit
+    from rig.results.analyse import nominal_model_for_unit
 
     counts = (meta.get("sensors") or {}).get("encoder_counts_per_rev")
     rated = test.get("rated_torque_Nm")
@@ -1050,7 +1050,7 @@ def frozen_watch(meta: dict[str, Any], test: dict[str, Any], t0_mono_s: float = 
 
 
 def limits_dict(limits: dict[str, Any] | None) -> dict[str, Any]:
-    """Every limit key (rig/outcome.py), None where not checked."""
+    """Every limit key (rig/results/outcome.py), None where not checked."""
     return {key: (limits or {}).get(key) for key in LIMIT_KEYS}
 
 

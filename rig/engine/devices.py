@@ -22,15 +22,15 @@ from typing import Any
 
 from drivers.errors import DeviceError, DeviceFault, DeviceProtocolError
 from drivers.transducer.protocol import DEVICE_TIME_MODULO_S
-from rig.devices import RigDevices
 from rig.engine.steady_clock import SteadyClock, SyncClock
+from rig.hardware.devices import RigDevices
 
 MAX_BAD_LINES_IN_A_ROW = 10
 log = logging.getLogger(__name__)
 
 
 class DevicesIO:
-    """Implements :class:`rig.engine.io.RigIO` over :class:`rig.devices.RigDevices`."""
+    """Implements :class:`rig.engine.io.RigIO` over :class:`rig.hardware.devices.RigDevices`."""
 
     def __init__(self, devices: RigDevices) -> None:
         if devices.encoder is None or devices.transducer is None or devices.drive is None:

@@ -1,7 +1,7 @@
 """What the engine needs from the rig: a narrow interface over the devices.
 
 :class:`RigIO` is implemented by :class:`rig.engine.devices.DevicesIO` over
-:class:`rig.devices.RigDevices` (real or simulated devices over their real protocols).
+:class:`rig.hardware.devices.RigDevices` (real or simulated devices over their real protocols).
 Every method raises a :class:`drivers.errors.DeviceError` naming the device on a fault.
 Times are host ``time.monotonic()`` seconds; units are in the names.
 """

@@ -15,10 +15,10 @@ from typing import Any
 import numpy as np
 
 from analysis.errors import AnalysisError
-from rig.analyse import METRIC_KEYS, analyse_run
+from rig.core.errors import RigError
 from rig.engine.merge import MergedRow
-from rig.errors import RigError
-from rig.outcome import run_outcome
+from rig.results.analyse import METRIC_KEYS, analyse_run
+from rig.results.outcome import run_outcome
 from rig.runformat import Run
 from rig.store import RunRecorder
 
@@ -53,7 +53,7 @@ class RunOutcome:
     analysis: dict[str, Any] = field(default_factory=dict)
     result: dict[str, Any] = field(default_factory=dict)
     outcome: str = "incomplete"
-    """"ok", "not_ok" or "incomplete" against ``limits`` (rig/outcome.py)."""
+    """"ok", "not_ok" or "incomplete" against ``limits`` (rig/results/outcome.py)."""
     limits: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
@@ -181,11 +181,11 @@ class OpenRun:
         return self._outcome("completed", None, analysis, result, verdict)
 
     def _finish_te(self, result: dict[str, Any], test: dict[str, Any]) -> RunOutcome:
-        """A transmission error run: the raw TE figures (rig/te_curve.py) under
-        ``result.te_raw``, and the analysis of rig/te.py (metrics, uncertainties, the model;
+        """A transmission error run: the raw TE figures (rig/results/te_curve.py) under
+        ``result.te_raw``, and the analysis of rig/results/te.py (metrics, uncertainties, the model;
         run-format.md's ``result``); closed as completed."""
-        from rig.te import analyse_te_run
-        from rig.te_curve import te_summary
+        from rig.results.te import analyse_te_run
+        from rig.results.te_curve import te_summary
 
         analysis: dict[str, Any] = {}
         try:

@@ -3,7 +3,7 @@ commanded torque) and while it runs (every commanded and every measured torque).
 
 from __future__ import annotations
 
-from rig.errors import RigError
+from rig.core.errors import RigError
 from rig.plans.steps import Ramp, Step, StepTwist, TurnInput
 
 

@@ -1,9 +1,10 @@
 """``rig export``: a run or a campaign in the formats other tools read.
 
 A run (its sample columns, then ``twist_arcmin``: the twist in arcmin centred on the loop,
-:func:`rig.analyse.sample_twist_arcmin`, the column the Python API's ``.to_pandas()`` adds; a
+:func:`rig.results.analyse.sample_twist_arcmin`, the column the Python API's ``.to_pandas()``
+adds; a
 ``twist_arcmin`` the run already holds is recomputed, never doubled; a transmission error run
-also ``te_arcsec`` before it, each sample's TE, :func:`rig.te.sample_te_arcsec`):
+also ``te_arcsec`` before it, each sample's TE, :func:`rig.results.te.sample_te_arcsec`):
 
 - ``csv``: a rig-run/1 run folder (run.json + samples.csv), :func:`rig.runformat.write_run`;
   its columns read back bit for bit.
@@ -17,7 +18,7 @@ also ``te_arcsec`` before it, each sample's TE, :func:`rig.te.sample_te_arcsec`)
   Numbers carry 16 significant digits (openpyxl writes ``%.16g``, Excel's own precision):
   within 1e-15 relative, not bit for bit; use csv, parquet or mat for that.
 
-A campaign: its tidy results table (:mod:`rig.api.results`, one row per run, the table of
+A campaign: its tidy results table (:mod:`rig.results.table`, one row per run, the table of
 ``rig.open(...).results()``) as CSV, Parquet, MATLAB (one variable per column) or XLSX
 (sheets ``results`` and ``campaign``).
 Units follow the column names (s, N·m, deg, °C, arcmin, J).
@@ -37,8 +38,8 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from rig.errors import RigError
-from rig.ids import id_from_text, id_problem
+from rig.core.errors import RigError
+from rig.core.ids import id_from_text, id_problem
 from rig.io.safe_write import atomic_file, atomic_folder, check_target
 from rig.runformat import Campaign, Run, write_run
 
@@ -113,11 +114,11 @@ def _meta_json(meta: dict[str, Any]) -> str:
 
 
 def with_twist(run: Run) -> Run:
-    """``run`` with :data:`rig.analyse.TWIST_COLUMN` as its last column (same meta); a
-    transmission error run also with ``te_arcsec`` (:func:`rig.te.sample_te_arcsec`) before
+    """``run`` with :data:`rig.results.analyse.TWIST_COLUMN` as its last column (same meta); a
+    transmission error run also with ``te_arcsec`` (:func:`rig.results.te.sample_te_arcsec`) before
     it."""
-    from rig.analyse import TWIST_COLUMN, sample_twist_arcmin
-    from rig.te import TE_COLUMN, is_te_run, sample_te_arcsec
+    from rig.results.analyse import TWIST_COLUMN, sample_twist_arcmin
+    from rig.results.te import TE_COLUMN, is_te_run, sample_te_arcsec
 
     added = [TE_COLUMN, TWIST_COLUMN] if is_te_run(run) else [TWIST_COLUMN]
     columns = [c for c in run.columns if c not in added]
@@ -179,7 +180,7 @@ def export_campaign(campaign: Campaign, fmt: str, out: Path | None = None, *,
                     force: bool = False) -> Path:
     """Write the campaign's results table as ``fmt`` (csv, parquet, mat, xlsx); the path.
     Where and how as :func:`export_run`."""
-    from rig.api.results import TEXT_COLUMNS, results_frame
+    from rig.results.table import TEXT_COLUMNS, results_frame
 
     fmt = _check_format(fmt)
     if out is None:

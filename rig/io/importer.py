@@ -17,8 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from rig.errors import RigError
-from rig.ids import id_from_text, id_problem
+from rig.core.errors import RigError
+from rig.core.ids import id_from_text, id_problem
+from rig.core.json_files import read_json_file
 from rig.io.map import (
     ABSOLUTE_ZERO_C,
     COLUMN_KINDS,
@@ -29,8 +30,6 @@ from rig.io.map import (
 )
 from rig.io.read import SourceData, read_source
 from rig.io.safe_write import atomic_folder, check_target
-from rig.json_files import read_json_file
-from rig.run_meta_check import unit_problems
 from rig.runformat import (
     REQUIRED_COLUMNS,
     RUN_JSON,
@@ -40,6 +39,7 @@ from rig.runformat import (
     write_samples_parquet,
 )
 from rig.runformat.csvwrite import csv_line, samples_text
+from rig.runformat.meta_check import unit_problems
 
 __all__ = ["MIN_STEP_S", "check_run_id", "import_run", "read_unit", "store_imported",
            "write_imported"]
@@ -70,7 +70,7 @@ def _default_run_id(path: Path) -> str:
 
 
 def check_run_id(run_id: str, where: str) -> str:
-    """``run_id`` if it is a valid run id (:mod:`rig.ids`), else one line naming ``where``
+    """``run_id`` if it is a valid run id (:mod:`rig.core.ids`), else one line naming ``where``
     it came from (``--run-id``, the map's ``run_id``)."""
     problem = id_problem(run_id, "run")
     if problem is not None:
@@ -143,7 +143,7 @@ def _check_samples(columns: dict[str, np.ndarray], data: SourceData) -> None:
     sample) and the column: finite time, torque and output angle; time strictly ascending in
     steps of at least :data:`MIN_STEP_S`; temperatures finite and above absolute zero
     (blank = not measured); at least ``MIN_LOOP_SAMPLES`` samples; a torque that moves."""
-    from rig.analyse import MIN_LOOP_SAMPLES
+    from rig.results.analyse import MIN_LOOP_SAMPLES
 
     n = len(columns["t_s"])
     if n == 0:
@@ -233,7 +233,7 @@ def store_imported(run: Run, store_root: str | Path, *,
     meta = {k: v for k, v in run.meta.items() if k not in ("format", "run_id", "started_at")}
     meta.setdefault("label", run.run_id)
     result, extra = _result(run)
-    from rig.outcome import run_outcome  # the verdict, as a measured run records it
+    from rig.results.outcome import run_outcome  # the verdict, as a measured run records it
 
     limits = meta.get("limits") if isinstance(meta.get("limits"), dict) else None
     extra["outcome"] = run_outcome({**meta, "status": "completed", "result": result or {}},
@@ -249,8 +249,8 @@ def store_imported(run: Run, store_root: str | Path, *,
 def _result(run: Run) -> tuple[dict[str, Any] | None, dict[str, Any]]:
     """The analysed metrics (with uncertainty and model) for run.json ``result``."""
     from analysis.errors import AnalysisError
-    from rig.analyse import METRIC_KEYS, analyse_run
-    from rig.json_files import finite_for_json
+    from rig.core.json_files import finite_for_json
+    from rig.results.analyse import METRIC_KEYS, analyse_run
 
     try:
         d = analyse_run(run).to_dict()

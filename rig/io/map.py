@@ -27,10 +27,10 @@ from pydantic import (
     model_validator,
 )
 
-from rig.errors import RigError
-from rig.ids import id_problem
-from rig.run_meta_check import meta_problems
-from rig.toml_files import describe_validation_error, read_toml
+from rig.core.errors import RigError
+from rig.core.ids import id_problem
+from rig.core.toml_files import describe_validation_error, read_toml
+from rig.runformat.meta_check import meta_problems
 
 __all__ = [
     "ABSOLUTE_ZERO_C", "COLUMN_KINDS", "RUN_UNITS", "TORQUE_MAX_NM", "UNITS", "ColumnRef",

@@ -21,7 +21,7 @@ import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from rig.errors import RigError
+from rig.core.errors import RigError
 
 __all__ = ["MARKER", "WriteTargetError", "atomic_file", "atomic_folder", "check_target"]
 

@@ -16,7 +16,7 @@ Guarantees:
   digits the spec asks for whenever a value needs them; in columns the format does not
   define, whole numbers are written as integers (``8``). A missing value (NaN) is an empty
   field.
-- Bad input raises :class:`rig.errors.RunFormatError` naming the file, the 1-based line and
+- Bad input raises :class:`rig.core.errors.RunFormatError` naming the file, the 1-based line and
   the 1-based column. In ``samples.csv`` the column is the 1-based CSV *field index* and the
   message names the column header; in JSON files it is the 1-based *character* column.
   Nothing is silently dropped.
@@ -40,8 +40,8 @@ from typing import Any
 import numpy as np
 import pyarrow.parquet as pq
 
-from rig.errors import RunFormatError
-from rig.ids import id_from_text, id_problem
+from rig.core.errors import RunFormatError
+from rig.core.ids import id_from_text, id_problem
 from rig.runformat.base import (
     CAMPAIGN_FORMAT,
     CAMPAIGN_JSON,
@@ -242,7 +242,7 @@ def read_run(path: str | Path, *, allow_truncated_tail: bool = False) -> Run:
     A run folder holding ``samples.parquet`` (a stored run) is read from it, else from
     ``samples.csv``. A bare CSV (another lab's export, samples only) or Parquet file gets
     the minimal meta ``{"format": "rig-run/1", "run_id": <file stem>}`` (characters an id
-    may not hold, :mod:`rig.ids`, become ``_``) and a note saying
+    may not hold, :mod:`rig.core.ids`, become ``_``) and a note saying
     so. A ``samples.csv`` or ``samples.parquet`` next to a ``run.json`` is read as that run
     folder.
 
@@ -783,7 +783,7 @@ def _read_run_json(path: Path) -> dict[str, Any]:
             raise RunFormatError(
                 path, f"{key!r} must be an object, got {type(meta[key]).__name__}", line, col
             )
-    from rig.run_meta_check import meta_problems
+    from rig.runformat.meta_check import meta_problems
 
     problems = meta_problems(meta)
     if problems:
@@ -794,7 +794,7 @@ def _read_run_json(path: Path) -> dict[str, Any]:
 
 
 def _check_ids(path: Path, text: str, meta: dict[str, Any]) -> None:
-    """``run_id`` and ``campaign_id`` (when present) are names: the rule of :mod:`rig.ids`
+    """``run_id`` and ``campaign_id`` (when present) are names: the rule of :mod:`rig.core.ids`
     (an id becomes a folder or file name when the run is exported or stored)."""
     for key, kind in (("run_id", "run"), ("campaign_id", "campaign")):
         if meta.get(key) is None:

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from rig.errors import RunFormatError
+from rig.core.errors import RunFormatError
 
 RUN_FORMAT = "rig-run/1"
 CAMPAIGN_FORMAT = "rig-campaign/1"

@@ -30,7 +30,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pacsv
 
-from rig.errors import RunFormatError
+from rig.core.errors import RunFormatError
 from rig.runformat.base import (
     KNOWN_NUMERIC_COLUMNS,
     REQUIRED_COLUMNS,

@@ -15,7 +15,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from rig.errors import RunFormatError
+from rig.core.errors import RunFormatError
 from rig.runformat.base import (
     KNOWN_NUMERIC_COLUMNS,
     REQUIRED_COLUMNS,

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from rig import __version__
-from rig.errors import RigError
+from rig.core.errors import RigError
 from rig.runformat import (
     CAMPAIGN_FORMAT,
     CAMPAIGN_JSON,
@@ -183,7 +183,7 @@ class Store:
         self.url: str | None = None
         self._index: IndexBackend
         if is_database_url(root):
-            from rig.redact import redact
+            from rig.core.redact import redact
             from rig.store.index_pg import PostgresIndex
 
             folder = samples if samples not in (None, "") else os.environ.get(SAMPLES_ENV)
@@ -532,8 +532,8 @@ class Store:
 
     def runs(self, *, serial: str | None = None, since: str | None = None,
              outcome: str | None = None, **filters: Any) -> Any:
-        """:meth:`list_runs` as a pandas DataFrame, one row per run (rig/api/store.py)."""
-        from rig.api.store import runs_frame
+        """:meth:`list_runs` as a pandas DataFrame, one row per run (rig/store/frame.py)."""
+        from rig.store.frame import runs_frame
         return runs_frame(self, serial=serial, since=since, outcome=outcome, **filters)
 
     def get_run(self, run_id: str) -> RunInfo:

@@ -124,7 +124,7 @@ def finalise_samples(folder: Path) -> int:
     renamed into place before the CSV is removed, so the folder always holds the samples
     whole in one of the two files; a folder that already has ``samples.parquet`` (a crash
     after the rename) only loses its leftover CSV. Returns the number of samples. A CSV that
-    cannot be read raises :class:`rig.errors.RunFormatError` and is left as it is.
+    cannot be read raises :class:`rig.core.errors.RunFormatError` and is left as it is.
     """
     csv_path = folder / SAMPLES_CSV
     parquet_path = folder / SAMPLES_PARQUET

@@ -1,7 +1,7 @@
 """Run and campaign ids of the measurement store: generation and strict validation.
 
 An id is also a folder name inside the store, so it is held to the one rule of
-:mod:`rig.ids`: ASCII letters, digits, ``_`` and ``-``, starting with a letter or digit, at
+:mod:`rig.core.ids`: ASCII letters, digits, ``_`` and ``-``, starting with a letter or digit, at
 most 100 characters. No dots, slashes or backslashes can appear, so no id can climb out of
 the store (``..``) or name a hidden file.
 """
@@ -11,8 +11,8 @@ from __future__ import annotations
 import re
 from datetime import UTC, datetime
 
-from rig.errors import RigError
-from rig.ids import ID_PATTERN, id_problem  # noqa: F401  (ID_PATTERN: re-exported)
+from rig.core.errors import RigError
+from rig.core.ids import ID_PATTERN, id_problem  # noqa: F401  (ID_PATTERN: re-exported)
 
 _LABEL_MAX = 40
 
@@ -36,7 +36,7 @@ class UnknownIdError(StoreError, LookupError):
 
 def validate_id(value: object, kind: str = "run") -> str:
     """Return ``value`` if it is a valid id, else raise :class:`InvalidIdError` naming it."""
-    problem = id_problem(value, kind)  # the one rule of rig/ids.py
+    problem = id_problem(value, kind)  # the one rule of rig/core/ids.py
     if problem is not None:
         raise InvalidIdError(problem)
     return value  # type: ignore[return-value]

@@ -551,9 +551,9 @@ def run_info(row: Mapping[str, Any], root: Path) -> RunInfo:
 
 
 def _indexed_outcome(row: Mapping[str, Any]) -> str | None:
-    """The run's outcome as every view shows it (rig/outcome.py ``recorded_outcome``) when
+    """The run's outcome as every view shows it (rig/results/outcome.py ``recorded_outcome``) when
     the row keeps the run's record (``meta``); else the indexed word as it is."""
-    from rig.outcome import recorded_outcome
+    from rig.results.outcome import recorded_outcome
 
     meta = _from_json(row["meta"]) if row.get("meta") is not None else None
     if not isinstance(meta, dict):

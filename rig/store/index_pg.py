@@ -28,7 +28,7 @@ import psycopg
 from psycopg.rows import dict_row
 from psycopg.types.json import Jsonb
 
-from rig.redact import redact
+from rig.core.redact import redact
 from rig.store.ids import StoreError, StoreUnavailable
 from rig.store.index import (
     JSON_COLUMNS,

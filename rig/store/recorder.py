@@ -8,7 +8,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
-from rig.errors import RigError
+from rig.core.errors import RigError
 from rig.runformat import SamplesAppender
 from rig.store.files import WriterLock, finalise_samples
 from rig.store.ids import StoreError

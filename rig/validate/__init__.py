@@ -29,7 +29,7 @@ the same with and without them.
 
 The case's label and true parameters are kept in :class:`Case` and written to run.json only
 under ``generator`` (never read by the diagnosis); the diagnosis sees the campaign through
-:func:`rig.diagnose.run_input` exactly as ``rig diagnose`` does. :func:`make_case` with
+:func:`rig.results.diagnose.run_input` exactly as ``rig diagnose`` does. :func:`make_case` with
 ``widened=False`` draws the stepped plant-form cases of before (single-case tests use them).
 
 Expected verdict: the effect itself, except ``shaft_compliance``, which one loop cannot tell
@@ -51,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from rig.diagnose import diagnose_campaign
+from rig.results.diagnose import diagnose_campaign
 from rig.runformat import Campaign, Run
 from rig.validate.labels import Label
 from simulators.offline import quantise_deg, simulate_run
@@ -519,7 +519,7 @@ def draw_case(seed: int, index: int, kind: str, artifacts: bool = False) -> Case
 def validate_one(args: tuple[int, int, str] | tuple[int, int, str, bool]) -> CaseResult:
     """:func:`draw_case` of ``(seed, index, kind[, artifacts])``, simulated and diagnosed
     blind."""
-    from rig.json_files import finite_for_json as _finite
+    from rig.core.json_files import finite_for_json as _finite
 
     seed, index, kind = args[:3]
     case = draw_case(seed, index, kind, bool(args[3]) if len(args) > 3 else False)

@@ -2,7 +2,8 @@
 generator's cases, diagnosed blind and summarised the same way.
 
 :func:`grade_folder` diagnoses every labelled campaign folder under a directory exactly as
-``rig diagnose`` does (:func:`rig.diagnose.diagnose_path`; the labels are never passed to it)
+``rig diagnose`` does (:func:`rig.results.diagnose.diagnose_path`; the labels are never passed to
+it)
 and grades the reports with :mod:`rig.validate.labels`. :func:`summarise_graded` gives the
 figures the development sets' graders print: correct verdicts, per-effect confusion, false
 alarms on ``none`` cases, ``also`` recall and precision, median shrink of correct verdicts.
@@ -20,16 +21,16 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from rig.blas import limit_blas_threads, worker_initializer
-from rig.errors import RigError
+from rig.core.blas import limit_blas_threads, worker_initializer
+from rig.core.errors import RigError
 from rig.validate.labels import Label, grade, read_labels
 
 
 def diagnose_report(folder: str) -> dict[str, Any]:
     """The ``rig-diagnosis/1`` report of one campaign folder as ``rig diagnose --json`` writes
     it (non-finite numbers as null); on failure ``{"error": ...}``. Returns also ``seconds``."""
-    from rig.diagnose import diagnose_path, report_dict
-    from rig.json_files import finite_for_json as _finite
+    from rig.core.json_files import finite_for_json as _finite
+    from rig.results.diagnose import diagnose_path, report_dict
 
     t0 = time.perf_counter()
     try:
@@ -44,7 +45,7 @@ def diagnose_report(folder: str) -> dict[str, Any]:
 def parallel_map(fn: Callable[[Any], Any], items: Iterable[Any], jobs: int) -> Iterator[Any]:
     """``map(fn, items)`` in ``jobs`` processes (in order); in this process when jobs <= 1.
 
-    Every call runs with one BLAS thread (rig/blas.py): the workers from their initializer,
+    Every call runs with one BLAS thread (rig/core/blas.py): the workers from their initializer,
     this process while it maps; ``jobs`` processes then use ``jobs`` cores, not ``jobs``
     times a thread per core."""
     items = list(items)

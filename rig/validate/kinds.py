@@ -154,7 +154,7 @@ def make_kind_case(index: int, effect: str, kind: str, rng: np.random.Generator,
     elif effect == "thermal_expansion":
         # a play change of 30-80 % of the unit's own play over the 28 K above the reference:
         # the mesh stays open (a beveloid's play is a few um, a cycloid's some 40 um)
-        from simulators.plant.geometry import geometry_for
+        from simulators.plant.kinds import geometry_for
 
         play_um = geometry_for(config).base_play_um(positions[0])
         sign = float(rng.choice([-1, 1]))
@@ -210,8 +210,8 @@ def kind_case_list(kind: str, cases: int, nulls: int) -> list[str]:
 def validate_kind_one(args: tuple[int, int, str, str, bool]) -> CaseResult:
     """Case ``(seed, index, effect, kind, artifacts)`` drawn from its own stream, simulated
     and diagnosed blind."""
-    from rig.diagnose import diagnose_campaign
-    from rig.json_files import finite_for_json
+    from rig.core.json_files import finite_for_json
+    from rig.results.diagnose import diagnose_campaign
 
     seed, index, effect, kind, artifacts = args
     k = UNIT_KINDS.index(kind)
@@ -275,7 +275,7 @@ def graded_kind_validation(kind: str, cases: int, nulls: int, seed: int = 0, job
 def check_kind(kind: str) -> str:
     """The kind named on the command line, or a one-line error."""
     if kind not in UNIT_KINDS:
-        from rig.errors import RigError
+        from rig.core.errors import RigError
 
         raise RigError(f"--kind {kind!r}: known unit kinds with a generator: "
                        f"{', '.join(UNIT_KINDS)}")

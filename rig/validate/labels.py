@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rig.errors import RigError
+from rig.core.errors import RigError
 
 VOCAB = ("backlash", "mesh_stiffness", "friction", "stiffness_nonlinearity", "runout",
          "bearing_clearance", "thermal_expansion", "torque_sensor_offset", "shaft_compliance",

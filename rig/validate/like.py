@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from rig.errors import RigError
+from rig.core.errors import RigError
 from rig.runformat import Campaign, Run
 
 IN_VOCABULARY = ("friction", "stiffness_nonlinearity", "runout", "bearing_clearance",
@@ -109,7 +109,7 @@ def design_of(campaign: Campaign | str | Path) -> Design:
     """The campaign's design and measuring system, estimated from its data alone."""
     from analysis.diagnosis.data import channel_lag_samples, resolution_of
     from analysis.loop.branches import white_noise_std
-    from rig.diagnose import run_input
+    from rig.results.diagnose import run_input
 
     camp = _campaign(campaign)
     if not camp.runs:
@@ -333,9 +333,9 @@ def _correct(kind: str, verdict: str, also: list[str], candidates: list[str]) ->
 
 def like_one(args: tuple[Design, int, str, float, int]) -> dict[str, Any]:
     """Case ``index``: draw its size (``multiple`` of the noise), make the campaign, diagnose
-    it blind (:func:`rig.diagnose.diagnose_campaign`, as ``rig diagnose`` does)."""
-    from rig.diagnose import diagnose_campaign
-    from rig.json_files import finite_for_json
+    it blind (:func:`rig.results.diagnose.diagnose_campaign`, as ``rig diagnose`` does)."""
+    from rig.core.json_files import finite_for_json
+    from rig.results.diagnose import diagnose_campaign
 
     design, index, kind, multiple, seed = args
     rng = np.random.default_rng([seed, index])

@@ -1,7 +1,8 @@
 """``rig validate-diagnosis --over-the-wire``: campaigns recorded through the real sequencer.
 
 Each case is a campaign file run exactly as ``rig campaign run FILE --simulated`` runs it
-(:func:`rig.measure.open_session`, :func:`rig.measure.run_campaign`): the engine's plan, the
+(:func:`rig.measurement.service.open_session`, :func:`rig.measurement.service.run_campaign`): the
+engine's plan, the
 drivers (CANopen encoders over SLCAN, the serial transducer, Modbus drive, sensor, input
 motor and climate) and the simulated devices of ``rig sim`` around the time-domain plant
 (simulators/plant). The plant carries one withheld effect (or none) in its ``effects`` table
@@ -18,7 +19,7 @@ and, drawn per case, the measuring system's own dynamics and artefacts (docs/pla
 The recorded campaign folders go to ``DIR/cases/<case id>/`` with ``DIR/labels.json`` in
 the development sets' format (effect, acceptable, category, true_params): ``rig
 validate-diagnosis --cases-dir DIR/cases --labels DIR/labels.json`` grades them again. The
-diagnosis sees only the campaign folder (rig/diagnose.py reads unit, test and samples).
+diagnosis sees only the campaign folder (rig/results/diagnose.py reads unit, test and samples).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from rig.errors import RigError
+from rig.core.errors import RigError
 
 UNIT_FILE = Path(__file__).resolve().parent.parent / "examples" / "units" / "seed000-pair1.json"
 RATED_NM = 10.0
@@ -74,8 +75,8 @@ def _u(rng: np.random.Generator, lo: float, hi: float) -> float:
 def _locked_stiffness_Nm_per_rad(plant: dict[str, Any]) -> float:
     """The chain's stiffness on a flank (mesh in series with the shaft compliance), N*m/rad,
     from the plant the tables make (simulators/plant/model.py ``c_lin``)."""
-    from rig.campaign import SimulationSection
-    from rig.measure import plant_config_for
+    from rig.measurement.service import plant_config_for
+    from rig.plans.campaign_file import SimulationSection
     from simulators.plant.model import PlantModel
 
     unit = json.loads(UNIT_FILE.read_text(encoding="utf-8"))
@@ -234,8 +235,8 @@ def record_case(args: tuple[WireCase, str]) -> dict[str, Any]:
 def _record_once(case: WireCase, cases_dir: str) -> dict[str, Any]:
     import time
 
-    from rig.campaign import campaign_from_mapping
-    from rig.measure import open_session, plant_config_for, run_campaign
+    from rig.measurement.service import open_session, plant_config_for, run_campaign
+    from rig.plans.campaign_file import campaign_from_mapping
     from rig.store import Store
 
     t0 = time.perf_counter()

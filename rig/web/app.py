@@ -25,7 +25,7 @@ from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from rig import __version__
-from rig.redact import redact_text
+from rig.core.redact import redact_text
 from rig.store import Store
 from rig.web.controller import RigController
 from rig.web.guard import GuardMiddleware
@@ -96,7 +96,7 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
     @app.exception_handler(StarletteHTTPException)
     async def redacted_error(request: Request, exc: StarletteHTTPException) -> Response:
         """Every error message without a password or token (a store error names the store
-        by its connection string; rig/redact.py)."""
+        by its connection string; rig/core/redact.py)."""
         if isinstance(exc.detail, str):
             exc.detail = redact_text(exc.detail)
         return await http_exception_handler(request, exc)

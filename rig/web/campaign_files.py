@@ -19,8 +19,8 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from rig.campaign import CampaignError, CampaignFile, load_campaign
-from rig.toml_files import MAX_TOML_BYTES, describe_validation_error
+from rig.core.toml_files import MAX_TOML_BYTES, describe_validation_error
+from rig.plans.campaign_file import CampaignError, CampaignFile, load_campaign
 from rig.web.models import (
     NAME_PATTERN,
     UNIT_MODELS,

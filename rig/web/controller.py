@@ -1,9 +1,10 @@
 """The page's hold on the rig: one opened rig session, at most one measurement at a time.
 
 :class:`RigController` opens the rig (the simulated one, or a rig TOML) with
-:func:`rig.measure.open_session`, watches the devices while idle (heartbeats, last values),
-and runs plans and campaigns with the engine (:func:`rig.measure.measure_plan`,
-:func:`rig.measure.run_campaign`) on a thread of its own, the store wrapped by
+:func:`rig.measurement.service.open_session`, watches the devices while idle (heartbeats, last
+values),
+and runs plans and campaigns with the engine (:func:`rig.measurement.service.measure_plan`,
+:func:`rig.measurement.service.run_campaign`) on a thread of its own, the store wrapped by
 :class:`rig.web.live_tap.TapStore` so that the rows recorded are also drawn live.
 
 Device access: while a measurement runs only the engine talks to the serial transducer and
@@ -24,15 +25,13 @@ from contextlib import AbstractContextManager
 from typing import Any
 
 from drivers.errors import DeviceError
-from rig.calibration import CalibrationExpired, calibration_meta, calibration_status
-from rig.campaign import campaign_from_mapping
+from rig.core.errors import RigError
 from rig.engine import Engine, EngineOptions
 from rig.engine.events import ProgressEvent
 from rig.engine.record import json_safe
 from rig.engine.safety import PlanRejected, preflight
-from rig.errors import RigError
-from rig.measure import RigSession, measure_plan, run_campaign, run_meta, run_result
-from rig.outcome import campaign_outcome
+from rig.hardware.calibration import CalibrationExpired, calibration_meta, calibration_status
+from rig.measurement.service import RigSession, measure_plan, run_campaign, run_meta, run_result
 from rig.plans import (
     TE_KIND,
     CampaignAxes,
@@ -42,7 +41,9 @@ from rig.plans import (
     te_campaign_plan,
     te_plan,
 )
+from rig.plans.campaign_file import campaign_from_mapping
 from rig.plans.estimate import estimate
+from rig.results.outcome import campaign_outcome
 from rig.store import Store
 from rig.web.faults import explain
 from rig.web.live import LiveHub
@@ -109,7 +110,7 @@ def compute_preview(req: RunRequest, facts: dict[str, Any]) -> dict[str, Any]:
     model, assumptions = model_summary(req) if req.test != TE_KIND else (None, [])
     batch = None
     if model is not None:
-        from rig.campaign import batch_band
+        from rig.plans.campaign_file import batch_band
 
         batch = batch_band(req.unit.mapping(), req.plan.rated_torque_Nm,
                            model["lost_motion_pct"])
@@ -127,13 +128,14 @@ def compute_preview(req: RunRequest, facts: dict[str, Any]) -> dict[str, Any]:
 
 def unit_design(req: RunRequest) -> dict[str, Any]:
     """What a single run's result says of the unit's design, as a campaign's does
-    (rig/measure.py): ``unit_kind``, ``model_name`` and ``band_source`` (the names of
+    (rig/measurement/service.py): ``unit_kind``, ``model_name`` and ``band_source`` (the names of
     :data:`analysis.models.by_kind.MODEL_NAMES`) and ``batch``, the kind's batch band
-    (:func:`rig.campaign.batch_band`: arcmin at the plan's rated torque and profile; None when
+    (:func:`rig.plans.campaign_file.batch_band`: arcmin at the plan's rated torque and profile;
+    None when
     the unit's data cannot give one)."""
     from analysis.models.by_kind import MODEL_NAMES
-    from rig.analyse import resolve_profile
-    from rig.campaign import batch_band
+    from rig.plans.campaign_file import batch_band
+    from rig.results.analyse import resolve_profile
 
     unit = req.unit.mapping()
     kind = str(unit.get("kind") or "internal_involute")
@@ -150,7 +152,7 @@ def unit_design(req: RunRequest) -> dict[str, Any]:
 
 def model_summary(req: RunRequest) -> tuple[dict[str, Any] | None, list[str]]:
     """The reference nominal model's loop for the unit (arcmin, N*m/arcmin), or None."""
-    from rig.analyse import nominal_model_for_unit, resolve_profile
+    from rig.results.analyse import nominal_model_for_unit, resolve_profile
 
     model, assumptions = nominal_model_for_unit(req.unit.mapping(), req.plan.rated_torque_Nm)
     if model is None:
@@ -432,7 +434,7 @@ class RigController:
     def _live_metrics(self) -> None:
         """Analyse the run being recorded as far as it goes (from the store: what is on disk)
         and send its metrics: they fill in as the loop closes (unavailable ones are None)."""
-        from rig.analyse import analyse_run
+        from rig.results.analyse import analyse_run
 
         with self._lock:
             profile = self._profile

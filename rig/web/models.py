@@ -3,7 +3,7 @@
 Requests are validated here with bounds that keep every value finite and every plan small
 enough to preview: a bad value is a 422 naming the field, never a 500. The plan and campaign
 settings map one to one onto :class:`rig.plans.LoopParams`, :class:`rig.plans.CampaignAxes`
-and :class:`rig.campaign.Limits`.
+and :class:`rig.plans.campaign_file.Limits`.
 """
 
 from __future__ import annotations
@@ -12,12 +12,12 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
 
-from rig import ids
-from rig.campaign import Limits
+from rig.core import ids
 from rig.plans import TE_KIND, CampaignAxes, LoopParams, TEParams, check_plan_size, unit_ratio
+from rig.plans.campaign_file import Limits
 
 ID_PATTERN = rf"^{ids.ID_PATTERN.pattern}$"
-"""Run and campaign ids in URLs: the one rule of :mod:`rig.ids`."""
+"""Run and campaign ids in URLs: the one rule of :mod:`rig.core.ids`."""
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,79}$"
 """A plan longer than this is refused (its preview alone would take seconds)."""
 
@@ -199,7 +199,8 @@ class PlanSettings(BaseModel):
 
 
 class LimitSettings(BaseModel):
-    """Pass/fail limits (:class:`rig.campaign.Limits`): arcmin at most, N*m/arcmin at least;
+    """Pass/fail limits (:class:`rig.plans.campaign_file.Limits`): arcmin at most, N*m/arcmin at
+    least;
     None: not checked."""
 
     model_config = _strict
@@ -462,7 +463,7 @@ class RunSummary(BaseModel):
     calibration_warnings: list[str]
     metrics: dict[str, Any] | None
     outcome: str | None = None
-    """The run's verdict: "ok", "not_ok", "incomplete", "no_limits" (rig/outcome.py; None
+    """The run's verdict: "ok", "not_ok", "incomplete", "no_limits" (rig/results/outcome.py; None
     while running or when none is recorded)."""
     verdict: str | None = None
     """The displayed word of ``outcome``: OK, NOT OK, INCOMPLETE, NO LIMITS."""
@@ -492,7 +493,7 @@ class LoopData(BaseModel):
     analysis_error: str | None
     outcome: str | None = None
     """The run's verdict against its ``limits``: "ok", "not_ok", "incomplete", "no_limits"
-    (rig/outcome.py; None while running)."""
+    (rig/results/outcome.py; None while running)."""
     verdict: str | None = None
     """The displayed word of ``outcome``: OK, NOT OK, INCOMPLETE, NO LIMITS."""
     limits: dict[str, Any] | None = None
@@ -510,7 +511,7 @@ class CampaignSummary(BaseModel):
     meta: dict[str, Any]
     summary: dict[str, Any] | None
     outcome: str | None = None
-    """The campaign's verdict (rig/outcome.py codes, as for a run)."""
+    """The campaign's verdict (rig/results/outcome.py codes, as for a run)."""
     verdict: str | None = None
     """The displayed word of ``outcome``: OK, NOT OK, INCOMPLETE, NO LIMITS."""
     runs: list[RunSummary]
@@ -530,7 +531,7 @@ class ErrorBody(BaseModel):
 
 
 class OutcomeWord(BaseModel):
-    """How the page shows one outcome code (rig/outcome.py)."""
+    """How the page shows one outcome code (rig/results/outcome.py)."""
 
     word: str
     """OK, NOT OK, INCOMPLETE or NO LIMITS."""

@@ -1,6 +1,7 @@
 """The diagnosis report of a campaign as an HTML page.
 
-The project's report writer (:mod:`rig.report_html`) draws it; :func:`plain_report_html` is
+The project's report writer (:mod:`rig.reports.diagnosis_html`) draws it;
+:func:`plain_report_html` is
 the fallback for a report that page cannot draw (plain tables of the rig-diagnosis/1 keys).
 """
 
@@ -17,12 +18,12 @@ log = logging.getLogger(__name__)
 
 def diagnose_campaign_folder(campaign_path: Path) -> tuple[dict[str, Any], str]:
     """Diagnose the campaign folder: its rig-diagnosis/1 report (JSON-safe) and the HTML page
-    of :func:`rig.report_html.render_html` (figures inline); the plain tables of
+    of :func:`rig.reports.diagnosis_html.render_html` (figures inline); the plain tables of
     :func:`plain_report_html` if that page cannot be drawn for this report."""
-    from rig.certificate.header import header_for_campaign
-    from rig.diagnose import diagnose_path, report_dict
     from rig.engine.record import json_safe
-    from rig.report_html import render_html
+    from rig.reports.certificate.header import header_for_campaign
+    from rig.reports.diagnosis_html import render_html
+    from rig.results.diagnose import diagnose_path, report_dict
 
     campaign, diagnosis = diagnose_path(campaign_path)
     report = json_safe(report_dict(campaign, diagnosis))

@@ -20,7 +20,7 @@ import secrets
 from dataclasses import dataclass
 from pathlib import Path
 
-from rig.errors import RigError
+from rig.core.errors import RigError
 
 TOKEN_ENV = "RIG_WEB_TOKEN"
 TOKEN_FILE = Path("web") / "operator-token"

@@ -1,7 +1,7 @@
 """The simulated rig behind ``rig serve --simulated``: the plant built around an example unit
 (rig/examples/units) with the effects of examples/campaigns/seed000-pair1.toml, or a plant TOML
 (``--plant``: simulators/cycloid_plant.toml ...), started as its own process (``rig sim``) by
-:func:`rig.measure.open_session`."""
+:func:`rig.measurement.service.open_session`."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from contextlib import AbstractContextManager
 from importlib import resources
 from typing import Any
 
-from rig.errors import RigError
+from rig.core.errors import RigError
 
 SIMULATED_EFFECTS: dict[str, Any] = {"effects": {
     "runout": {"enabled": True},
@@ -41,8 +41,8 @@ def example_plant(unit_name: str = DEFAULT_UNIT) -> Any:
     """The simulated plant around the example unit ``unit_name``: the default plant with
     :data:`SIMULATED_EFFECTS`, the runout left off for a unit that gives no runouts (the
     cycloid and beveloid examples)."""
-    from rig.campaign import SimulationSection
-    from rig.measure import plant_config_for
+    from rig.measurement.service import plant_config_for
+    from rig.plans.campaign_file import SimulationSection
 
     unit = example_unit(unit_name)
     effects = dict(SIMULATED_EFFECTS["effects"])
@@ -56,7 +56,7 @@ def simulated_session_factory(unit_name: str = DEFAULT_UNIT
                               ) -> Callable[[], AbstractContextManager[Any]]:
     """A factory of rig sessions on a new simulated rig whose plant is ``unit_name``'s
     (:func:`example_plant`)."""
-    from rig.measure import open_session
+    from rig.measurement.service import open_session
 
     plant = example_plant(unit_name)
 
@@ -80,7 +80,7 @@ def simulated_plant(path: str) -> Any:
 def plant_session_factory(path: str) -> Callable[[], AbstractContextManager[Any]]:
     """A factory of rig sessions on a new simulated rig running the plant TOML ``path``
     (its unit of any kind, its effects, noise and rig tables as the file says)."""
-    from rig.measure import open_session
+    from rig.measurement.service import open_session
 
     plant = simulated_plant(path)
 

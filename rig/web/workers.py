@@ -4,7 +4,7 @@ The server's event loop answers the E-stop and the status; its thread pool serve
 requests. Neither may be held by an analysis: :func:`run_in_worker` runs a picklable function
 in a separate process (one worker, spawned on first use, kept for the next request) and waits
 for it on the calling request's thread. The engine has its own process anyway
-(rig/engine/host.py); this keeps the page itself responsive.
+(rig/web/engine_host.py); this keeps the page itself responsive.
 
 The plan previews' pool (issue 21 item 10) runs at a lower CPU priority
 (:data:`POOL_NICE`: a flood of previews cannot take the CPU from acquisition, whatever
@@ -23,8 +23,8 @@ from concurrent.futures import BrokenExecutor, CancelledError, Future, ProcessPo
 from multiprocessing import resource_tracker
 from typing import Any, TypeVar
 
-from rig.blas import worker_initializer
-from rig.errors import RigError
+from rig.core.blas import worker_initializer
+from rig.core.errors import RigError
 
 __all__ = ["PoolBusy", "pool_full", "run_in_worker", "shutdown_workers", "warm_up",
            "worker_pids"]
@@ -65,7 +65,7 @@ def _worker_start(increment: int) -> None:
 def _executor(pool: str) -> ProcessPoolExecutor:
     with _lock:
         if pool not in _pools:
-            # one BLAS thread (rig/blas.py): the work runs beside the rig's real time; a
+            # one BLAS thread (rig/core/blas.py): the work runs beside the rig's real time; a
             # preview worker also at a lower CPU priority
             nice = POOL_NICE.get(pool, 0)
             _pools[pool] = ProcessPoolExecutor(

@@ -282,7 +282,7 @@ def _make_plant(kind: str, config_path: str | None = None) -> Plant:
         from simulators.plant.config import load_plant_config
 
         return GearPlant(load_plant_config(config_path))
-    from simulators.modbus.test_plant import SineTestPlant
+    from simulators.modbus.plant_backdoor import SineTestPlant
 
     return SineTestPlant()
 

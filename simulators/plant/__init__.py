@@ -9,7 +9,7 @@ Sign conventions: positive torque twists the output positively; the output turns
 the eccentric shaft: ``output_angle_deg = offset - input_angle_deg / ratio + twist`` with
 ``ratio = z_external / (z_internal - z_external)`` (8 for 45/40; 39 for a 40/39 cycloid pair)
 or, for a beveloid pair, ``z_gear / z_pinion``. The unit's ``kind`` chooses the geometry
-(:func:`simulators.plant.geometry.geometry_for`, docs/unit-kinds.md).
+(:func:`simulators.plant.kinds.geometry_for`, docs/unit-kinds.md).
 """
 
 from __future__ import annotations

@@ -347,7 +347,7 @@ def plant_config_from_mapping(data: dict[str, Any], source: str = "<memory>") ->
     except ValidationError as exc:
         raise PlantConfigError(_describe(exc, source)) from exc
     # The unit table is checked by the geometry (it names unit.<key> on error).
-    from simulators.plant.geometry import geometry_for
+    from simulators.plant.kinds import geometry_for
 
     try:
         geometry_for(config)

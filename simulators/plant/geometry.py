@@ -75,7 +75,7 @@ def reference_nominal(unit: Mapping[str, Any]) -> NominalMesh:
     )
 
 
-class _UnitView:
+class UnitView:
     """Typed access to the unit mapping; errors name ``unit.<key>``."""
 
     def __init__(self, unit: Mapping[str, Any]) -> None:
@@ -112,31 +112,6 @@ def _checked(key: str, index: int, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise ValueError(f"key unit.{key}[{index}]: expected a finite number, got {value!r}")
     return float(value)
-
-
-def geometry_for(config: UnitAndEffects) -> MeshGeometry:
-    """The plant geometry of the unit's ``kind`` (run-format.md ``unit.kind``):
-    ``internal_involute`` (default, seed 000), ``cycloid`` (seed 002), ``beveloid`` (seed 001),
-    ``planetary`` (seed 003).
-    Raises ValueError naming the key."""
-    unit = config.unit
-    kind = unit.get("kind", "internal_involute") if isinstance(unit, Mapping) else None
-    if kind == "cycloid":
-        from simulators.plant.cycloid import CycloidGeometry
-
-        return CycloidGeometry.from_config(config)
-    if kind == "beveloid":
-        from simulators.plant.beveloid import BeveloidGeometry
-
-        return BeveloidGeometry.from_config(config)
-    if kind == "planetary":
-        from simulators.plant.planetary import PlanetaryGeometry
-
-        return PlanetaryGeometry.from_config(config)
-    if kind not in (None, "internal_involute"):
-        raise ValueError(f"key unit.kind: {kind!r} has no plant (known: internal_involute, "
-                         "cycloid, beveloid, planetary)")
-    return MeshGeometry.from_config(config)
 
 
 def _tooth_table(explicit: list[float] | None, count: int, rms: float,
@@ -212,7 +187,7 @@ class MeshGeometry:
         """Build from the unit table and the effects (raises ValueError naming the key)."""
         unit = config.unit
         nominal = reference_nominal(unit)
-        u = _UnitView(unit)
+        u = UnitView(unit)
         z1, z2 = u.int_("z_internal"), u.int_("z_external")
         alpha = math.radians(u.num("pressure_angle_deg", 20.0))
         m = u.num("module_mm")
@@ -226,7 +201,7 @@ class MeshGeometry:
         thermal) for tooth counts z1 (``*_internal`` tables) and z2 (``*_external``), module
         ``m`` (mm), play sensitivity ``tan_alpha`` (2 tan_alpha um of play per um of center
         distance) and center distance ``a`` (mm); ``extra``: a subclass's own fields."""
-        u = _UnitView(config.unit)
+        u = UnitView(config.unit)
         fx = config.effects
 
         ro = fx.runout

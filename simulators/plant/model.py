@@ -27,7 +27,8 @@ from dataclasses import dataclass
 
 from simulators.plant.config import PlantConfig
 from simulators.plant.friction import Friction
-from simulators.plant.geometry import ARCMIN_PER_RAD, geometry_for
+from simulators.plant.geometry import ARCMIN_PER_RAD
+from simulators.plant.kinds import geometry_for
 
 _MAX_ITER = 80
 

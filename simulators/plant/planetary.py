@@ -55,7 +55,7 @@ from simulators.plant.geometry import (
     MeshGeometry,
     NominalMesh,
     UnitAndEffects,
-    _UnitView,
+    UnitView,
 )
 
 ARCSEC_PER_RAD = ARCMIN_PER_RAD * 60.0
@@ -101,7 +101,7 @@ class PlanetaryGeometry(MeshGeometry):
     def from_config(cls, config: UnitAndEffects) -> PlanetaryGeometry:
         """Build from a PlantConfig with a ``kind = "planetary"`` unit and its ``[planetary]``
         table (ValueError names the key)."""
-        u = _UnitView(config.unit)
+        u = UnitView(config.unit)
         train = paper_train()
         stages = train.stages
         ratio = u.num("ratio", train.total_ratio)

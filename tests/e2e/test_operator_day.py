@@ -21,7 +21,7 @@ from playwright.sync_api import expect, sync_playwright
 from pymodbus.client import ModbusTcpClient
 
 from drivers.modbus.map import LOADING_DRIVE_MAP, encode_float32
-from rig.config import load_rig_config
+from rig.hardware.config import load_rig_config
 from rig.store import Store
 from tests.e2e.test_control_page import ARTIFACTS, TOKEN, get_json, launch_browser, rig_serve
 
@@ -59,7 +59,7 @@ def seed_a_failed_campaign(root: Path) -> str:
     """A NOT OK campaign in the store before the page starts (closed-form runs recorded with
     their limits and outcomes as a measured campaign records them): History must call it
     NOT OK, as the certificate and the CLI do."""
-    from rig.synthetic_runs import write_campaign
+    from rig.store.synthetic_runs import write_campaign
 
     st = Store(root)
     try:

@@ -38,7 +38,7 @@ from playwright.sync_api import expect, sync_playwright
 from pymodbus.client import ModbusTcpClient
 
 from drivers.modbus.map import TORQUE_SENSOR_MAP, encode_float32
-from rig.config import load_rig_config
+from rig.hardware.config import load_rig_config
 from rig.store import Store
 from tests.e2e.test_control_page import ARTIFACTS, CHROMIUM, REPO, TOKEN, get_json, launch_browser
 from tests.e2e.test_operator_day import post
@@ -323,7 +323,7 @@ def test_operator_page(tmp_path: Path):
             assert not any("unknown unit key" in a for a in meta.get("result", {}).get(
                 "assumptions", []))
         run_json = store.load_run(runs[0]["run_id"])
-        from rig.analyse import analyse_run
+        from rig.results.analyse import analyse_run
 
         assert not [a for a in analyse_run(run_json).assumptions if "unknown unit key" in a]
 

@@ -24,7 +24,7 @@ import pytest
 from playwright.sync_api import expect, sync_playwright
 
 from rig.store import Store
-from rig.synthetic_runs import write_campaign
+from rig.store.synthetic_runs import write_campaign
 from tests.e2e.test_control_page import ARTIFACTS, CHROMIUM, get_json, launch_browser, rig_serve
 
 pytestmark = [

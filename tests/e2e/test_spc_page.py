@@ -33,7 +33,7 @@ N_UNITS = 6
 def write_store(root: Path):
     """Six units of one design, one run each, with hostile serials (tests/test_html_escaping)."""
     from rig.store import Store
-    from rig.synthetic_runs import write_campaign
+    from rig.store.synthetic_runs import write_campaign
 
     st = Store(root)
     for k, play in enumerate([1.0, 1.2, 1.1, 1.6, 1.3, 1.2][:N_UNITS]):

@@ -25,9 +25,9 @@ from test_control_page import (
     launch_browser,
 )
 
-from rig.campaign import SimulationSection
-from rig.measure import plant_config_for, write_plant_toml
-from rig.simrig import SimulatedRig
+from rig.hardware.simrig import SimulatedRig
+from rig.measurement.service import plant_config_for, write_plant_toml
+from rig.plans.campaign_file import SimulationSection
 from simulators.plant.config import load_plant_config
 
 pytestmark = [

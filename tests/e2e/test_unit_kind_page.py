@@ -116,7 +116,7 @@ def test_operator_measures_a_cycloid_unit_and_sees_its_model_and_band(tmp_path):
         assert lost == pytest.approx(truth, rel=0.02), (lost, truth)
         assert lost == pytest.approx(model, rel=0.05), (lost, model)
         assert model == pytest.approx(meta["result"]["model"]["lost_motion_arcmin"], abs=0.001)
-        # the band of the run's result (rig.campaign.batch_band), as the page rounds it
+        # the band of the run's result (rig.plans.campaign_file.batch_band), as the page rounds it
         stored = get_json(url + "api/status")["last_result"]["batch"]["band_95_arcmin"]
         assert band == pytest.approx(stored, abs=0.006) and 0 < band[0] < band[1]
         with urllib.request.urlopen(url + f"api/runs/{run['run_id']}/certificate.html",

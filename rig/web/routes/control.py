@@ -16,8 +16,8 @@ from typing import Annotated, Any
 from fastapi import APIRouter, HTTPException, Request
 from fastapi import Path as PathParam
 
-from rig.campaign import CampaignError
-from rig.errors import RigError
+from rig.core.errors import RigError
+from rig.plans.campaign_file import CampaignError
 from rig.web import campaign_files
 from rig.web.auth import Operator, is_operator
 from rig.web.controller import ControlError, RigController, compute_preview

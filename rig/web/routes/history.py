@@ -17,9 +17,9 @@ from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 
+from rig.core.errors import RigError
 from rig.engine.record import json_safe
-from rig.errors import RigError
-from rig.outcome import (
+from rig.results.outcome import (
     OUTCOME_MEANINGS,
     OUTCOME_WORDS,
     OUTCOMES,
@@ -68,7 +68,7 @@ def summary_of(info: RunInfo) -> dict[str, Any]:
 @router.get("/outcomes", response_model=dict[str, OutcomeWord],
             summary="The verdict vocabulary: outcome code -> displayed word and meaning")
 def outcomes() -> dict[str, dict[str, str]]:
-    """The one mapping the page shows verdicts with (rig/outcome.py)."""
+    """The one mapping the page shows verdicts with (rig/results/outcome.py)."""
     return {code: {"word": OUTCOME_WORDS[code], "meaning": OUTCOME_MEANINGS[code]}
             for code in OUTCOMES}
 
@@ -104,7 +104,7 @@ def get_run(request: Request, run_id: RunId) -> dict[str, Any]:
             summary="A run's loop (torque, twist, model loop) for drawing, decimated")
 def run_loop(request: Request, run_id: RunId,
              max_points: Annotated[int, Query(ge=10, le=100_000)] = 5000) -> dict[str, Any]:
-    from rig.analyse import analyse_run, loop_centre_arcmin
+    from rig.results.analyse import analyse_run, loop_centre_arcmin
 
     store = _store(request)
     _run_info(store, run_id)
@@ -194,8 +194,8 @@ def _samples_csv(store: Store, run_id: str) -> bytes:
                                         "description": "The loop with the model (PNG)"}},
     summary="Download the PNG of a run's loop")
 def run_png(request: Request, run_id: RunId) -> Response:
-    from rig.analyse import analyse_run
-    from rig.plots import plot_loops
+    from rig.reports.loop_plots import plot_loops
+    from rig.results.analyse import analyse_run
 
     store = _store(request)
     _run_info(store, run_id)
@@ -293,7 +293,7 @@ CERTIFICATE = {**NOT_FOUND, **UNPROCESSABLE, 200: {
 
 def _certificate(store: Store, kind: str, ident: str, fmt: str) -> Response:
     """The certificate of a finished run or campaign, drawn in the analysis worker."""
-    from rig.certificate import certificate_bytes
+    from rig.reports.certificate import certificate_bytes
     from rig.web.workers import run_in_worker
 
     try:

@@ -3,7 +3,7 @@ as a page) and ``GET /api/spc`` (every figure as JSON), for the store the page s
 
 Lost motion, backlash and stiffness per unit over time as individuals/moving-range charts
 with control limits, the out-of-control rules, Cp/Cpk against each unit's own campaign
-limits and the seed 000 batch band of the design (rig/spc/__init__.py, docs/deployment.md).
+limits and the seed 000 batch band of the design (rig/reports/spc/__init__.py, docs/deployment.md).
 Computed in the page's worker process (rig/web/workers.py): a large store never holds up the page.
 """
 
@@ -15,7 +15,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.responses import HTMLResponse, JSONResponse
 
-from rig.errors import RigError
+from rig.core.errors import RigError
 from rig.web.models import ErrorBody
 from rig.web.routes.history import ERROR_JSON
 from rig.web.workers import run_in_worker
@@ -38,8 +38,8 @@ Since = Annotated[str | None, Query(pattern=r"^\d{4}-\d{2}-\d{2}$", description=
 def spc_document(store_root: str, samples: str | None, design: str | None,
                  since: str | None, html: bool) -> Any:
     """In the worker: the ``rig spc`` document (JSON) or its HTML page."""
-    from rig.spc import spc_report
-    from rig.spc.html import render_html
+    from rig.reports.spc import spc_report
+    from rig.reports.spc.html import render_html
     from rig.store import Store
 
     store = Store(store_root, create=False, recover=False, samples=samples)

@@ -487,7 +487,7 @@ function renderCampaignNow(cur, busy) {
   }
 }
 
-// The verdict's words come from the server (GET /api/outcomes, rig/outcome.py): one
+// The verdict's words come from the server (GET /api/outcomes, rig/results/outcome.py): one
 // vocabulary for the page, the certificate, the CLI, SPC and the Python API.
 let OUTCOME_WORDS = {};
 const OUTCOME_CLASS = { ok: "pass", not_ok: "fail", incomplete: "incomplete", no_limits: "no-limits" };
@@ -1224,7 +1224,7 @@ async function logIn() {
 // The live TE plot: TE = 3600 (output - input / ratio) against the output angle modulo 360
 // (docs/run-format.md), each direction less its running mean (c_d); the rig sends the raw
 // TE of each recorded row (rig/web/live_tap.py). After the run: the figures of the run's
-// analysis (rig/te.py), its limits and the verdict.
+// analysis (rig/results/te.py), its limits and the verdict.
 const te = { F: [[], []], R: [[], []], sumF: 0, nF: 0, sumR: 0, nR: 0 };
 let tePlot = null;
 

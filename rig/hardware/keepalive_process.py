@@ -128,7 +128,7 @@ class KeepaliveProcess:
     def start(self) -> None:
         """Start the process (returns at once; it feeds from its first tick)."""
         # the child imports this very module, from where this process has it
-        root = str(Path(__file__).resolve().parent.parent)
+        root = str(Path(__file__).resolve().parents[2])
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(
             p for p in (root, os.environ.get("PYTHONPATH", "")) if p)}
         self._proc = subprocess.Popen(

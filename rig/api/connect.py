@@ -1,7 +1,7 @@
 """Measuring from a script: ``with rig.connect(simulated=True) as r: r.campaign(...)``.
 
-The services of ``rig campaign run`` and ``rig measure`` (:mod:`rig.measurement.service`) do the
-work:
+The services of ``rig campaign run`` and ``rig measure`` do the work
+(:func:`rig.measurement.service.run_campaign`, :func:`rig.measurement.single_run.measure_run`):
 the same plan, engine, store and verdicts. A simulated rig is started (its own process) for
 each campaign or run with that campaign's unit as its plant, as ``--simulated`` does; a real
 rig (``rig=`` a rig TOML) is opened once for the whole ``with`` block.
@@ -19,23 +19,15 @@ from pydantic import ValidationError
 from rig.api.data import Campaign, Run
 from rig.core.errors import RigError, RunFormatError
 from rig.core.json_files import finite_for_json, read_json_file
-from rig.engine import EngineOptions
 from rig.engine.events import ProgressEvent
-from rig.measurement.service import (
-    RigSession,
-    measure_plan,
-    open_session,
-    plant_config_for,
-    run_campaign,
-    run_meta,
-    run_result,
-)
-from rig.plans import LoopParams, hysteresis_plan
+from rig.measurement.service import RigSession, open_session, plant_config_for, run_campaign
+from rig.measurement.single_run import MeasureRequest, measure_run, with_simulated_plant
+from rig.plans import LoopParams
 from rig.plans.campaign_file import CampaignFile, Limits, campaign_from_mapping, load_campaign
 from rig.runformat import CAMPAIGN_JSON, read_campaign
 from rig.runformat import Campaign as RawCampaign
 from rig.store import Store, default_store_root
-from simulators.plant.config import PlantConfig, PlantConfigError, load_plant_config
+from simulators.plant.config import PlantConfig
 
 __all__ = ["MEASURE_DEFAULTS", "Connection", "Progress", "connect", "read_stored_campaign"]
 
@@ -139,34 +131,30 @@ class Connection:
         except ValidationError as exc:
             raise RigError("; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}"
                                      for e in exc.errors())) from None
-        unit_data: dict[str, Any] = {}
-        if isinstance(unit, Mapping):
-            unit_data = dict(unit)
-        elif unit is not None:
-            unit_data = read_json_file(unit, RigError, "unit data")
-            if not isinstance(unit_data, dict):
-                raise RigError(f"{unit}: the unit data must be a JSON object")
-        plant = None
+        request = MeasureRequest(loop=loop, position_deg=position_deg, unit=_unit_data(unit),
+                                 limits=lim, profile=profile, operator=operator)
         if self.simulated:
-            try:
-                plant = plant_config_for(unit_data or load_plant_config().unit)
-            except PlantConfigError as exc:
-                raise RigError(str(exc)) from exc
-            unit_data = unit_data or dict(plant.unit)
-        with self._open(plant) as session:
-            options = EngineOptions(profile=profile, stale_timeout_s=session.stale_timeout_s,
-                                    limits=lim.model_dump())
-            engine, outcomes = measure_plan(
-                session, self.store, hysteresis_plan(loop, position_deg),
-                run_meta(unit_data, session, operator), options=options, progress=progress)
-        if not outcomes:
-            raise RigError(f"no run was recorded: {engine.stopping_reason}")
-        result = finite_for_json(run_result(outcomes[-1].to_dict(), lim))
+            request = with_simulated_plant(request)
+        with self._open(request.plant) as session:
+            measured = measure_run(request, session, self.store, progress=progress)
+        result = finite_for_json(measured.result)
         return Run(self.store.load_run(result["run_id"]), result=result)
 
     def __repr__(self) -> str:
         what = "simulated rig" if self.simulated else f"rig {self.rig}"
         return f"<Connection to the {what}, store {self.store.location}>"
+
+
+def _unit_data(unit: str | Path | Mapping[str, Any] | None) -> dict[str, Any]:
+    """The unit data of :meth:`Connection.measure`: a mapping, or a JSON file's object."""
+    if isinstance(unit, Mapping):
+        return dict(unit)
+    if unit is None:
+        return {}
+    data = read_json_file(unit, RigError, "unit data")
+    if not isinstance(data, dict):
+        raise RigError(f"{unit}: the unit data must be a JSON object")
+    return data
 
 
 def read_stored_campaign(folder: Path) -> RawCampaign:

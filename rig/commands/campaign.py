@@ -16,7 +16,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from rig.commands.measure import (
+from rig.commands.output import (
     console,
     exit_code,
     outcome_markup,
@@ -102,8 +102,7 @@ def register(app: typer.Typer) -> None:
                 out.print("[red]interrupted: the rig is in its safe state; the runs are kept"
                           "[/red]")
                 raise typer.Exit(2) from None
-        if json_file is not None:
-            write_json(json_file, result)
+        write_json(json_file, result)
         out.print(_summary_table(result))
         lm = result["lost_motion_arcmin"]
         if lm["mean"] is not None:

@@ -14,7 +14,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from rig.commands.measure import outcome_markup
+from rig.commands.output import outcome_markup
 from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
 
 if TYPE_CHECKING:

@@ -2,9 +2,10 @@
 
 :class:`RigController` opens the rig (the simulated one, or a rig TOML) with
 :func:`rig.measurement.service.open_session`, watches the devices while idle (heartbeats, last
-values),
-and runs plans and campaigns with the engine (:func:`rig.measurement.service.measure_plan`,
-:func:`rig.measurement.service.run_campaign`) on a thread of its own, the store wrapped by
+values), and measures single runs and campaigns with the measurement service
+(:func:`rig.measurement.single_run.measure_run`, :func:`rig.measurement.service.run_campaign`)
+on a thread of its own: the engine handed to the controller before it starts (pause, resume,
+abort), its events forwarded to the pages, the store wrapped by
 :class:`rig.web.live_tap.TapStore` so that the rows recorded are also drawn live.
 
 Device access: while a measurement runs only the engine talks to the serial transducer and
@@ -26,24 +27,16 @@ from typing import Any
 
 from drivers.errors import DeviceError
 from rig.core.errors import RigError
-from rig.engine import Engine, EngineOptions
+from rig.engine import Engine
 from rig.engine.events import ProgressEvent
 from rig.engine.record import json_safe
 from rig.engine.safety import PlanRejected, preflight
 from rig.hardware.calibration import CalibrationExpired, calibration_meta, calibration_status
-from rig.measurement.service import RigSession, measure_plan, run_campaign, run_meta, run_result
-from rig.plans import (
-    TE_KIND,
-    CampaignAxes,
-    Plan,
-    campaign_plan,
-    hysteresis_plan,
-    te_campaign_plan,
-    te_plan,
-)
+from rig.measurement.service import RigSession, run_campaign
+from rig.measurement.single_run import MeasureRequest, measure_run
+from rig.plans import TE_KIND, CampaignAxes, Plan, campaign_plan, te_campaign_plan
 from rig.plans.campaign_file import campaign_from_mapping
 from rig.plans.estimate import estimate
-from rig.results.outcome import campaign_outcome
 from rig.store import Store
 from rig.web.faults import explain
 from rig.web.live import LiveHub
@@ -68,18 +61,26 @@ class ControlError(RigError):
     """A command that cannot be done now (HTTP 409): says why and what to do."""
 
 
+def single_run_request(req: RunRequest) -> MeasureRequest:
+    """The measurement service's request of a single run (``kind`` "run") set up on the
+    page."""
+    te = req.te_params() if req.test == TE_KIND else None
+    return MeasureRequest(loop=None if te is not None else req.plan.loop_params(), te=te,
+                          position_deg=req.position_deg, unit=req.unit.mapping(),
+                          limits=req.limits.limits(), profile=req.profile,
+                          operator=req.operator, calibration_override=req.calibration_override,
+                          override_how=OVERRIDE_HOW, torque_limit_Nm=req.torque_limit_Nm)
+
+
 def build_plan(req: RunRequest) -> Plan:
-    """The engine plan of a request: one hysteresis run, or a campaign over ``axes``; with
-    ``test`` "transmission_error" the same of transmission error runs."""
-    if req.test == TE_KIND:
-        params = req.te_params()
-        return te_plan(params) if req.kind == "run" else te_campaign_plan(
-            params, CampaignAxes(repeats=req.axes.repeats,
-                                 temperatures_C=list(req.axes.temperatures_C)))
-    loop = req.plan.loop_params()
+    """The engine plan of a request: one run (:meth:`MeasureRequest.plan`), or a campaign
+    over ``axes``; with ``test`` "transmission_error" of transmission error runs."""
     if req.kind == "run":
-        return hysteresis_plan(loop, req.position_deg)
-    return campaign_plan(loop, req.axes.axes())
+        return single_run_request(req).plan()
+    if req.test == TE_KIND:
+        return te_campaign_plan(req.te_params(), CampaignAxes(
+            repeats=req.axes.repeats, temperatures_C=list(req.axes.temperatures_C)))
+    return campaign_plan(req.plan.loop_params(), req.axes.axes())
 
 
 def compute_preview(req: RunRequest, facts: dict[str, Any]) -> dict[str, Any]:
@@ -670,33 +671,14 @@ class RigController:
         self._monitor_once()  # the devices as the end left them (safe state), at once
         self.hub.add_event({"type": "state", "state": state, "result": self._last_result})
 
-    def _options(self, req: RunRequest) -> EngineOptions:
-        return EngineOptions(torque_limit_Nm=req.torque_limit_Nm, profile=req.profile,
-                             limits=req.limits.limits().model_dump())
-
     def _measure_run(self, req: RunRequest, session: RigSession, tap: TapStore
                      ) -> tuple[dict[str, Any], str, str | None]:
-        unit = req.unit.mapping()
-        meta = run_meta(unit, session, req.operator, req.calibration_override,
-                        override_how=OVERRIDE_HOW)
-        plan = build_plan(req) if req.test == TE_KIND else hysteresis_plan(
-            req.plan.loop_params(), req.position_deg)
-        engine, outcomes = measure_plan(session, tap, plan, meta, options=self._options(req),
-                                        progress=self._on_event, on_engine=self._set_engine)
-        limits = req.limits.limits()
-        runs = [run_result(o.to_dict(), limits) for o in outcomes]
-        state = "completed" if engine.state == "completed" else "aborted"
-        passed = state == "completed" and bool(runs) and all(r["passed"] for r in runs)
-        outcome = campaign_outcome([r["outcome"] for r in runs], state)
-        failures = [c for r in runs for c in r["failures"]]
-        if state == "aborted" and engine.stopping_reason:
-            failures.append(f"run aborted: {engine.stopping_reason}")
-        result = {"kind": "run", "status": state, "reason": engine.stopping_reason,
-                  "passed": passed, "outcome": outcome, "limits": limits.model_dump(),
-                  "failures": failures, "runs": runs}
+        measured = measure_run(single_run_request(req), session, tap, progress=self._on_event,
+                               on_engine=self._set_engine)
+        result = {"kind": "run", **measured.summary()}
         if req.test != TE_KIND:
             result.update(unit_design(req))
-        return result, state, engine.stopping_reason
+        return result, measured.state, measured.reason
 
     def _measure_campaign(self, req: RunRequest, session: RigSession, tap: TapStore
                           ) -> tuple[dict[str, Any], str, str | None]:

@@ -112,8 +112,7 @@ def test_analyse_table_keeps_its_headers_and_shows_the_loop_area_in_mJ(tmp_path:
 
 
 # -- item 22: --json - is stdout; no folder made for a mistyped path ----------------------------
-@pytest.mark.timeout(600)
-@pytest.mark.parametrize("args", [
+JSON_DASH_COMMANDS = [
     ["analyse", str(RUNS_DIR / "pair1-pos000")],
     ["analyse", str(CAMPAIGN)],
     ["model", str(UNIT)],
@@ -121,7 +120,12 @@ def test_analyse_table_keeps_its_headers_and_shows_the_loop_area_in_mJ(tmp_path:
     ["rotor", "--elements", "4"],
     ["montecarlo", "--samples", "200", "--quiet"],
     ["diagnose", str(CAMPAIGN)],
-], ids=lambda a: "-".join(x for x in a if not x.startswith("/"))[:40])
+]
+
+
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("args", JSON_DASH_COMMANDS,
+                         ids=lambda a: "-".join(x for x in a if not x.startswith("/"))[:40])
 def test_json_dash_is_stdout(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, args: list[str]):
     monkeypatch.chdir(tmp_path)
     res = CliRunner().invoke(app, [*args, "--json", "-"])
@@ -130,6 +134,54 @@ def test_json_dash_is_stdout(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, ar
     assert isinstance(doc, dict) and doc
     assert not (tmp_path / "-").exists()
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.fixture(scope="module")
+def empty_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from rig.store import Store
+
+    root = tmp_path_factory.mktemp("store")
+    Store(root).close()
+    return root
+
+
+STORE_JSON_COMMANDS = ["runs", "spc", "reanalyse"]
+
+
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("command", STORE_JSON_COMMANDS)
+def test_json_dash_is_stdout_of_the_store_commands(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, empty_store: Path, command: str):
+    monkeypatch.chdir(tmp_path)
+    res = CliRunner().invoke(app, [command, "--store", str(empty_store), "--json", "-"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.stdout)  # the JSON alone on stdout
+    assert isinstance(doc, dict) and doc
+    assert list(tmp_path.iterdir()) == []
+
+
+JSON_DASH_ELSEWHERE = {
+    "te-calibrate": "two TE runs: tests/test_te_app.py",
+    "validate-diagnosis": "a minute of diagnoses: tests/test_validate_like.py",
+    "measure": "a rig", "campaign run": "a rig", "devices": "a rig",
+}
+"""Commands with ``--json`` whose ``--json -`` is not run here, and why."""
+
+
+def test_every_command_with_json_is_checked_for_json_dash():
+    import typer.main
+
+    group = typer.main.get_command(app)
+    with_json = set()
+    for path in _commands():
+        command = group
+        for name in path:
+            command = command.commands[name]
+        if any("--json" in param.opts for param in command.params):
+            with_json.add(" ".join(path))
+    checked = {args[0] for args in JSON_DASH_COMMANDS} | set(STORE_JSON_COMMANDS)
+    assert with_json == checked | set(JSON_DASH_ELSEWHERE), with_json ^ (
+        checked | set(JSON_DASH_ELSEWHERE))
 
 
 def test_certificate_refuses_a_missing_folder_and_makes_nothing(tmp_path: Path):

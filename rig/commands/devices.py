@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -47,6 +46,7 @@ def register(app: typer.Typer) -> None:
 
         Exit 0 when every device is healthy, 1 when one has errors, 2 on a bad configuration.
         """
+        from rig.commands.output import JsonOutput
         from rig.hardware.config import RigConfigError, load_rig_config
         from rig.hardware.device_check import check_devices
 
@@ -68,12 +68,9 @@ def register(app: typer.Typer) -> None:
             "healthy": healthy,
             "devices": {r.name: r.to_json() for r in reports},
         }
-        to_stdout = json_file is not None and str(json_file) == "-"
-        console = Console(stderr=to_stdout, width=160)
+        json_out = JsonOutput(json_file)
+        console = Console(stderr=json_out.to_stdout, width=160)
         console.print(_table(reports, f"Devices of rig {config.rig.rig_id} ({rig_file}), "
                                       f"{seconds:g} s"))
-        if to_stdout:
-            print(json.dumps(doc, indent=2))
-        elif json_file is not None:
-            json_file.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+        json_out.write(doc, ensure_ascii=True)
         raise typer.Exit(0 if healthy else 1)

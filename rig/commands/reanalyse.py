@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-import json
-import sys
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -26,7 +25,11 @@ def register(app: typer.Typer) -> None:
             "--workers", min=1, help="Processes of the local Dask cluster (default 1).")
         ] = None,
         json_out: Annotated[bool, typer.Option(
-            "--json", help="Print the summary as JSON on stdout.")] = False,
+            "--json", help="Print the summary as JSON on stdout (--json, --json -), or write "
+            "it to a file (--json FILE).")] = False,
+        json_file: Annotated[Path | None, typer.Argument(
+            hidden=True, metavar="FILE", help="With --json: the summary's file ('-': stdout).")
+        ] = None,
     ) -> None:
         """Analyse every completed run and diagnose every completed campaign again with this
         software version; the results are kept beside the older ones (docs/deployment.md).
@@ -38,10 +41,13 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
+        from rig.commands.output import JsonOutput
         from rig.core.errors import RigError
         from rig.store import Store
         from rig.store.reanalyse import reanalyse as run_reanalysis
 
+        if json_file is not None and not json_out:
+            raise RigError(f"{json_file}: the summary's file goes with --json (--json FILE)")
         if dask and workers:
             raise RigError("give --dask (a scheduler) or --workers (a local cluster), not both")
         st = Store(store, create=False, samples=samples)
@@ -65,9 +71,8 @@ def register(app: typer.Typer) -> None:
             raise RigError(f"Dask scheduler {dask}: {exc}") from exc
         except ValueError as exc:
             raise RigError(str(exc)) from exc
-        doc = summary.to_dict()
         if json_out:
-            sys.stdout.write(json.dumps(doc, indent=2) + "\n")
+            JsonOutput(json_file or "-").write(summary.to_dict(), ensure_ascii=True)
         else:
             err.print(f"software {summary.software_version}: {summary.n_runs} runs, "
                       f"{summary.n_campaigns} campaigns; {summary.written} results written, "

@@ -3,7 +3,6 @@ INCOMPLETE / NO LIMITS, rig/results/outcome.py) and lost motion."""
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
@@ -115,6 +114,7 @@ def register(app: typer.Typer) -> None:
         URL postgresql://... whose run files are in --samples (else $RIG_SAMPLES_DIR).
         --json lists every run once, with its run_id.
         """
+        from rig.commands.output import JsonOutput
         from rig.store import Store
 
         if status is not None and status not in ("running", "completed", "aborted"):
@@ -123,14 +123,12 @@ def register(app: typer.Typer) -> None:
             )
         st = Store(store, create=False, samples=samples)
         infos = st.list_runs(campaign_id=campaign, status=status, limit=limit)
+        json_out = JsonOutput(json_file)
         if json_file is not None:
-            doc = {"store": st.location, "recovered": st.recovered,
-                   "runs": [run_json(i) for i in infos]}
-            text = json.dumps(doc, indent=2, ensure_ascii=False, allow_nan=False) + "\n"
-            if str(json_file) == "-":
-                sys.stdout.write(text)
+            json_out.write({"store": st.location, "recovered": st.recovered,
+                            "runs": [run_json(i) for i in infos]})
+            if json_out.to_stdout:
                 return
-            json_file.write_text(text, encoding="utf-8")
         # rich wraps to 80 columns when not writing to a terminal: allow a wide table then
         console = Console(width=None if sys.stdout.isatty() else 200)
         for run_id in st.recovered:

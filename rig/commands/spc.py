@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -36,6 +35,7 @@ def register(app: typer.Typer) -> None:
         from rich.markup import escape
         from rich.table import Table
 
+        from rig.commands.output import JsonOutput
         from rig.core.errors import RigError
         from rig.reports.spc import spc_report
         from rig.reports.spc.html import render_html
@@ -46,15 +46,11 @@ def register(app: typer.Typer) -> None:
             doc = spc_report(st, design=design, since=since)
         except ValueError as exc:
             raise RigError(str(exc)) from exc
-        if json_file is not None:
-            text = json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
-            if str(json_file) == "-":
-                sys.stdout.write(text)
-            else:
-                json_file.write_text(text, encoding="utf-8")
+        json_out = JsonOutput(json_file)
+        json_out.write(doc)
         if html is not None:
             html.write_text(render_html(doc), encoding="utf-8")
-        if str(json_file) == "-":
+        if json_out.to_stdout:
             return
         out = Console(width=None if sys.stdout.isatty() else 160)
 

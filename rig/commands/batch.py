@@ -31,27 +31,12 @@ def register(app: typer.Typer) -> None:
         M value deviations, runouts with random phases, bearing clearances and the eccentric
         distance error; each unit's lost motion at its worst eccentric-shaft position.
         """
-        from analysis.models.seed000_batch import lost_motion_batch
-        from analysis.models.seed000_unit import InternalPairUnit
         from rig.commands.output import JsonOutput
-        from rig.runformat.unit_file import load_unit_mapping
+        from rig.reports.batch import batch_report
 
         json_out = JsonOutput(json_file)
-        unit, _ = InternalPairUnit.from_mapping(load_unit_mapping(unit_file))
-        result = lost_motion_batch(
-            unit,
-            samples=samples,
-            seed=seed,
-            compensate=compensate,
-            rated_torque_Nm=rated_torque,
-            lost_motion_pct=percent,
-        )
-        report = {
-            "format": "rig-batch/1",
-            "unit_file": str(unit_file),
-            "compensated": compensate,
-            **result.to_dict(),
-        }
+        report = batch_report(unit_file, samples=samples, seed=seed, compensate=compensate,
+                              rated_torque_Nm=rated_torque, lost_motion_pct=percent)
         table = Table(
             title=f"Lost motion of {samples} units (±{percent:g} % of {rated_torque:g} N·m)"
         )
@@ -69,7 +54,7 @@ def register(app: typer.Typer) -> None:
         console = Console(stderr=json_out.to_stdout)
         console.print(table)
         console.print(
-            f"units that bind somewhere (play < 0): {100 * result.interference_fraction:.1f} % "
-            f"(deepest {result.interference_max_um:.2f} um)"
+            f"units that bind somewhere (play < 0): {100 * report['interference_fraction']:.1f} % "
+            f"(deepest {report['interference_max_um']:.2f} um)"
         )
         json_out.write(report)

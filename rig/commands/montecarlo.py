@@ -2,7 +2,8 @@
 
 Runs the three methods of the paper for its example (random errors, the maximum deviation
 method, maximum deviation with random phases), ranks the error sources and names the
-dominant spectral line, prints the comparison with the paper and optionally writes JSON.
+dominant spectral line (the report: :func:`rig.reports.montecarlo.montecarlo_report`), prints
+the comparison with the paper and optionally writes JSON.
 """
 
 from __future__ import annotations
@@ -15,19 +16,11 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from analysis.models.seed003_montecarlo import (
-    PAPER_FIGURES_ARCSEC,
-    check_sample_count,
-    max_deviation,
-    max_deviation_random_phase,
-    monte_carlo,
-    sensitivity_ranking,
-    spectrum,
-)
-from analysis.models.seed003_planetary import PaperReading, paper_train
+from analysis.models.seed003_montecarlo import PAPER_FIGURES_ARCSEC, check_sample_count
+from analysis.models.seed003_planetary import PaperReading
 from rig.core.errors import RigError
+from rig.reports.montecarlo import montecarlo_report
 
-FORMAT = "rig-montecarlo/1"
 SIGNS = ("printed", "consistent")
 PLANET_ROWS = ("E_A_f10", "E_f", "E_A")
 SPEEDS = ("kinematic", "printed")
@@ -39,72 +32,6 @@ def _choice(value: str, allowed: tuple[str, ...], option: str) -> str:
             f"must be one of {', '.join(allowed)}, got {value!r}", param_hint=option
         )
     return value
-
-
-def run_montecarlo(
-    samples: int,
-    seed: int,
-    reading: PaperReading,
-    progress: Progress | None = None,
-    window_revs: float = 1.0,
-) -> dict[str, Any]:
-    """Compute the report (the JSON document) for the paper's example."""
-    train = paper_train(reading)
-
-    def tracker(label: str, total: int):
-        if progress is None:
-            return None
-        task = progress.add_task(label, total=total)
-        return lambda done: progress.update(task, completed=done)
-
-    mc = monte_carlo(train, samples, seed, tracker("Monte Carlo", samples), window_revs)
-    random_phase = max_deviation_random_phase(
-        train, samples, seed + 1, tracker("max deviation, random phases", samples), window_revs
-    )
-    step = tracker("max deviation, common phase", 1)
-    common = max_deviation(train, window_revs=window_revs)
-    if step:
-        step(1)
-    step = tracker("sensitivity ranking", 1)
-    ranking = sensitivity_ranking(train, seed=seed + 2)
-    if step:
-        step(1)
-    step = tracker("spectrum", 1)
-    lines = spectrum(train, seed=seed + 3)
-    if step:
-        step(1)
-    top = sorted(
-        range(lines.amplitude_arcsec.size), key=lambda k: -lines.amplitude_arcsec[k]
-    )[:10]
-    return {
-        "format": FORMAT,
-        "model": "seed 003: three 2K-H stages in series (Table 2), max |dtheta| in arcsec",
-        "window_output_revs": window_revs,
-        "reading": {
-            "table1_signs": reading.table1_signs,
-            "planet_speed": reading.planet_speed,
-            "stage3_planet_row": reading.stage3_planet_row,
-        },
-        "samples": samples,
-        "seed": seed,
-        "monte_carlo": mc.as_dict(),
-        "max_deviation": common.as_dict(),
-        "max_deviation_random_phase": random_phase.as_dict(),
-        "paper": PAPER_FIGURES_ARCSEC,
-        "sensitivity_ranking": [item.as_dict() for item in ranking],
-        "spectrum": {
-            "dominant_frequency_per_rev": lines.dominant_frequency_per_rev,
-            "dominant_amplitude_arcsec": lines.dominant_amplitude_arcsec,
-            "dominant_sources": list(lines.dominant_sources),
-            "lines": [
-                {
-                    "frequency_per_rev": float(lines.frequency_per_rev[k]),
-                    "amplitude_arcsec": float(lines.amplitude_arcsec[k]),
-                }
-                for k in top
-            ],
-        },
-    }
 
 
 def _print_report(console: Console, report: dict[str, Any]) -> None:
@@ -175,7 +102,7 @@ def register(app: typer.Typer) -> None:
         json_out = JsonOutput(json_path)
         console = Console(stderr=True)
         if quiet:
-            report = run_montecarlo(samples, seed, reading, window_revs=window_revs)
+            report = montecarlo_report(samples, seed, reading, window_revs=window_revs)
         else:
             columns = (
                 TextColumn("{task.description}"),
@@ -184,6 +111,11 @@ def register(app: typer.Typer) -> None:
                 TimeElapsedColumn(),
             )
             with Progress(*columns, console=console, transient=False) as progress:
-                report = run_montecarlo(samples, seed, reading, progress, window_revs)
+
+                def tracker(label: str, total: int) -> Any:
+                    task = progress.add_task(label, total=total)
+                    return lambda done: progress.update(task, completed=done)
+
+                report = montecarlo_report(samples, seed, reading, tracker, window_revs)
             _print_report(Console(stderr=json_out.to_stdout), report)
         json_out.write(report)

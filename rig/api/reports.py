@@ -20,7 +20,7 @@ from analysis.errors import AnalysisError
 from analysis.models.seed000 import Seed000Design, design_chain
 from rig.core.errors import RigError
 from rig.core.json_files import finite_for_json
-from rig.results.analyse import RunAnalysis, analyse_run
+from rig.results.analyse import RunAnalysis
 from rig.results.diagnose import diagnose_campaign, diagnose_path, report_dict
 from rig.results.table import result_row, rows_frame
 from rig.runformat import CAMPAIGN_FORMAT, Campaign, Run, is_campaign, read_run_or_campaign
@@ -150,11 +150,11 @@ def analyse(run_or_path: Any, **options: Any) -> Analysis:
     (:class:`rig.results.te.TERunAnalysis`). ``options`` (hysteresis runs): ``profile``
     ("nabtesco" ±3 %,
     "harmonic-drive" ±4 %), ``percent``, ``rated_torque_Nm``, ``hd_T1_Nm``, ``hd_T2_Nm``."""
-    from rig.results.te import analyse_te_run, is_te_run
+    from rig.results.any_run import analyse_any_run
 
     campaign, single = as_campaign(run_or_path)
-    return Analysis(campaign, [analyse_te_run(run) if is_te_run(run) else
-                               analyse_run(run, **options) for run in campaign.runs], single)
+    return Analysis(campaign, [analyse_any_run(run, **options) for run in campaign.runs],
+                    single)
 
 
 def diagnose(campaign_or_path: Any) -> Diagnosis:

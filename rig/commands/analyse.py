@@ -162,26 +162,20 @@ def register(app: typer.Typer) -> None:
         """Compute lost motion, backlash, stiffness, loop area and torque offset, with the model;
         of a transmission error run, its TE figures, orders and the seeds' band."""
         from rig.commands.output import JsonOutput
-        from rig.results.analyse import analyse_run
-        from rig.results.te import analyse_te_run, is_te_run
+        from rig.results.any_run import analyse_any_run
+        from rig.results.te import TERunAnalysis
         from rig.runformat import is_campaign, read_run_or_campaign
 
         json_out = JsonOutput(json_file)
         console = Console(stderr=json_out.to_stdout)
         campaign = read_run_or_campaign(path)
         every: list[Any] = [
-            analyse_te_run(run) if is_te_run(run) else analyse_run(
-                run,
-                profile=profile,
-                percent=percent,
-                rated_torque_Nm=rated_torque,
-                hd_T1_Nm=hd_t1,
-                hd_T2_Nm=hd_t2,
-            )
+            analyse_any_run(run, profile=profile, percent=percent, rated_torque_Nm=rated_torque,
+                            hd_T1_Nm=hd_t1, hd_T2_Nm=hd_t2)
             for run in campaign.runs
         ]
-        items = [i for i in every if not is_te_run(i.run)]
-        te_items = [i for i in every if is_te_run(i.run)]
+        items = [i for i in every if not isinstance(i, TERunAnalysis)]
+        te_items = [i for i in every if isinstance(i, TERunAnalysis)]
         if items:
             console.print(_table(items))
         if te_items:

@@ -21,7 +21,6 @@ from rig.core.json_files import finite_for_json
 from rig.results.analyse import (
     METRIC_KEYS,
     RunAnalysis,
-    analyse_run,
     resolve_profile,
     run_twist_arcmin,
 )
@@ -175,10 +174,9 @@ def results_frame(campaign: Campaign, **options: Any) -> pd.DataFrame:
     rows = []
     for run in campaign.runs:
         try:
-            from rig.results.te import analyse_te_run, is_te_run
+            from rig.results.any_run import analyse_any_run
 
-            analysis, error = (analyse_te_run(run) if is_te_run(run)
-                               else analyse_run(run, **options)), None
+            analysis, error = analyse_any_run(run, **options), None
         except RigError as exc:
             analysis, error = None, str(exc)
         rows.append(result_row(run, analysis, campaign_meta=campaign.meta, error=error))

@@ -92,12 +92,10 @@ def run_job(job: Job) -> dict[str, Any]:
         return out
     try:
         if job.kind == "run":
-            from rig.results.analyse import analyse_run
-            from rig.results.te import analyse_te_run, is_te_run
+            from rig.results.any_run import analyse_any_run, result_record
 
             profile = job.profile or data.meta.get("profile")
-            out["metrics"] = _finite(analyse_te_run(data).result_record() if is_te_run(data)
-                                     else analyse_run(data, profile=profile).to_dict())
+            out["metrics"] = _finite(result_record(analyse_any_run(data, profile=profile)))
         else:
             from rig.results.diagnose import diagnose_campaign, report_dict
 

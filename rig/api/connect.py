@@ -18,10 +18,15 @@ from pydantic import ValidationError
 
 from rig.api.data import Campaign, Run
 from rig.core.errors import RigError, RunFormatError
-from rig.core.json_files import finite_for_json, read_json_file
+from rig.core.json_files import finite_for_json
 from rig.engine.events import ProgressEvent
 from rig.measurement.service import RigSession, open_session, plant_config_for, run_campaign
-from rig.measurement.single_run import MeasureRequest, measure_run, with_simulated_plant
+from rig.measurement.single_run import (
+    MeasureRequest,
+    measure_run,
+    unit_data,
+    with_simulated_plant,
+)
 from rig.plans import LoopParams
 from rig.plans.campaign_file import CampaignFile, Limits, campaign_from_mapping, load_campaign
 from rig.runformat import CAMPAIGN_JSON, read_campaign
@@ -131,7 +136,7 @@ class Connection:
         except ValidationError as exc:
             raise RigError("; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}"
                                      for e in exc.errors())) from None
-        request = MeasureRequest(loop=loop, position_deg=position_deg, unit=_unit_data(unit),
+        request = MeasureRequest(loop=loop, position_deg=position_deg, unit=unit_data(unit),
                                  limits=lim, profile=profile, operator=operator)
         if self.simulated:
             request = with_simulated_plant(request)
@@ -143,18 +148,6 @@ class Connection:
     def __repr__(self) -> str:
         what = "simulated rig" if self.simulated else f"rig {self.rig}"
         return f"<Connection to the {what}, store {self.store.location}>"
-
-
-def _unit_data(unit: str | Path | Mapping[str, Any] | None) -> dict[str, Any]:
-    """The unit data of :meth:`Connection.measure`: a mapping, or a JSON file's object."""
-    if isinstance(unit, Mapping):
-        return dict(unit)
-    if unit is None:
-        return {}
-    data = read_json_file(unit, RigError, "unit data")
-    if not isinstance(data, dict):
-        raise RigError(f"{unit}: the unit data must be a JSON object")
-    return data
 
 
 def read_stored_campaign(folder: Path) -> RawCampaign:

@@ -18,6 +18,7 @@ from rich.table import Table
 
 from rig.commands.output import (
     console,
+    exit_2_on_ctrl_c,
     exit_code,
     outcome_markup,
     print_outcome,
@@ -95,13 +96,9 @@ def register(app: typer.Typer) -> None:
         st = Store(store, samples=samples)
         out.print(f"campaign {camp.name}: {est.n_runs} runs, about {est.total_s:.0f} s")
         with open_session(rig=rig, simulated=simulated, plant=plant_cfg) as session, \
-                progress_bar(out, est.total_s) as on_event:
-            try:
-                result = run_campaign(camp, session, st, progress=on_event)
-            except KeyboardInterrupt:
-                out.print("[red]interrupted: the rig is in its safe state; the runs are kept"
-                          "[/red]")
-                raise typer.Exit(2) from None
+                progress_bar(out, est.total_s) as on_event, \
+                exit_2_on_ctrl_c(out, "the runs are kept"):
+            result = run_campaign(camp, session, st, progress=on_event)
         write_json(json_file, result)
         out.print(_summary_table(result))
         lm = result["lost_motion_arcmin"]

@@ -15,7 +15,14 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from rig.commands.output import console, exit_code, print_outcome, progress_bar, write_json
+from rig.commands.output import (
+    console,
+    exit_2_on_ctrl_c,
+    exit_code,
+    print_outcome,
+    progress_bar,
+    write_json,
+)
 from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
 
 if TYPE_CHECKING:
@@ -27,109 +34,89 @@ if TYPE_CHECKING:
 TESTS = {"lost-motion": "lost_motion", "transmission-error": "transmission_error"}
 """``rig measure --test`` values and the run.json ``test.kind`` each measures."""
 
-Simulated = Annotated[bool, typer.Option(
-    "--simulated", help="Start the simulated rig (its own process) for the run.")]
-RigFile = Annotated[Path | None, typer.Option(
-    "--rig", help="Rig configuration (TOML) of real or simulated device addresses.")]
-UnitFile = Annotated[Path | None, typer.Option(
-    help="Unit data (run.json 'unit' JSON); with --simulated also the plant's unit.")]
-Serial = Annotated[str | None, typer.Option(help="Serial number of the unit.")]
-Operator = Annotated[str | None, typer.Option(
-    help="Who measures (kept in run.json and on the certificate).")]
-CalibrationOverride = Annotated[str | None, typer.Option(
-    "--calibration-override", metavar="REASON",
-    help="Measure although a sensor calibration of the rig configuration is past due; "
-         "the reason is recorded in run.json with the operator and the time.")]
-PlantFile = Annotated[Path | None, typer.Option(
-    help="Plant TOML for --simulated (default: the default plant with --unit).")]
-RatedTorque = Annotated[float, typer.Option(help="Rated torque, N·m.")]
-Amplitude = Annotated[float, typer.Option(help="Loop amplitude, % of rated.")]
-Position = Annotated[float | None, typer.Option(
-    help="Lock the input (eccentric shaft) at this angle first, deg.")]
-Mode = Annotated[str, typer.Option(help="equal_torque, equal_position or constant_rate.")]
-Rate = Annotated[float, typer.Option(help="Loading rate, N·m/s.")]
-Steps = Annotated[int, typer.Option(help="Torque steps per quarter cycle.")]
-Dwell = Annotated[float, typer.Option(help="Dwell at each step, s.")]
-Cycles = Annotated[int, typer.Option(help="Recorded cycles.")]
-PreCycles = Annotated[int, typer.Option(help="Unrecorded cycles before.")]
-ZeroBand = Annotated[float, typer.Option(help="Cross |T| below this slowly, N·m (0: off).")]
-ZeroRate = Annotated[float, typer.Option(help="Rate inside the zero band, N·m/s.")]
-ExtraLevel = Annotated[list[float] | None, typer.Option(
-    help="Extra settled levels, % of rated (repeat; default 3).")]
-Profile = Annotated[str, typer.Option(
-    help="Lost-motion band: nabtesco (±3 %) or harmonic-drive (±4 %).")]
-MaxLostMotion = Annotated[float | None, typer.Option(
-    help="Limit: lost motion at most this, arcmin.")]
-MaxBacklash = Annotated[float | None, typer.Option(
-    help="Limit: backlash at most this, arcmin.")]
-MinStiffness = Annotated[float | None, typer.Option(
-    help="Limit: stiffness at least this, N·m/arcmin.")]
-JsonFile = Annotated[Path | None, typer.Option(
-    "--json", help="Write the run's metrics, status and reason as JSON ('-': stdout).")]
-Preview = Annotated[bool, typer.Option(
-    "--preview", help="List the plan's steps and its duration; measure nothing.")]
-Test = Annotated[str, typer.Option(
-    "--test", help="lost-motion (the hysteresis loop) or transmission-error (the "
-    "input turned at --speed under a --brake torque, both encoders recorded).")]
-Speed = Annotated[float, typer.Option(help="transmission-error: input speed, rpm.")]
-Brake = Annotated[float, typer.Option(
-    help="transmission-error: brake torque, fraction of the rated torque "
-         "(within the torque limit).")]
-Revolutions = Annotated[float, typer.Option(
-    help="transmission-error: output revolutions in each direction (>= 1).")]
-Ratio = Annotated[float | None, typer.Option(
-    help="transmission-error: signed reduction ratio (output = input / ratio; "
-         "default: the unit's, -z_external / (z_internal - z_external) for an "
-         "internal involute pair).")]
-
-
 def register(app: typer.Typer) -> None:
     @app.command()
     def measure(
-        simulated: Simulated = False,
-        rig: RigFile = None,
-        unit: UnitFile = None,
-        serial: Serial = None,
-        operator: Operator = None,
-        calibration_override: CalibrationOverride = None,
-        plant: PlantFile = None,
-        rated_torque: RatedTorque = 10.0,
-        amplitude: Amplitude = 100.0,
-        position: Position = None,
-        mode: Mode = "equal_torque",
-        rate: Rate = 25.0,
-        steps: Steps = 4,
-        dwell: Dwell = 0.05,
-        cycles: Cycles = 1,
-        pre_cycles: PreCycles = 1,
-        zero_band: ZeroBand = 0.3,
-        zero_rate: ZeroRate = 0.3,
-        extra_level: ExtraLevel = None,
-        profile: Profile = "nabtesco",
-        max_lost_motion: MaxLostMotion = None,
-        max_backlash: MaxBacklash = None,
-        min_stiffness: MinStiffness = None,
+        simulated: Annotated[bool, typer.Option(
+            "--simulated", help="Start the simulated rig (its own process) for the run.")
+        ] = False,
+        rig: Annotated[Path | None, typer.Option(
+            "--rig", help="Rig configuration (TOML) of real or simulated device addresses.")
+        ] = None,
+        unit: Annotated[Path | None, typer.Option(
+            help="Unit data (run.json 'unit' JSON); with --simulated also the plant's unit.")
+        ] = None,
+        serial: Annotated[str | None, typer.Option(help="Serial number of the unit.")] = None,
+        operator: Annotated[str | None, typer.Option(
+            help="Who measures (kept in run.json and on the certificate).")] = None,
+        calibration_override: Annotated[str | None, typer.Option(
+            "--calibration-override", metavar="REASON",
+            help="Measure although a sensor calibration of the rig configuration is past due; "
+                 "the reason is recorded in run.json with the operator and the time.")
+        ] = None,
+        plant: Annotated[Path | None, typer.Option(
+            help="Plant TOML for --simulated (default: the default plant with --unit).")
+        ] = None,
+        rated_torque: Annotated[float, typer.Option(help="Rated torque, N·m.")] = 10.0,
+        amplitude: Annotated[float, typer.Option(help="Loop amplitude, % of rated.")] = 100.0,
+        position: Annotated[float | None, typer.Option(
+            help="Lock the input (eccentric shaft) at this angle first, deg.")] = None,
+        mode: Annotated[str, typer.Option(
+            help="equal_torque, equal_position or constant_rate.")] = "equal_torque",
+        rate: Annotated[float, typer.Option(help="Loading rate, N·m/s.")] = 25.0,
+        steps: Annotated[int, typer.Option(help="Torque steps per quarter cycle.")] = 4,
+        dwell: Annotated[float, typer.Option(help="Dwell at each step, s.")] = 0.05,
+        cycles: Annotated[int, typer.Option(help="Recorded cycles.")] = 1,
+        pre_cycles: Annotated[int, typer.Option(help="Unrecorded cycles before.")] = 1,
+        zero_band: Annotated[float, typer.Option(
+            help="Cross |T| below this slowly, N·m (0: off).")] = 0.3,
+        zero_rate: Annotated[float, typer.Option(help="Rate inside the zero band, N·m/s.")
+                             ] = 0.3,
+        extra_level: Annotated[list[float] | None, typer.Option(
+            help="Extra settled levels, % of rated (repeat; default 3).")] = None,
+        profile: Annotated[str, typer.Option(
+            help="Lost-motion band: nabtesco (±3 %) or harmonic-drive (±4 %).")] = "nabtesco",
+        max_lost_motion: Annotated[float | None, typer.Option(
+            help="Limit: lost motion at most this, arcmin.")] = None,
+        max_backlash: Annotated[float | None, typer.Option(
+            help="Limit: backlash at most this, arcmin.")] = None,
+        min_stiffness: Annotated[float | None, typer.Option(
+            help="Limit: stiffness at least this, N·m/arcmin.")] = None,
         store: StoreOption = DEFAULT_STORE,
         samples: SamplesOption = None,
-        json_file: JsonFile = None,
-        preview: Preview = False,
-        test: Test = "lost-motion",
-        speed: Speed = 120.0,
-        brake: Brake = 0.2,
-        revolutions: Revolutions = 1.0,
-        ratio: Ratio = None,
+        json_file: Annotated[Path | None, typer.Option(
+            "--json", help="Write the run's metrics, status and reason as JSON ('-': stdout).")
+        ] = None,
+        preview: Annotated[bool, typer.Option(
+            "--preview", help="List the plan's steps and its duration; measure nothing.")
+        ] = False,
+        test: Annotated[str, typer.Option(
+            "--test", help="lost-motion (the hysteresis loop) or transmission-error (the "
+            "input turned at --speed under a --brake torque, both encoders recorded).")
+        ] = "lost-motion",
+        speed: Annotated[float, typer.Option(
+            help="transmission-error: input speed, rpm.")] = 120.0,
+        brake: Annotated[float, typer.Option(
+            help="transmission-error: brake torque, fraction of the rated torque "
+                 "(within the torque limit).")] = 0.2,
+        revolutions: Annotated[float, typer.Option(
+            help="transmission-error: output revolutions in each direction (>= 1).")] = 1.0,
+        ratio: Annotated[float | None, typer.Option(
+            help="transmission-error: signed reduction ratio (output = input / ratio; "
+                 "default: the unit's, -z_external / (z_internal - z_external) for an "
+                 "internal involute pair).")] = None,
     ) -> None:
         """Measure one hysteresis loop (GB/T order -T -> 0 -> +T -> 0 -> -T), or with --test
         transmission-error the transmission error in both directions, into the store."""
         from rig.core.errors import RigError
-        from rig.measurement.single_run import measure_run, open_run_session
+        from rig.measurement.single_run import measure_run, open_run_session, unit_data
         from rig.plans.estimate import estimate
         from rig.store import Store
 
         out = console()
         if test not in TESTS:
             raise RigError(f"--test: expected one of {', '.join(TESTS)}, got {test!r}")
-        unit_data = _read_unit(unit)
+        unit_mapping = unit_data(unit)
         loop, limits = _loop_and_limits(
             rated_torque=rated_torque, amplitude_pct=amplitude, mode=mode, rate_Nm_per_s=rate,
             steps_per_quarter=steps, dwell_s=dwell, cycles=cycles, pre_cycles=pre_cycles,
@@ -138,8 +125,9 @@ def register(app: typer.Typer) -> None:
             min_stiffness=min_stiffness)
         te = None
         if TESTS[test] == "transmission_error":
-            te = _te_params(rated_torque, speed, brake, revolutions, ratio, unit_data, plant)
-        request = _request(loop, te, position, unit_data, limits, profile)
+            te = _te_params(rated_torque, speed, brake, revolutions, ratio, unit_mapping,
+                            plant)
+        request = _request(loop, te, position, unit_mapping, limits, profile)
         est = estimate(request.plan().steps())
         if preview:
             _print_preview(out, request.plan(), est)
@@ -147,29 +135,12 @@ def register(app: typer.Typer) -> None:
         request = _ready(request, serial, operator, calibration_override, simulated, plant)
         with open_run_session(request, rig=rig, simulated=simulated) as session:
             st = Store(store, samples=samples)
-            with progress_bar(out, est.total_s) as on_event:
-                try:
-                    measured = measure_run(request, session, st, progress=on_event)
-                except KeyboardInterrupt:
-                    out.print("[red]interrupted: the rig is in its safe state; the run is "
-                              "kept as aborted[/red]")
-                    raise typer.Exit(2) from None
+            with progress_bar(out, est.total_s) as on_event, \
+                    exit_2_on_ctrl_c(out, "the run is kept as aborted"):
+                measured = measure_run(request, session, st, progress=on_event)
         result = measured.result
         write_json(json_file, result)
         raise typer.Exit(_print_result(out, result, st))
-
-
-def _read_unit(path: Path | None) -> dict[str, Any]:
-    """``--unit``: the unit data (a JSON object), {} when not given."""
-    if path is None:
-        return {}
-    from rig.core.errors import RigError
-    from rig.core.json_files import read_json_file
-
-    data = read_json_file(path, RigError, "unit data")
-    if not isinstance(data, dict):
-        raise RigError(f"{path}: the unit data must be a JSON object")
-    return data
 
 
 def _loop_and_limits(*, rated_torque: float, extra_level: list[float] | None,

@@ -113,6 +113,19 @@ def exit_code(code: str | None) -> int:
 
 
 @contextmanager
+def exit_2_on_ctrl_c(out: Console, kept: str) -> Iterator[None]:
+    """Ctrl-C (or SIGTERM) during a measurement: say that the rig is in its safe state and
+    what is ``kept``, and exit 2."""
+    import typer
+
+    try:
+        yield
+    except KeyboardInterrupt:
+        out.print(f"[red]interrupted: the rig is in its safe state; {kept}[/red]")
+        raise typer.Exit(2) from None
+
+
+@contextmanager
 def progress_bar(out: Console, total_s: float) -> Iterator[Callable[[ProgressEvent], None]]:
     """A rich progress bar over the plan's estimated time (s); yields the engine's progress
     callback. A run's end, a fault, an abort, a pause are printed in colour, a completed

@@ -1,8 +1,10 @@
 """The measurement service: open a rig (real, or the simulated one for the duration), run a
 plan or a campaign on it with the engine into the store, and collect the results.
 
-Used by ``rig measure`` and ``rig campaign run`` (and, later, the web page). A simulated rig
-runs as its own process (``rig sim``) with a plant whose unit is the campaign's unit.
+A campaign: :func:`run_campaign`; a single run: :func:`rig.measurement.single_run.measure_run`.
+Both are called by the command line (``rig campaign run``, ``rig measure``), the Python API
+(``rig.connect``) and the control page. A simulated rig runs as its own process (``rig sim``)
+with a plant whose unit is the campaign's unit.
 """
 
 from __future__ import annotations

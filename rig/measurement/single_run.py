@@ -99,6 +99,21 @@ class MeasureRequest:
                              limits=self.limits.model_dump(), run_meta=truth)
 
 
+def unit_data(unit: str | Path | Mapping[str, Any] | None) -> dict[str, Any]:
+    """The run's unit data (run.json ``unit``): a mapping, or a JSON file's object; {} for
+    None."""
+    if isinstance(unit, Mapping):
+        return dict(unit)
+    if unit is None:
+        return {}
+    from rig.core.json_files import read_json_file
+
+    data = read_json_file(unit, RigError, "unit data")
+    if not isinstance(data, dict):
+        raise RigError(f"{unit}: the unit data must be a JSON object")
+    return data
+
+
 def default_unit(plant_file: Path | None = None) -> dict[str, Any]:
     """The unit of the plant TOML ``plant_file``, else of the default plant."""
     try:

@@ -49,6 +49,7 @@ def register(app: typer.Typer) -> None:
         from rig.commands.output import JsonOutput
         from rig.hardware.config import RigConfigError, load_rig_config
         from rig.hardware.device_check import check_devices
+        from rig.reports.devices import devices_report
 
         err = Console(stderr=True)
         try:
@@ -59,18 +60,10 @@ def register(app: typer.Typer) -> None:
             raise typer.Exit(2) from exc
         with err.status(f"reading {len(config.device_names())} devices for {seconds:g} s"):
             reports = check_devices(config, seconds)
-        healthy = all(r.healthy for r in reports)
-        doc = {
-            "format": "rig-devices/1",
-            "rig_id": config.rig.rig_id,
-            "rig_config": str(rig_file),
-            "seconds": seconds,
-            "healthy": healthy,
-            "devices": {r.name: r.to_json() for r in reports},
-        }
+        doc = devices_report(config, rig_file, seconds, reports)
         json_out = JsonOutput(json_file)
         console = Console(stderr=json_out.to_stdout, width=160)
         console.print(_table(reports, f"Devices of rig {config.rig.rig_id} ({rig_file}), "
                                       f"{seconds:g} s"))
         json_out.write(doc, ensure_ascii=True)
-        raise typer.Exit(0 if healthy else 1)
+        raise typer.Exit(0 if doc["healthy"] else 1)

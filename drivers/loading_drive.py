@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pydantic import ConfigDict, Field
 
 from drivers.errors import DeviceError, DeviceFault, DeviceOutOfRange, DeviceProtocolError
+from drivers.lifecycle import ClosedOnExit
 from drivers.modbus.link import ModbusHealth, ModbusLink, ModbusLinkConfig
 from drivers.modbus.map import (
     DRIVE_DEVICE_ID,
@@ -81,7 +82,7 @@ def decode_drive_block(words: list[int], device: str, t_s: float = 0.0) -> Drive
                        float(values["actual_torque"]), float(values["active_setpoint"]))
 
 
-class LoadingDrive:
+class LoadingDrive(ClosedOnExit):
     """A torque-controlled loading drive on Modbus; opening it sets its watchdog time."""
 
     def __init__(self, config: LoadingDriveConfig, link: ModbusLink | None = None) -> None:
@@ -197,9 +198,3 @@ class LoadingDrive:
                 self.safe_state()
         if self._own_link:
             self.link.close()
-
-    def __enter__(self) -> LoadingDrive:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()

@@ -28,10 +28,12 @@ import enum
 import math
 import time
 from dataclasses import dataclass
+from typing import Generic, TypeVar
 
 from pydantic import Field
 
 from drivers.errors import DeviceError, DeviceFault, DeviceOutOfRange, DeviceTimeout
+from drivers.lifecycle import ClosedOnExit
 from drivers.modbus.link import ModbusHealth, ModbusLink, ModbusLinkConfig
 from drivers.modbus.map import (
     Register,
@@ -135,14 +137,18 @@ class ClimateState:
     setpoint_C: float
 
 
-class _ModbusUnit:
+ConfigT = TypeVar("ConfigT", bound=ModbusLinkConfig)
+"""The link config of a Modbus unit (InputMotorConfig, ClimateConfig)."""
+
+
+class _ModbusUnit(ClosedOnExit, Generic[ConfigT]):
     """Shared plumbing: a name, a (possibly shared) link, reads of the input block."""
 
     kind = "device"
     register_map: dict[str, Register] = {}
 
-    def __init__(self, config: ModbusLinkConfig, link: ModbusLink | None = None) -> None:
-        self.config = config
+    def __init__(self, config: ConfigT, link: ModbusLink | None = None) -> None:
+        self.config: ConfigT = config
         self._own_link = link is None
         self.link = link or ModbusLink(config)
         self.name = f"{self.kind} (Modbus unit {config.device_id} on {self.link.where()})"
@@ -163,22 +169,12 @@ class _ModbusUnit:
         if self._own_link:
             self.link.close()
 
-    def __enter__(self) -> _ModbusUnit:
-        return self
 
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
-
-
-class InputMotor(_ModbusUnit):
+class InputMotor(_ModbusUnit[InputMotorConfig]):
     """Turns the input (eccentric shaft) to an angle (deg) and locks it there."""
 
     kind = "input motor"
     register_map = INPUT_MOTOR_MAP
-
-    def __init__(self, config: InputMotorConfig, link: ModbusLink | None = None) -> None:
-        super().__init__(config, link)
-        self.config: InputMotorConfig = config
 
     def state(self) -> InputState:
         """Read angle, target and status (one FC4 request)."""
@@ -244,15 +240,11 @@ class InputMotor(_ModbusUnit):
                             self.link.last_latency_s)
 
 
-class ClimateChamber(_ModbusUnit):
+class ClimateChamber(_ModbusUnit[ClimateConfig]):
     """Sets the ambient/heater setpoint (deg C) and reads the housing temperature."""
 
     kind = "climate chamber"
     register_map = CLIMATE_MAP
-
-    def __init__(self, config: ClimateConfig, link: ModbusLink | None = None) -> None:
-        super().__init__(config, link)
-        self.config: ClimateConfig = config
 
     def state(self) -> ClimateState:
         """Read housing temperature and setpoint in force (one FC4 request)."""

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pydantic import Field
 
 from drivers.errors import DeviceError, DeviceFault, DeviceOutOfRange, DeviceProtocolError
+from drivers.lifecycle import ClosedOnExit
 from drivers.modbus.link import ModbusHealth, ModbusLink, ModbusLinkConfig
 from drivers.modbus.map import (
     SENSOR_DEVICE_ID,
@@ -78,7 +79,7 @@ def decode_torque_block(words: list[int], device: str, full_scale_Nm: float | No
     return torque, status, int(values["sample_counter"]), full_scale
 
 
-class ModbusTorqueSensor:
+class ModbusTorqueSensor(ClosedOnExit):
     """A torque sensor on Modbus (TCP or RTU); pass ``link`` to share an RS-485 line."""
 
     def __init__(self, config: ModbusTorqueSensorConfig, link: ModbusLink | None = None
@@ -150,9 +151,3 @@ class ModbusTorqueSensor:
         """Close the connection (unless the link was handed in and is shared)."""
         if self._own_link:
             self.link.close()
-
-    def __enter__(self) -> ModbusTorqueSensor:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()

@@ -32,9 +32,9 @@ from typing import Generic, TypeVar
 
 from pydantic import Field
 
-from drivers.errors import DeviceError, DeviceFault, DeviceOutOfRange, DeviceTimeout
+from drivers.errors import DeviceFault, DeviceOutOfRange, DeviceTimeout
 from drivers.lifecycle import ClosedOnExit
-from drivers.modbus.link import ModbusHealth, ModbusLink, ModbusLinkConfig
+from drivers.modbus.link import ModbusLink, ModbusLinkConfig, ReportsModbusHealth
 from drivers.modbus.map import (
     Register,
     decode_flags,
@@ -141,7 +141,7 @@ ConfigT = TypeVar("ConfigT", bound=ModbusLinkConfig)
 """The link config of a Modbus unit (InputMotorConfig, ClimateConfig)."""
 
 
-class _ModbusUnit(ClosedOnExit, Generic[ConfigT]):
+class _ModbusUnit(ReportsModbusHealth, ClosedOnExit, Generic[ConfigT]):
     """Shared plumbing: a name, a (possibly shared) link, reads of the input block."""
 
     kind = "device"
@@ -228,16 +228,10 @@ class InputMotor(_ModbusUnit[InputMotorConfig]):
                                     f"locked={st.locked}, moving={st.moving}")
             time.sleep(0.02)
 
-    def health(self) -> ModbusHealth:
-        """Read once; ok when the motor answers without a fault. Never raises."""
-        try:
-            st = self.state()
-            ok = not st.fault
-            detail = f"angle {st.angle_deg:.6g} deg, locked={st.locked}, moving={st.moving}"
-        except DeviceError as exc:
-            ok, detail = False, str(exc)
-        return ModbusHealth(self.name, ok, detail, self.link.requests, self.link.errors,
-                            self.link.last_latency_s)
+    def _health_check(self) -> tuple[bool, str]:
+        """Read once; ok when the motor answers without a fault."""
+        st = self.state()
+        return not st.fault, f"angle {st.angle_deg:.6g} deg, locked={st.locked}, moving={st.moving}"
 
 
 class ClimateChamber(_ModbusUnit[ClimateConfig]):
@@ -261,12 +255,7 @@ class ClimateChamber(_ModbusUnit[ClimateConfig]):
                                    f"{celsius!r} deg C (refused, not sent)")
         self._write("setpoint", encode_float32(value))
 
-    def health(self) -> ModbusHealth:
-        """Read once; ok when the chamber answers. Never raises."""
-        try:
-            st = self.state()
-            ok, detail = True, f"housing {st.housing_C:.4g} C, setpoint {st.setpoint_C:.4g} C"
-        except DeviceError as exc:
-            ok, detail = False, str(exc)
-        return ModbusHealth(self.name, ok, detail, self.link.requests, self.link.errors,
-                            self.link.last_latency_s)
+    def _health_check(self) -> tuple[bool, str]:
+        """Read once; ok when the chamber answers."""
+        st = self.state()
+        return True, f"housing {st.housing_C:.4g} C, setpoint {st.setpoint_C:.4g} C"

@@ -18,8 +18,8 @@ import numpy as np
 
 from rig.core.errors import RigError
 
-__all__ = ["MAX_JSON_BYTES", "check_bounded_file", "finite_for_json", "parse_json_text",
-           "read_bounded_text", "read_json_file"]
+__all__ = ["MAX_JSON_BYTES", "DuplicateKey", "check_bounded_file", "finite_for_json",
+           "no_duplicate_keys", "parse_json_text", "read_bounded_text", "read_json_file"]
 
 MAX_JSON_BYTES = 4 * 1024 * 1024
 """A unit or a run.json is a few kB; 4 MB leaves room for long notes and refuses the absurd."""
@@ -62,6 +62,25 @@ def check_bounded_file(file: Path, info: os.stat_result, error: type[RigError], 
     if info.st_size > max_bytes:
         raise error(f"{file}: the {what} is {info.st_size} bytes, more than the "
                     f"{max_bytes} a {what} can be")
+
+
+class DuplicateKey(ValueError):
+    """A JSON object gives ``key`` twice (raised by :func:`no_duplicate_keys`)."""
+
+    def __init__(self, key: str) -> None:
+        super().__init__(key)
+        self.key = key
+
+
+def no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """``object_pairs_hook`` for ``json.loads``: the object; DuplicateKey for a key given
+    twice."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise DuplicateKey(key)
+        out[key] = value
+    return out
 
 
 def parse_json_text(text: str, where: str, error: type[RigError], **kwargs: Any) -> Any:

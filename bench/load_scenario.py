@@ -189,6 +189,19 @@ def _serve(store: Path, stats: Path, log: Path, env: dict[str, str]) -> Iterator
                 proc.kill()
 
 
+def _served(stack: contextlib.ExitStack, workdir: Path | None, env: dict[str, str]
+            ) -> tuple[Path, Path, Path, str]:
+    """``rig serve`` on a store in ``workdir`` (None: a temporary folder) until ``stack``
+    closes: (workdir, store, the simulator's stats file, the page's URL)."""
+    if workdir is None:
+        workdir = Path(stack.enter_context(tempfile.TemporaryDirectory()))
+    store = workdir / "store"
+    store.mkdir(parents=True, exist_ok=True)
+    stats = workdir / "sim-stats.json"
+    url = stack.enter_context(_serve(store, stats, workdir / "serve.log", env))
+    return workdir, store, stats, url
+
+
 def _wait_state(client: httpx.Client, states: tuple[str, ...], timeout_s: float
                 ) -> dict[str, Any]:
     end = time.monotonic() + timeout_s
@@ -286,12 +299,7 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
     """
     env = _sim_env(realtime_priority, device_priority)
     with contextlib.ExitStack() as stack:
-        if workdir is None:
-            workdir = Path(stack.enter_context(tempfile.TemporaryDirectory()))
-        store = workdir / "store"
-        store.mkdir(parents=True, exist_ok=True)
-        stats = workdir / "sim-stats.json"
-        url = stack.enter_context(_serve(store, stats, workdir / "serve.log", env))
+        workdir, store, stats, url = _served(stack, workdir, env)
         client = stack.enter_context(httpx.Client(base_url=url, timeout=30))
         # the earlier campaign (no load): the one the page is asked to diagnose
         earlier = _measure(client, _campaign_body("earlier", list(positions),
@@ -401,12 +409,7 @@ def run_preview_flood(workdir: Path | None = None, *, clients: int = 60, busy: i
     figures. The bench's own client sends the operator token (it is the operator)."""
     env = _sim_env(None, device_priority)
     with contextlib.ExitStack() as stack:
-        if workdir is None:
-            workdir = Path(stack.enter_context(tempfile.TemporaryDirectory()))
-        store = workdir / "store"
-        store.mkdir(parents=True, exist_ok=True)
-        stats = workdir / "sim-stats.json"
-        url = stack.enter_context(_serve(store, stats, workdir / "serve.log", env))
+        workdir, store, stats, url = _served(stack, workdir, env)
         client = stack.enter_context(httpx.Client(base_url=url, timeout=30, headers=AUTH))
         _wait_state(client, ("idle",), 120.0)
         body = _campaign_body("flood", list(positions), steps_per_quarter)

@@ -35,6 +35,7 @@ from typing import Any
 
 from drivers.encoder_canopen import CanopenEncoder, EncoderNetwork
 from drivers.errors import DeviceError
+from drivers.lifecycle import ClosedOnExit
 from drivers.loading_drive import LoadingDrive
 from drivers.modbus.link import ModbusLink, ModbusLinkConfig
 from drivers.modbus.map import LOADING_DRIVE_MAP
@@ -49,7 +50,7 @@ log = logging.getLogger(__name__)
 KEEPALIVE_REGISTER = LOADING_DRIVE_MAP["keepalive"].address
 
 
-class RigDevices:
+class RigDevices(ClosedOnExit):
     """The opened drivers of one rig (see the module docstring). Use :func:`open_rig`."""
 
     def __init__(self, config: RigConfig) -> None:
@@ -164,12 +165,6 @@ class RigDevices:
                 close()
             except Exception:  # closing the rest matters more than one close failing
                 log.exception("closing %s failed", name)
-
-    def __enter__(self) -> RigDevices:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # -- keepalive --------------------------------------------------------------------------
     def start_keepalive(self) -> None:

@@ -15,7 +15,7 @@ Drive keepalive: the drive's watchdog trips when the master writes nothing for
 ``drive.watchdog_s``. The keepalive is written every ``rig.keepalive_period_s`` while the
 engine shows it is alive: the engine calls :meth:`RigDevices.alive` at least every
 ``rig.master_timeout_s``; if it stops (a hung program), the keepalive stops and the drive
-falls to its safe state by itself. On Modbus TCP (and ``rig.hardware.keepalive_process``, the
+falls to its safe state by itself. On Modbus TCP (and ``rig.keepalive_process``, the
 default) a small process of its own writes it over its own connection
 (:mod:`rig.hardware.keepalive_process`), so nothing in this process can hold it up; a thread of the
 bundle writes it whenever that process has not been acknowledged for 1.5 periods (not yet
@@ -181,7 +181,7 @@ class RigDevices(ClosedOnExit):
 
     def _start_keepalive_process(self) -> None:
         cfg, rig = self.config.drive, self.config.rig
-        if not rig.hardware.keepalive_process or cfg is None or cfg.transport != "tcp":
+        if not rig.keepalive_process or cfg is None or cfg.transport != "tcp":
             return
         process = KeepaliveProcess(KeepaliveTarget(
             host=cfg.host, port=cfg.port, unit=cfg.device_id, address=KEEPALIVE_REGISTER,

@@ -19,6 +19,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from bench.processes import stop_process
 from drivers.errors import DeviceError
 from drivers.loading_drive import LoadingDrive, LoadingDriveConfig
 from drivers.modbus.torque_sensor import ModbusTorqueSensor, ModbusTorqueSensorConfig
@@ -103,8 +104,4 @@ def run() -> Iterator[dict]:
         drive.close()
         sensor.close()
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        stop_process(proc, 20)

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.processes import stop_process
 from drivers.transducer.serial import SerialTorqueTransducer, TransducerConfig
 
 REPO = Path(__file__).resolve().parent.parent
@@ -58,11 +59,7 @@ def _simulator_process(transport: str) -> Iterator[str]:
             raise RuntimeError("the transducer simulator printed no address within 60 s")
         yield json.loads(proc.stdout.readline())["transducer"]
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        stop_process(proc, 30)
 
 
 def _measure(transport: str, seconds: float) -> Iterator[dict]:

@@ -18,14 +18,12 @@ from __future__ import annotations
 
 import contextlib
 import os
-import subprocess
-import sys
 import time
 from pathlib import Path
 from tempfile import TemporaryDirectory
 from typing import Any
 
-from bench.load_scenario import BUSY_SCRIPT
+from bench.load_scenario import BackgroundLoad
 from rig.hardware.simrig import DEVICE_PRIORITY_ENV, REALTIME_ENV
 
 __all__ = ["run_lost_motion_under_load"]
@@ -64,13 +62,11 @@ def run_lost_motion_under_load(*, busy: int = 3, repeats: int = 2,
         os.environ[DEVICE_PRIORITY_ENV] = str(device_priority)
     if realtime_priority is not None:
         os.environ[REALTIME_ENV] = str(realtime_priority)
-    procs: list[subprocess.Popen] = []
+    load = BackgroundLoad()
     runs: list[dict[str, Any]] = []
     aborted: list[str | None] = []
     try:
-        for _ in range(busy):
-            procs.append(subprocess.Popen([sys.executable, "-c", BUSY_SCRIPT],
-                                          start_new_session=True))
+        load.busy(busy)
         time.sleep(1.0)  # the load is on before the rig starts
         with TemporaryDirectory() as tmp, open_session(simulated=True, plant=plant) as session:
             store = Store(Path(tmp) / "store")
@@ -100,9 +96,7 @@ def run_lost_motion_under_load(*, busy: int = 3, repeats: int = 2,
                         "why_no_value": None if value is not None else
                         (out.get("errors") or {}).get("lost_motion_arcmin") or out.get("reason")})
     finally:
-        for p in procs:
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(p.pid, 9)
+        load.stop()
         for name, value in saved.items():
             if value is None:
                 os.environ.pop(name, None)

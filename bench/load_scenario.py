@@ -108,6 +108,30 @@ fast as the page answers, ignoring 429/503 and Retry-After (a hostile flood), fo
 ``seconds``; the answers' counts by status go to ``out`` every second."""
 
 
+class BackgroundLoad:
+    """Processes started in their own sessions (a scenario's load); :meth:`stop` kills each
+    with its whole process group."""
+
+    def __init__(self) -> None:
+        self.procs: list[subprocess.Popen] = []
+
+    def start(self, args: list[str], **popen: Any) -> subprocess.Popen:
+        """Start ``args`` in a new session (``popen``: more Popen arguments)."""
+        proc = subprocess.Popen(args, start_new_session=True, **popen)
+        self.procs.append(proc)
+        return proc
+
+    def busy(self, count: int) -> None:
+        """Start ``count`` processes that keep a core busy."""
+        for _ in range(count):
+            self.start([sys.executable, "-c", BUSY_SCRIPT])
+
+    def stop(self) -> None:
+        for p in self.procs:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(p.pid, 9)
+
+
 def acquisition_figures(t_s: np.ndarray, period_s: float) -> tuple[int, float]:
     """Samples lost and p99 jitter (ms) of one run's row times ``t_s`` (s, host time at
     receipt).
@@ -163,6 +187,19 @@ def _serve(store: Path, stats: Path, log: Path, env: dict[str, str]) -> Iterator
                 proc.wait(60)
             except subprocess.TimeoutExpired:
                 proc.kill()
+
+
+def _served(stack: contextlib.ExitStack, workdir: Path | None, env: dict[str, str]
+            ) -> tuple[Path, Path, Path, str]:
+    """``rig serve`` on a store in ``workdir`` (None: a temporary folder) until ``stack``
+    closes: (workdir, store, the simulator's stats file, the page's URL)."""
+    if workdir is None:
+        workdir = Path(stack.enter_context(tempfile.TemporaryDirectory()))
+    store = workdir / "store"
+    store.mkdir(parents=True, exist_ok=True)
+    stats = workdir / "sim-stats.json"
+    url = stack.enter_context(_serve(store, stats, workdir / "serve.log", env))
+    return workdir, store, stats, url
 
 
 def _wait_state(client: httpx.Client, states: tuple[str, ...], timeout_s: float
@@ -262,12 +299,7 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
     """
     env = _sim_env(realtime_priority, device_priority)
     with contextlib.ExitStack() as stack:
-        if workdir is None:
-            workdir = Path(stack.enter_context(tempfile.TemporaryDirectory()))
-        store = workdir / "store"
-        store.mkdir(parents=True, exist_ok=True)
-        stats = workdir / "sim-stats.json"
-        url = stack.enter_context(_serve(store, stats, workdir / "serve.log", env))
+        workdir, store, stats, url = _served(stack, workdir, env)
         client = stack.enter_context(httpx.Client(base_url=url, timeout=30))
         # the earlier campaign (no load): the one the page is asked to diagnose
         earlier = _measure(client, _campaign_body("earlier", list(positions),
@@ -279,23 +311,14 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
 
         earlier_path = Store(store).get_campaign(earlier_id).path
 
-        procs: list[subprocess.Popen] = []
-
-        def stop_load() -> None:
-            for p in procs:
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(p.pid, 9)
-
-        stack.callback(stop_load)
-        for _ in range(busy):
-            procs.append(subprocess.Popen([sys.executable, "-c", BUSY_SCRIPT],
-                                          start_new_session=True))
+        load = BackgroundLoad()
+        stack.callback(load.stop)
+        load.busy(busy)
         if earlier_path:
             loop = (f"while true; do {shlex.join([*RIG, 'diagnose', str(earlier_path)])} "
                     f">/dev/null 2>&1; done")
-            procs.append(subprocess.Popen(["bash", "-c", loop], start_new_session=True))
-        procs.append(subprocess.Popen([sys.executable, "-c", SSE_CLIENTS_SCRIPT, url,
-                                       str(sse_clients)], start_new_session=True))
+            load.start(["bash", "-c", loop])
+        load.start([sys.executable, "-c", SSE_CLIENTS_SCRIPT, url, str(sse_clients)])
         time.sleep(2.0)  # the load is on before the campaign starts
 
         cli = None
@@ -303,11 +326,9 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
             cli_json = workdir / "cli-campaign.json"
             cli_log = stack.enter_context(open(workdir / "cli-campaign.log", "w",
                                                encoding="utf-8"))
-            cli = subprocess.Popen([*RIG, "campaign", "run", str(cli_campaign), "--simulated",
-                                    "--store", str(workdir / "cli-store"), "--json",
-                                    str(cli_json)], stdout=cli_log, stderr=cli_log,
-                                   cwd=workdir, env=env, start_new_session=True)
-            procs.append(cli)
+            cli = load.start([*RIG, "campaign", "run", str(cli_campaign), "--simulated",
+                              "--store", str(workdir / "cli-store"), "--json", str(cli_json)],
+                             stdout=cli_log, stderr=cli_log, cwd=workdir, env=env)
         the_store = Store(store)
         campaigns: list[dict[str, Any]] = []
         for i in range(repeats):
@@ -326,7 +347,7 @@ def run_load_scenario(workdir: Path | None = None, *, positions: tuple[float, ..
                 cli.returncode in (0, 1) and doc.get("status") == "completed"),
                 "load_cli_campaign_exit": cli.returncode,
                 "load_cli_campaign_reason": doc.get("reason")}
-        stop_load()
+        load.stop()
         completed = [c["completed"] for c in campaigns]
         in_a_row = next((i for i, ok in enumerate(completed) if not ok), len(completed))
         jitters = [c["jitter_p99_ms"] for c in campaigns if c["jitter_p99_ms"] is not None]
@@ -388,12 +409,7 @@ def run_preview_flood(workdir: Path | None = None, *, clients: int = 60, busy: i
     figures. The bench's own client sends the operator token (it is the operator)."""
     env = _sim_env(None, device_priority)
     with contextlib.ExitStack() as stack:
-        if workdir is None:
-            workdir = Path(stack.enter_context(tempfile.TemporaryDirectory()))
-        store = workdir / "store"
-        store.mkdir(parents=True, exist_ok=True)
-        stats = workdir / "sim-stats.json"
-        url = stack.enter_context(_serve(store, stats, workdir / "serve.log", env))
+        workdir, store, stats, url = _served(stack, workdir, env)
         client = stack.enter_context(httpx.Client(base_url=url, timeout=30, headers=AUTH))
         _wait_state(client, ("idle",), 120.0)
         body = _campaign_body("flood", list(positions), steps_per_quarter)
@@ -401,26 +417,17 @@ def run_preview_flood(workdir: Path | None = None, *, clients: int = 60, busy: i
         body_file.write_text(json.dumps(body), encoding="utf-8")
         counts_file = workdir / "flood-counts.json"
         quiet = _estop_times(client, estop_presses)  # the same presses without the flood
-        procs: list[subprocess.Popen] = []
-
-        def stop_load() -> None:
-            for p in procs:
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(p.pid, 9)
-
-        stack.callback(stop_load)
-        for _ in range(busy):
-            procs.append(subprocess.Popen([sys.executable, "-c", BUSY_SCRIPT],
-                                          start_new_session=True))
-        procs.append(subprocess.Popen(
-            [sys.executable, "-c", FLOOD_SCRIPT, url, str(clients), str(max_seconds),
-             str(body_file), str(counts_file)], start_new_session=True))
+        load = BackgroundLoad()
+        stack.callback(load.stop)
+        load.busy(busy)
+        load.start([sys.executable, "-c", FLOOD_SCRIPT, url, str(clients), str(max_seconds),
+                    str(body_file), str(counts_file)])
         time.sleep(3.0)  # the flood is on before the campaign starts
         done = _measure(client, body, max_seconds)
         estop = _estop_times(client, estop_presses)
         flood = (json.loads(counts_file.read_text(encoding="utf-8"))
                  if counts_file.is_file() else {})
-        stop_load()
+        load.stop()
         drive = json.loads(stats.read_text(encoding="utf-8")) if stats.is_file() else {}
         result = done.get("last_result") or {}
         return {

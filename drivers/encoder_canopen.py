@@ -49,6 +49,7 @@ from drivers.errors import (
     DeviceProtocolError,
     DeviceTimeout,
 )
+from drivers.lifecycle import StartedOnEnter
 
 DEFAULT_EDS = Path(__file__).resolve().parent / "cia406_encoder.eds"
 CIA406_PROFILE = 0x0196
@@ -336,7 +337,7 @@ class EncoderNetwork:
                     bus.shutdown()
 
 
-class CanopenEncoder:
+class CanopenEncoder(StartedOnEnter):
     """A CiA 406 absolute encoder: ``start()``, ``read()``, ``readings()``, ``zero()``,
     ``health()``, ``identity()``, ``errors()``, ``close()``.
 
@@ -456,13 +457,6 @@ class CanopenEncoder:
             del self.network.canopen[node.id]
         if self._own_network:
             self.network.close()
-
-    def __enter__(self) -> CanopenEncoder:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # -- samples ---------------------------------------------------------------------------
     def read(self) -> EncoderReading:

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 from pydantic import ConfigDict, Field
 
 from drivers.errors import DeviceError, DeviceFault, DeviceOutOfRange, DeviceProtocolError
-from drivers.modbus.link import ModbusHealth, ModbusLink, ModbusLinkConfig
+from drivers.lifecycle import ClosedOnExit
+from drivers.modbus.link import ModbusLink, ModbusLinkConfig, ReportsModbusHealth
 from drivers.modbus.map import (
     DRIVE_DEVICE_ID,
     LOADING_DRIVE_MAP,
@@ -81,7 +82,7 @@ def decode_drive_block(words: list[int], device: str, t_s: float = 0.0) -> Drive
                        float(values["actual_torque"]), float(values["active_setpoint"]))
 
 
-class LoadingDrive:
+class LoadingDrive(ReportsModbusHealth, ClosedOnExit):
     """A torque-controlled loading drive on Modbus; opening it sets its watchdog time."""
 
     def __init__(self, config: LoadingDriveConfig, link: ModbusLink | None = None) -> None:
@@ -178,17 +179,11 @@ class LoadingDrive:
                                      _INPUT_COUNT)
         return decode_drive_block(words, self.name, 0.5 * (t0 + time.monotonic()))
 
-    def health(self) -> ModbusHealth:
-        """Read the status once; ok when the drive answers and no fault is latched."""
-        try:
-            st = self.status()
-            ok = not st.faulted
-            detail = (f"enabled={st.enabled}, fault {int(st.fault_code)} {st.fault_code.name}, "
-                      f"actual {st.actual_torque_Nm:.6g} N*m")
-        except DeviceError as exc:
-            ok, detail = False, str(exc)
-        return ModbusHealth(self.name, ok, detail, self.link.requests, self.link.errors,
-                            self.link.last_latency_s)
+    def _health_check(self) -> tuple[bool, str]:
+        """The status once: ok when the drive answers and no fault is latched."""
+        st = self.status()
+        return not st.faulted, (f"enabled={st.enabled}, fault {int(st.fault_code)} "
+                                f"{st.fault_code.name}, actual {st.actual_torque_Nm:.6g} N*m")
 
     def close(self, safe: bool = True) -> None:
         """Leave the drive safe (best effort, see :meth:`safe_state`) and close the link."""
@@ -197,9 +192,3 @@ class LoadingDrive:
                 self.safe_state()
         if self._own_link:
             self.link.close()
-
-    def __enter__(self) -> LoadingDrive:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()

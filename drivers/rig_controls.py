@@ -28,11 +28,13 @@ import enum
 import math
 import time
 from dataclasses import dataclass
+from typing import Generic, TypeVar
 
 from pydantic import Field
 
-from drivers.errors import DeviceError, DeviceFault, DeviceOutOfRange, DeviceTimeout
-from drivers.modbus.link import ModbusHealth, ModbusLink, ModbusLinkConfig
+from drivers.errors import DeviceFault, DeviceOutOfRange, DeviceTimeout
+from drivers.lifecycle import ClosedOnExit
+from drivers.modbus.link import ModbusLink, ModbusLinkConfig, ReportsModbusHealth
 from drivers.modbus.map import (
     Register,
     decode_flags,
@@ -135,14 +137,18 @@ class ClimateState:
     setpoint_C: float
 
 
-class _ModbusUnit:
+ConfigT = TypeVar("ConfigT", bound=ModbusLinkConfig)
+"""The link config of a Modbus unit (InputMotorConfig, ClimateConfig)."""
+
+
+class _ModbusUnit(ReportsModbusHealth, ClosedOnExit, Generic[ConfigT]):
     """Shared plumbing: a name, a (possibly shared) link, reads of the input block."""
 
     kind = "device"
     register_map: dict[str, Register] = {}
 
-    def __init__(self, config: ModbusLinkConfig, link: ModbusLink | None = None) -> None:
-        self.config = config
+    def __init__(self, config: ConfigT, link: ModbusLink | None = None) -> None:
+        self.config: ConfigT = config
         self._own_link = link is None
         self.link = link or ModbusLink(config)
         self.name = f"{self.kind} (Modbus unit {config.device_id} on {self.link.where()})"
@@ -163,22 +169,12 @@ class _ModbusUnit:
         if self._own_link:
             self.link.close()
 
-    def __enter__(self) -> _ModbusUnit:
-        return self
 
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
-
-
-class InputMotor(_ModbusUnit):
+class InputMotor(_ModbusUnit[InputMotorConfig]):
     """Turns the input (eccentric shaft) to an angle (deg) and locks it there."""
 
     kind = "input motor"
     register_map = INPUT_MOTOR_MAP
-
-    def __init__(self, config: InputMotorConfig, link: ModbusLink | None = None) -> None:
-        super().__init__(config, link)
-        self.config: InputMotorConfig = config
 
     def state(self) -> InputState:
         """Read angle, target and status (one FC4 request)."""
@@ -232,27 +228,17 @@ class InputMotor(_ModbusUnit):
                                     f"locked={st.locked}, moving={st.moving}")
             time.sleep(0.02)
 
-    def health(self) -> ModbusHealth:
-        """Read once; ok when the motor answers without a fault. Never raises."""
-        try:
-            st = self.state()
-            ok = not st.fault
-            detail = f"angle {st.angle_deg:.6g} deg, locked={st.locked}, moving={st.moving}"
-        except DeviceError as exc:
-            ok, detail = False, str(exc)
-        return ModbusHealth(self.name, ok, detail, self.link.requests, self.link.errors,
-                            self.link.last_latency_s)
+    def _health_check(self) -> tuple[bool, str]:
+        """Read once; ok when the motor answers without a fault."""
+        st = self.state()
+        return not st.fault, f"angle {st.angle_deg:.6g} deg, locked={st.locked}, moving={st.moving}"
 
 
-class ClimateChamber(_ModbusUnit):
+class ClimateChamber(_ModbusUnit[ClimateConfig]):
     """Sets the ambient/heater setpoint (deg C) and reads the housing temperature."""
 
     kind = "climate chamber"
     register_map = CLIMATE_MAP
-
-    def __init__(self, config: ClimateConfig, link: ModbusLink | None = None) -> None:
-        super().__init__(config, link)
-        self.config: ClimateConfig = config
 
     def state(self) -> ClimateState:
         """Read housing temperature and setpoint in force (one FC4 request)."""
@@ -269,12 +255,7 @@ class ClimateChamber(_ModbusUnit):
                                    f"{celsius!r} deg C (refused, not sent)")
         self._write("setpoint", encode_float32(value))
 
-    def health(self) -> ModbusHealth:
-        """Read once; ok when the chamber answers. Never raises."""
-        try:
-            st = self.state()
-            ok, detail = True, f"housing {st.housing_C:.4g} C, setpoint {st.setpoint_C:.4g} C"
-        except DeviceError as exc:
-            ok, detail = False, str(exc)
-        return ModbusHealth(self.name, ok, detail, self.link.requests, self.link.errors,
-                            self.link.last_latency_s)
+    def _health_check(self) -> tuple[bool, str]:
+        """Read once; ok when the chamber answers."""
+        st = self.state()
+        return True, f"housing {st.housing_C:.4g} C, setpoint {st.setpoint_C:.4g} C"

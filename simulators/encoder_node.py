@@ -33,6 +33,7 @@ from typing import Literal
 import can
 import canopen
 
+from drivers.lifecycle import RunsWhileEntered
 from simulators.clock import Clock, MonotonicClock
 from simulators.plant.api import Plant, PlantSnapshot
 
@@ -88,7 +89,7 @@ class EncoderBackdoor:
         self._node._preset_offset += int(counts)
 
 
-class EncoderNode:
+class EncoderNode(RunsWhileEntered):
     """A CiA 406 absolute encoder as a canopen ``LocalNode`` on a python-can bus.
 
     ``interface``/``channel`` pick the bus (default: the in-process virtual bus
@@ -179,13 +180,6 @@ class EncoderNode:
         if self.network is not None:
             self.network.disconnect()
         self.network = self.local = None
-
-    def __enter__(self) -> EncoderNode:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     # -- the device model ------------------------------------------------------------------
     def angle_deg(self, snapshot: PlantSnapshot) -> float:

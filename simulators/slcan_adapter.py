@@ -32,6 +32,8 @@ from typing import Literal
 
 import can
 
+from drivers.lifecycle import RunsWhileEntered
+
 OK = b"\r"
 ERROR = b"\a"
 MAX_LINE = 32  # the longest valid line: "T" + 8 id + 1 dlc + 16 data = 26 chars
@@ -282,7 +284,7 @@ class SlcanBackdoor:
         return line[:head] + bytes([0x30 + max(0, dlc - 1)]) + line[head + 1 :]
 
 
-class SlcanAdapter:
+class SlcanAdapter(RunsWhileEntered):
     """The adapter as a TCP server on 127.0.0.1 (one client at a time, like a tty).
 
     ``start()`` returns the pyserial URL ``socket://127.0.0.1:PORT``; ``stop()`` closes
@@ -345,13 +347,6 @@ class SlcanAdapter:
         if self._bus is not None:
             self._bus.shutdown()
             self._bus = None
-
-    def __enter__(self) -> SlcanAdapter:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     def drop_client(self) -> None:
         with self._send_lock:

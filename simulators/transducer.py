@@ -32,6 +32,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Literal
 
+from drivers.lifecycle import RunsWhileEntered
 from drivers.transducer.protocol import (
     ERROR_TEXT,
     MAX_COMMAND_CHARS,
@@ -368,7 +369,7 @@ class _Link:
             os.close(self.fd)
 
 
-class TransducerSimulator:
+class TransducerSimulator(RunsWhileEntered):
     """The transducer face: serves the protocol on a pty or a 127.0.0.1 TCP port.
 
     ``start()`` returns the address the driver opens (a pty path such as ``/dev/pts/7``
@@ -447,13 +448,6 @@ class TransducerSimulator:
         if self._listener is not None:
             self._listener.close()
             self._listener = None
-
-    def __enter__(self) -> TransducerSimulator:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     def _wake(self) -> None:
         if self._wake_w >= 0:

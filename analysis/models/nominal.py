@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 
 from analysis.errors import AnalysisError
-from analysis.models.mesh_stiffness import internal_pair_stiffness
 from analysis.models.seed000_geometry import backlash_arcmin_from_um, m_value_mm
 from analysis.models.seed000_unit import InternalPairUnit
 
@@ -150,14 +149,9 @@ def reference_nominal_model(unit: InternalPairUnit | Mapping[str, Any]) -> Nomin
             f"({j_t:.2f} um): the teeth interfere, no loop to predict"
         )
     e_m, _ = m_value_deviation_mm(unit)
-    stiffness = internal_pair_stiffness(
-        z_internal=unit.z_internal,
-        z_external=unit.z_external,
-        module_mm=unit.module_mm,
-        pressure_angle_rad=unit.pressure_angle_rad,
-        addendum_coeff=unit.addendum_coeff,
-        face_width_mm=unit.face_width_mm if unit.face_width_mm is not None else 1.0,
-        center_distance_mm=float(unit.center_distance_mm),
+    stiffness = unit.pair_stiffness(
+        unit.face_width_mm if unit.face_width_mm is not None else 1.0,
+        float(unit.center_distance_mm),
     )
     k_m = stiffness.mesh_stiffness_N_per_um
     k_t = stiffness.torsional_stiffness_Nm_per_arcmin

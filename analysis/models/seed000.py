@@ -18,7 +18,6 @@ from typing import Any
 
 from analysis.errors import AnalysisError
 from analysis.models import seed000_geometry as geo
-from analysis.models.mesh_stiffness import internal_pair_stiffness
 from analysis.models.nominal import (
     m_value_deviation_mm,
     nominal_free_play_um,
@@ -186,15 +185,7 @@ def design_chain(
 
     stiffness = None
     if unit.face_width_mm is not None:
-        stiffness = internal_pair_stiffness(
-            z_internal=unit.z_internal,
-            z_external=unit.z_external,
-            module_mm=unit.module_mm,
-            pressure_angle_rad=alpha,
-            addendum_coeff=unit.addendum_coeff,
-            face_width_mm=unit.face_width_mm,
-            center_distance_mm=a,
-        ).torsional_stiffness_Nm_per_arcmin
+        stiffness = unit.pair_stiffness(unit.face_width_mm, a).torsional_stiffness_Nm_per_arcmin
 
     cd_range = fit = None
     if runouts_known:

@@ -30,7 +30,6 @@ import numpy as np
 from scipy import stats
 
 from analysis.errors import AnalysisError
-from analysis.models.mesh_stiffness import internal_pair_stiffness
 from analysis.models.seed000_geometry import backlash_arcmin_from_um, runout_center_distance_mm
 from analysis.models.seed000_unit import InternalPairUnit
 
@@ -205,15 +204,7 @@ def lost_motion_batch(
     period_rev = round(theta.size / angles_per_rev)
     if unit.face_width_mm is None:
         raise AnalysisError("unit key 'face_width_mm' missing: the stiffness term needs it")
-    stiffness = internal_pair_stiffness(
-        z_internal=unit.z_internal,
-        z_external=unit.z_external,
-        module_mm=unit.module_mm,
-        pressure_angle_rad=unit.pressure_angle_rad,
-        addendum_coeff=unit.addendum_coeff,
-        face_width_mm=unit.face_width_mm,
-        center_distance_mm=a_design,
-    ).torsional_stiffness_Nm_per_arcmin
+    stiffness = unit.pair_stiffness(unit.face_width_mm, a_design).torsional_stiffness_Nm_per_arcmin
     elastic_arcmin = 2.0 * lost_motion_pct / 100.0 * rated_torque_Nm / stiffness
 
     worst = np.empty(samples)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from analysis.errors import AnalysisError
+from analysis.models.mesh_stiffness import MeshStiffness, internal_pair_stiffness
 
 KIND = "internal_involute"
 
@@ -52,6 +53,20 @@ class InternalPairUnit:
     def standard_center_distance_mm(self) -> float:
         """a0 = m (z_internal - z_external) / 2 (mm)."""
         return self.module_mm * (self.z_internal - self.z_external) / 2.0
+
+    def pair_stiffness(self, face_width_mm: float, center_distance_mm: float) -> MeshStiffness:
+        """Mesh and torsional stiffness of the pair over ``face_width_mm`` at
+        ``center_distance_mm`` (mm): :func:`analysis.models.mesh_stiffness.internal_pair_stiffness`
+        with this unit's teeth, module, pressure angle and addendum."""
+        return internal_pair_stiffness(
+            z_internal=self.z_internal,
+            z_external=self.z_external,
+            module_mm=self.module_mm,
+            pressure_angle_rad=self.pressure_angle_rad,
+            addendum_coeff=self.addendum_coeff,
+            face_width_mm=face_width_mm,
+            center_distance_mm=center_distance_mm,
+        )
 
     @property
     def ring_pitch_radius_mm(self) -> float:

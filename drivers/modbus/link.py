@@ -191,3 +191,22 @@ class ModbusLink:
         with self._lock:
             self._client.close()
 
+
+class ReportsModbusHealth:
+    """:meth:`health` of a Modbus device with ``name`` and ``link``: one read by its
+    ``_health_check()`` (ok, detail), a DeviceError being (False, its text)."""
+
+    name: str
+    link: ModbusLink
+
+    def _health_check(self) -> tuple[bool, str]:
+        raise NotImplementedError
+
+    def health(self) -> ModbusHealth:
+        """Read once and say whether the device answers sensibly; never raises."""
+        try:
+            ok, detail = self._health_check()
+        except DeviceError as exc:
+            ok, detail = False, str(exc)
+        return ModbusHealth(self.name, ok, detail, self.link.requests, self.link.errors,
+                            self.link.last_latency_s)

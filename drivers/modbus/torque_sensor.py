@@ -18,8 +18,9 @@ from dataclasses import dataclass
 
 from pydantic import Field
 
-from drivers.errors import DeviceError, DeviceFault, DeviceOutOfRange, DeviceProtocolError
-from drivers.modbus.link import ModbusHealth, ModbusLink, ModbusLinkConfig
+from drivers.errors import DeviceFault, DeviceOutOfRange, DeviceProtocolError
+from drivers.lifecycle import ClosedOnExit
+from drivers.modbus.link import ModbusLink, ModbusLinkConfig, ReportsModbusHealth
 from drivers.modbus.map import (
     SENSOR_DEVICE_ID,
     TORQUE_SENSOR_MAP,
@@ -78,7 +79,7 @@ def decode_torque_block(words: list[int], device: str, full_scale_Nm: float | No
     return torque, status, int(values["sample_counter"]), full_scale
 
 
-class ModbusTorqueSensor:
+class ModbusTorqueSensor(ReportsModbusHealth, ClosedOnExit):
     """A torque sensor on Modbus (TCP or RTU); pass ``link`` to share an RS-485 line."""
 
     def __init__(self, config: ModbusTorqueSensorConfig, link: ModbusLink | None = None
@@ -136,23 +137,12 @@ class ModbusTorqueSensor:
         return float(values_of(TORQUE_SENSOR_MAP, "holding", first, words,
                                self.name)["tare_offset"])
 
-    def health(self) -> ModbusHealth:
-        """Read once and say whether the sensor answers sensibly; never raises."""
-        try:
-            reading = self.read()
-            ok, detail = True, f"torque {reading.torque_Nm:.6g} N*m, status {reading.status!r}"
-        except DeviceError as exc:
-            ok, detail = False, str(exc)
-        return ModbusHealth(self.name, ok, detail, self.link.requests, self.link.errors,
-                            self.link.last_latency_s)
+    def _health_check(self) -> tuple[bool, str]:
+        """One reading: ok when the sensor answers sensibly."""
+        reading = self.read()
+        return True, f"torque {reading.torque_Nm:.6g} N*m, status {reading.status!r}"
 
     def close(self) -> None:
         """Close the connection (unless the link was handed in and is shared)."""
         if self._own_link:
             self.link.close()
-
-    def __enter__(self) -> ModbusTorqueSensor:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()

@@ -37,6 +37,7 @@ from drivers.errors import (
     DeviceProtocolError,
     DeviceTimeout,
 )
+from drivers.lifecycle import OpenedOnEnter
 from drivers.transducer.protocol import (
     MAX_LINE_BYTES,
     SEQ_MODULO,
@@ -143,7 +144,7 @@ class TransducerHealth:
     streaming: bool = False
 
 
-class SerialTorqueTransducer:
+class SerialTorqueTransducer(OpenedOnEnter):
     """The transducer behind a narrow interface: read, stream, tare, health, close.
 
     Not thread-safe: use one instance from one thread (or guard it with a lock).
@@ -208,13 +209,6 @@ class SerialTorqueTransducer:
         self._port.close()
         self._port = None
         self._streaming = False
-
-    def __enter__(self) -> SerialTorqueTransducer:
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # --- queries --------------------------------------------------------------------------
 

@@ -18,8 +18,8 @@ import numpy as np
 
 from rig.core.errors import RigError
 
-__all__ = ["MAX_JSON_BYTES", "check_bounded_file", "finite_for_json", "parse_json_text",
-           "read_json_file"]
+__all__ = ["MAX_JSON_BYTES", "DuplicateKey", "check_bounded_file", "finite_for_json",
+           "no_duplicate_keys", "parse_json_text", "read_bounded_text", "read_json_file"]
 
 MAX_JSON_BYTES = 4 * 1024 * 1024
 """A unit or a run.json is a few kB; 4 MB leaves room for long notes and refuses the absurd."""
@@ -29,18 +29,27 @@ def read_json_file(path: str | Path, error: type[RigError], what: str,
                    max_bytes: int = MAX_JSON_BYTES) -> Any:
     """The parsed JSON of ``path``; ``error`` naming the file (and line:column) otherwise."""
     file = Path(path)
+    text = read_bounded_text(file, error, what, max_bytes, "cannot read {file}, the {what}")
+    return parse_json_text(text, str(file), error)
+
+
+def read_bounded_text(file: Path, error: type[RigError], what: str, max_bytes: int,
+                      unreadable: str = "{file}: cannot read the {what}") -> str:
+    """The UTF-8 text of ``file``, a regular file of at most ``max_bytes``; ``error`` naming
+    the file otherwise (``unreadable``, formatted with file and what, when it cannot be
+    stat'ed)."""
     try:
         info = file.stat()
     except OSError as exc:
-        raise error(f"cannot read {file}, the {what} ({exc.strerror or exc})") from exc
+        where = unreadable.format(file=file, what=what)
+        raise error(f"{where} ({exc.strerror or exc})") from exc
     check_bounded_file(file, info, error, what, max_bytes)
     try:
-        text = file.read_text(encoding="utf-8")
+        return file.read_text(encoding="utf-8")
     except OSError as exc:
         raise error(f"{file}: cannot read the {what} ({exc.strerror or exc})") from exc
     except UnicodeDecodeError as exc:
         raise error(f"{file}: not UTF-8 text ({exc.reason} at byte {exc.start})") from exc
-    return parse_json_text(text, str(file), error)
 
 
 def check_bounded_file(file: Path, info: os.stat_result, error: type[RigError], what: str,
@@ -53,6 +62,25 @@ def check_bounded_file(file: Path, info: os.stat_result, error: type[RigError], 
     if info.st_size > max_bytes:
         raise error(f"{file}: the {what} is {info.st_size} bytes, more than the "
                     f"{max_bytes} a {what} can be")
+
+
+class DuplicateKey(ValueError):
+    """A JSON object gives ``key`` twice (raised by :func:`no_duplicate_keys`)."""
+
+    def __init__(self, key: str) -> None:
+        super().__init__(key)
+        self.key = key
+
+
+def no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """``object_pairs_hook`` for ``json.loads``: the object; DuplicateKey for a key given
+    twice."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise DuplicateKey(key)
+        out[key] = value
+    return out
 
 
 def parse_json_text(text: str, where: str, error: type[RigError], **kwargs: Any) -> Any:

@@ -14,7 +14,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from rig.core.errors import RigError
-from rig.core.json_files import check_bounded_file
+from rig.core.json_files import read_bounded_text
 
 MAX_TOML_BYTES = 1024 * 1024
 """A rig configuration or a campaign is a few kB; 1 MB refuses the absurd before reading."""
@@ -24,17 +24,7 @@ _TOML_POSITION = re.compile(r"\(at line (\d+), column (\d+)\)")
 def read_toml(path: str | Path, error: type[RigError], what: str) -> dict[str, Any]:
     """Parse ``path``; any failure raises ``error`` naming the file (and line:column)."""
     file = Path(path)
-    try:
-        info = file.stat()
-    except OSError as exc:
-        raise error(f"{file}: cannot read the {what} ({exc.strerror or exc})") from exc
-    check_bounded_file(file, info, error, what, MAX_TOML_BYTES)
-    try:
-        text = file.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise error(f"{file}: cannot read the {what} ({exc.strerror or exc})") from exc
-    except UnicodeDecodeError as exc:
-        raise error(f"{file}: not UTF-8 text ({exc.reason} at byte {exc.start})") from exc
+    text = read_bounded_text(file, error, what, MAX_TOML_BYTES)
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -15,7 +15,7 @@ Drive keepalive: the drive's watchdog trips when the master writes nothing for
 ``drive.watchdog_s``. The keepalive is written every ``rig.keepalive_period_s`` while the
 engine shows it is alive: the engine calls :meth:`RigDevices.alive` at least every
 ``rig.master_timeout_s``; if it stops (a hung program), the keepalive stops and the drive
-falls to its safe state by itself. On Modbus TCP (and ``rig.hardware.keepalive_process``, the
+falls to its safe state by itself. On Modbus TCP (and ``rig.keepalive_process``, the
 default) a small process of its own writes it over its own connection
 (:mod:`rig.hardware.keepalive_process`), so nothing in this process can hold it up; a thread of the
 bundle writes it whenever that process has not been acknowledged for 1.5 periods (not yet
@@ -35,6 +35,7 @@ from typing import Any
 
 from drivers.encoder_canopen import CanopenEncoder, EncoderNetwork
 from drivers.errors import DeviceError
+from drivers.lifecycle import ClosedOnExit
 from drivers.loading_drive import LoadingDrive
 from drivers.modbus.link import ModbusLink, ModbusLinkConfig
 from drivers.modbus.map import LOADING_DRIVE_MAP
@@ -49,7 +50,7 @@ log = logging.getLogger(__name__)
 KEEPALIVE_REGISTER = LOADING_DRIVE_MAP["keepalive"].address
 
 
-class RigDevices:
+class RigDevices(ClosedOnExit):
     """The opened drivers of one rig (see the module docstring). Use :func:`open_rig`."""
 
     def __init__(self, config: RigConfig) -> None:
@@ -164,12 +165,6 @@ class RigDevices:
                 close()
             except Exception:  # closing the rest matters more than one close failing
                 log.exception("closing %s failed", name)
-
-    def __enter__(self) -> RigDevices:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # -- keepalive --------------------------------------------------------------------------
     def start_keepalive(self) -> None:

@@ -35,6 +35,7 @@ import threading
 from pathlib import Path
 from typing import Any, Literal
 
+from drivers.lifecycle import RunsWhileEntered
 from rig.core.errors import RigError
 from rig.hardware.config import dump_rig_toml, rig_config_from_mapping
 from rig.hardware.simulated_tolerances import SIMULATED_HEARTBEAT_MS, SIMULATED_MISSED_PERIODS
@@ -61,7 +62,7 @@ class SimulatedRigError(RigError):
     """The simulated rig could not start (names what failed)."""
 
 
-class SimulatedRig:
+class SimulatedRig(RunsWhileEntered):
     """Start the simulated rig; use as a context manager (see the module docstring).
 
     ``plant_config``: a PlantConfig, a plant TOML path, or None (the default plant).
@@ -176,13 +177,6 @@ class SimulatedRig:
             self._tempdir = None
         self._started = False
         return code
-
-    def __enter__(self) -> SimulatedRig:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     @property
     def backdoors(self) -> dict[str, Any]:

@@ -268,27 +268,25 @@ def _kind_batch_band(unit: dict[str, Any], kind: str, rated_torque_Nm: float, pc
     the unit's data cannot give one."""
     from analysis.errors import AnalysisError
 
+    if kind == "cycloid":
+        from analysis.models.cycloid_batch import cycloid_advice as advise
+        from analysis.models.cycloid_batch import cycloid_batch as draw
+
+        what = ("seed 002's modification budget (Table 2, JB/T 10419 grade 5: runouts, "
+                "pitch deviations, eccentricity, crank bearings, grinding), worst crank "
+                "position (seed 003's Monte Carlo method)")
+    else:
+        from analysis.models.beveloid_batch import beveloid_advice as advise
+        from analysis.models.beveloid_batch import beveloid_batch as draw
+
+        what = ("seed 001's installation error budget (eq. 8: center distance, lateral "
+                "offset, axial position; runouts, bearings), worst position (seed 003's "
+                "Monte Carlo method)")
     try:
-        if kind == "cycloid":
-            from analysis.models.cycloid_batch import cycloid_advice, cycloid_batch
-
-            batch = cycloid_batch(unit, rated_torque_Nm=rated_torque_Nm, lost_motion_pct=pct,
-                                  samples=samples)
-            advice = cycloid_advice(unit, rated_torque_Nm=rated_torque_Nm,
-                                    lost_motion_pct=pct, samples=samples)
-            what = ("seed 002's modification budget (Table 2, JB/T 10419 grade 5: runouts, "
-                    "pitch deviations, eccentricity, crank bearings, grinding), worst crank "
-                    "position (seed 003's Monte Carlo method)")
-        else:
-            from analysis.models.beveloid_batch import beveloid_advice, beveloid_batch
-
-            batch = beveloid_batch(unit, rated_torque_Nm=rated_torque_Nm, lost_motion_pct=pct,
-                                   samples=samples)
-            advice = beveloid_advice(unit, rated_torque_Nm=rated_torque_Nm,
-                                     lost_motion_pct=pct, samples=samples)
-            what = ("seed 001's installation error budget (eq. 8: center distance, lateral "
-                    "offset, axial position; runouts, bearings), worst position (seed 003's "
-                    "Monte Carlo method)")
+        batch = draw(unit, rated_torque_Nm=rated_torque_Nm, lost_motion_pct=pct,
+                     samples=samples)
+        advice = advise(unit, rated_torque_Nm=rated_torque_Nm, lost_motion_pct=pct,
+                        samples=samples)
     except (AnalysisError, KeyError, TypeError, ValueError):
         return None
     low, high = batch.band_arcmin(0.95)

@@ -149,44 +149,67 @@ def render_html(report: dict[str, Any], diagnosis: Diagnosis,
         self_check=self_check_words(report.get("self_check")))
 
 
+def _share(entry: dict[str, Any], key: str = "gap_share") -> str:
+    """A term's share of the gap (or of ``key``) in percent; empty when not given."""
+    v = entry.get(key)
+    return "" if v is None else f"{v:.0%}"
+
+
+def _lag_row(lag: dict[str, Any]) -> dict[str, str]:
+    return {"name": "torque channel lag", "share": _share(lag),
+            "estimate": f"{1000.0 * (lag.get('median_s') or 0.0):.2f} ms (median)"}
+
+
+def _transients_row(tr: dict[str, Any]) -> dict[str, str]:
+    n = sum((tr.get("per_run_samples") or {}).values())
+    return {"name": "transients after impacts", "share": _share(tr),
+            "estimate": f"{n} samples left out"}
+
+
+def _torque_zero_row(z: dict[str, Any]) -> dict[str, str]:
+    est = ("not readable" if not z.get("runs_read") else
+           f"common {z.get('common_Nm', 0.0):+.4f} N·m, scatter "
+           f"{(z.get('scatter_Nm') or 0.0):.4f} N·m; {z.get('treated_as', '')}")
+    return {"name": "torque zero (re-tare residual, drift)", "share": _share(z),
+            "estimate": est}
+
+
+def _friction_row(f: dict[str, Any]) -> dict[str, str]:
+    return {"name": "ordinary friction", "share": _share(f),
+            "estimate": f"{f.get('friction_Nm', 0.0):.4f} N·m"}
+
+
+def _resolution_row(q: dict[str, Any]) -> dict[str, str]:
+    return {"name": "resolution", "share": _share(q, "noise_share") + " of the noise",
+            "estimate": f"encoder {q.get('twist_arcsec', 0.0):.3g} arcsec, torque "
+                        f"{q.get('torque_Nm', 0.0):.3g} N·m"}
+
+
+def _sample_times_row(t: dict[str, Any]) -> dict[str, str]:
+    return {"name": "sample times", "share": "",
+            "estimate": f"{1000.0 * (t.get('interval_s') or 0.0):.3g} ms, jitter "
+                        f"{1000.0 * (t.get('jitter_s') or 0.0):.3g} ms, "
+                        f"{t.get('gaps', 0)} gap(s)"}
+
+
+_MEASUREMENT_TERMS = (
+    ("torque_lag", _lag_row),
+    ("impact_transients", _transients_row),
+    ("torque_zero", _torque_zero_row),
+    ("ordinary_friction", _friction_row),
+    ("resolution", _resolution_row),
+    ("sample_times", _sample_times_row),
+)
+"""(key of the report's ``measurement``, its row) in the order of the page's table."""
+
+
 def _measurement_rows(m: dict[str, Any]) -> list[dict[str, str]]:
     """One row per measuring-system term of the report's ``measurement`` key."""
-    def share(entry: dict[str, Any], key: str = "gap_share") -> str:
-        v = entry.get(key)
-        return "" if v is None else f"{v:.0%}"
-
     rows = []
-    lag = m.get("torque_lag") or {}
-    if lag:
-        rows.append({"name": "torque channel lag", "share": share(lag),
-                     "estimate": f"{1000.0 * (lag.get('median_s') or 0.0):.2f} ms (median)"})
-    tr = m.get("impact_transients") or {}
-    if tr:
-        n = sum((tr.get("per_run_samples") or {}).values())
-        rows.append({"name": "transients after impacts", "share": share(tr),
-                     "estimate": f"{n} samples left out"})
-    z = m.get("torque_zero") or {}
-    if z:
-        est = ("not readable" if not z.get("runs_read") else
-               f"common {z.get('common_Nm', 0.0):+.4f} N·m, scatter "
-               f"{(z.get('scatter_Nm') or 0.0):.4f} N·m; {z.get('treated_as', '')}")
-        rows.append({"name": "torque zero (re-tare residual, drift)", "share": share(z),
-                     "estimate": est})
-    f = m.get("ordinary_friction") or {}
-    if f:
-        rows.append({"name": "ordinary friction", "share": share(f),
-                     "estimate": f"{f.get('friction_Nm', 0.0):.4f} N·m"})
-    q = m.get("resolution") or {}
-    if q:
-        rows.append({"name": "resolution", "share": share(q, "noise_share") + " of the noise",
-                     "estimate": f"encoder {q.get('twist_arcsec', 0.0):.3g} arcsec, torque "
-                                 f"{q.get('torque_Nm', 0.0):.3g} N·m"})
-    t = m.get("sample_times") or {}
-    if t:
-        rows.append({"name": "sample times", "share": "",
-                     "estimate": f"{1000.0 * (t.get('interval_s') or 0.0):.3g} ms, jitter "
-                                 f"{1000.0 * (t.get('jitter_s') or 0.0):.3g} ms, "
-                                 f"{t.get('gaps', 0)} gap(s)"})
+    for key, row in _MEASUREMENT_TERMS:
+        entry = m.get(key) or {}
+        if entry:
+            rows.append(row(entry))
     return rows
 
 

@@ -42,6 +42,7 @@ import pyarrow.parquet as pq
 
 from rig.core.errors import RunFormatError
 from rig.core.ids import id_from_text, id_problem
+from rig.core.json_files import DuplicateKey, no_duplicate_keys
 from rig.runformat.base import (
     CAMPAIGN_FORMAT,
     CAMPAIGN_JSON,
@@ -716,34 +717,20 @@ def _locate_string_after(text: str, value: str, key: str) -> tuple[int | None, i
 
 def _parse_json_object(path: Path, text: str) -> dict[str, Any]:
     """Parse a JSON object; syntax errors carry the decoder's line and character column."""
-
-    def no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        for k, v in pairs:
-            if k in out:
-                raise _DuplicateKey(k)
-            out[k] = v
-        return out
-
     try:
-        obj = json.loads(text, object_pairs_hook=no_duplicates)
+        obj = json.loads(text, object_pairs_hook=no_duplicate_keys)
     except json.JSONDecodeError as e:
         raise RunFormatError(path, f"invalid JSON: {e.msg}", e.lineno, e.colno) from None
     except RecursionError:
         raise RunFormatError(path, "JSON nested too deeply (more levels than any run has)") \
             from None
-    except _DuplicateKey as e:
+    except DuplicateKey as e:
         line, col = _locate_duplicate(text, e.key)
         message = f"key {e.key!r} appears twice in one object"
         raise RunFormatError(path, message, line, col) from None
     if not isinstance(obj, dict):
         raise RunFormatError(path, f"expected a JSON object, got {type(obj).__name__}", 1, 1)
     return obj
-
-
-class _DuplicateKey(Exception):
-    def __init__(self, key: str) -> None:
-        self.key = key
 
 
 def _locate_duplicate(text: str, key: str) -> tuple[int | None, int | None]:

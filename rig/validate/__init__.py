@@ -51,6 +51,7 @@ from typing import Any
 
 import numpy as np
 
+from rig.core.json_files import finite_for_json
 from rig.results.diagnose import diagnose_campaign
 from rig.runformat import Campaign, Run
 from rig.validate.labels import Label
@@ -519,15 +520,18 @@ def draw_case(seed: int, index: int, kind: str, artifacts: bool = False) -> Case
 def validate_one(args: tuple[int, int, str] | tuple[int, int, str, bool]) -> CaseResult:
     """:func:`draw_case` of ``(seed, index, kind[, artifacts])``, simulated and diagnosed
     blind."""
-    from rig.core.json_files import finite_for_json as _finite
-
     seed, index, kind = args[:3]
     case = draw_case(seed, index, kind, bool(args[3]) if len(args) > 3 else False)
-    campaign = simulate_campaign(case)
+    return diagnose_blind(case, simulate_campaign(case))
+
+
+def diagnose_blind(case: Case, campaign: Campaign) -> CaseResult:
+    """The diagnosis of ``case``'s simulated ``campaign``, blind to the case, with its time
+    (s); the report as JSON has it (no NaN)."""
     t0 = time.perf_counter()
     report = diagnose_campaign(campaign).to_dict()
     seconds = time.perf_counter() - t0
-    report = json.loads(json.dumps(_finite(report), allow_nan=False))
+    report = json.loads(json.dumps(finite_for_json(report), allow_nan=False))
     return CaseResult(case, report["verdict"], list(report.get("candidates") or []),
                       report.get("shrink"), seconds, report)
 

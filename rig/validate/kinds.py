@@ -22,7 +22,6 @@ the diagnosis); grading is :mod:`rig.validate.cases`' (per effect, false alarms 
 from __future__ import annotations
 
 import json
-import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -36,6 +35,7 @@ from rig.validate import (
     Case,
     CaseResult,
     case_label,
+    diagnose_blind,
     draw_runout,
     simulate_campaign,
     with_artifacts,
@@ -210,9 +210,6 @@ def kind_case_list(kind: str, cases: int, nulls: int) -> list[str]:
 def validate_kind_one(args: tuple[int, int, str, str, bool]) -> CaseResult:
     """Case ``(seed, index, effect, kind, artifacts)`` drawn from its own stream, simulated
     and diagnosed blind."""
-    from rig.core.json_files import finite_for_json
-    from rig.results.diagnose import diagnose_campaign
-
     seed, index, effect, kind, artifacts = args
     k = UNIT_KINDS.index(kind)
     rng = np.random.default_rng([seed, index, KIND_STREAM, k])
@@ -220,12 +217,7 @@ def validate_kind_one(args: tuple[int, int, str, str, bool]) -> CaseResult:
     case = make_kind_case(index, effect, kind, rng, arts)
     campaign = simulate_campaign(case)
     campaign.meta["name"] = f"validation-{kind}-case{index:03d}"
-    t0 = time.perf_counter()
-    report = diagnose_campaign(campaign).to_dict()
-    seconds = time.perf_counter() - t0
-    report = json.loads(json.dumps(finite_for_json(report), allow_nan=False))
-    return CaseResult(case, report["verdict"], list(report.get("candidates") or []),
-                      report.get("shrink"), seconds, report)
+    return diagnose_blind(case, campaign)
 
 
 def iter_kind_validation(kind: str, cases: int, nulls: int, seed: int = 0, jobs: int = 1,

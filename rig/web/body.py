@@ -23,6 +23,8 @@ import json
 import math
 from typing import Any
 
+from rig.core.json_files import DuplicateKey, no_duplicate_keys
+
 __all__ = ["BodyRejected", "canonical_json_body", "is_json_media_type", "media_type",
            "non_finite_paths"]
 
@@ -72,19 +74,6 @@ def non_finite_paths(value: Any, path: tuple[str | int, ...] = ()) -> list[tuple
     return []
 
 
-class _DuplicateKey(ValueError):
-    pass
-
-
-def _object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in out:
-            raise _DuplicateKey(key)
-        out[key] = value
-    return out
-
-
 def _invalid(msg: str, loc: list[Any], error: str) -> BodyRejected:
     return BodyRejected(422, [{"loc": ["body", *loc], "msg": msg, "type": "json_invalid",
                                "input": None, "ctx": {"error": error}}])
@@ -104,8 +93,8 @@ def parse_json_body(body: bytes, content_type: str | None) -> Any:
     except UnicodeDecodeError as exc:
         raise BodyRejected(400, f"the body is not UTF-8 (byte {exc.start})") from exc
     try:
-        value = json.loads(text, parse_constant=float, object_pairs_hook=_object)
-    except _DuplicateKey as exc:
+        value = json.loads(text, parse_constant=float, object_pairs_hook=no_duplicate_keys)
+    except DuplicateKey as exc:
         raise _invalid("JSON object with a key given twice", [], f"duplicate key {exc}") \
             from exc
     except json.JSONDecodeError as exc:

@@ -30,6 +30,7 @@ from pymodbus.framer import FramerType
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
+from drivers.lifecycle import RunsWhileEntered
 from drivers.modbus.map import (
     DRIVE_DEVICE_ID,
     LOADING_DRIVE_MAP,
@@ -74,7 +75,7 @@ def _sim_device(unit: int, register_map: dict[str, Register], action) -> SimDevi
     )
 
 
-class ModbusRigServer:
+class ModbusRigServer(RunsWhileEntered):
     """Serve the simulated torque sensor and loading drive of ``plant`` over Modbus.
 
     ``torque_limit_Nm`` (N*m) is the drive's own limit; ``full_scale_Nm`` (N*m) the sensor's
@@ -260,13 +261,6 @@ class ModbusRigServer:
             return
         self._loop.call_soon_threadsafe(self._loop.stop)
         thread.join(timeout=10.0)
-
-    def __enter__(self) -> ModbusRigServer:
-        self.start()
-        return self
-
-    def __exit__(self, *exc_info) -> None:
-        self.stop()
 
 
 def _running_loop() -> asyncio.AbstractEventLoop | None:

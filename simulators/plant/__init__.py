@@ -155,12 +155,15 @@ class GearPlant:
 
     def command_torque(self, torque_Nm: float) -> None:
         """Set the drive's torque setpoint (N*m); the drive clips it to its torque limit."""
-        value = float(torque_Nm)
-        if not math.isfinite(value):
-            raise ValueError(f"torque command must be a finite number of N*m, got {torque_Nm!r}")
+        value = _finite(torque_Nm, "torque command must be a finite number of N*m")
+        self._set_model(command_Nm=value)
+
+    def _set_model(self, **values: float) -> None:
+        """Advance the model to now, then set its attributes ``values`` (in order)."""
         with self._lock:
             self._advance()
-            self._model.command_Nm = value
+            for name, value in values.items():
+                setattr(self._model, name, value)
 
     def enable_drive(self, enabled: bool) -> None:
         """Enable the drive, or disable it (its torque decays to zero with the loop lag).
@@ -184,22 +187,15 @@ class GearPlant:
 
     def lock_input_at(self, angle_deg: float) -> None:
         """Turn the eccentric shaft to ``angle_deg`` (at rig.input_speed_deg_per_s) and lock."""
-        value = float(angle_deg)
-        if not math.isfinite(value):
-            raise ValueError(f"input angle must be a finite number of deg, got {angle_deg!r}")
-        with self._lock:
-            self._advance()
-            self._model.input_speed_deg_s = self.config.rig.input_speed_deg_per_s
-            self._model.input_target_deg = value
+        value = _finite(angle_deg, "input angle must be a finite number of deg")
+        self._set_model(input_speed_deg_s=self.config.rig.input_speed_deg_per_s,
+                        input_target_deg=value)
 
     def turn_input(self, speed_deg_per_s: float) -> float:
         """Turn the eccentric shaft (input) at a constant speed (deg/s; the sign is the
         direction, + forward) until :meth:`stop_input` or :meth:`lock_input_at`; 0 stops
         it. Returns the input angle (deg) at the command."""
-        value = float(speed_deg_per_s)
-        if not math.isfinite(value):
-            raise ValueError(f"input speed must be a finite number of deg/s, got "
-                             f"{speed_deg_per_s!r}")
+        value = _finite(speed_deg_per_s, "input speed must be a finite number of deg/s")
         with self._lock:
             self._advance()
             m = self._model
@@ -225,12 +221,7 @@ class GearPlant:
 
     def set_ambient_temperature(self, celsius: float) -> None:
         """Set the ambient/heater setpoint the housing temperature follows (deg C)."""
-        value = float(celsius)
-        if not math.isfinite(value):
-            raise ValueError(f"ambient temperature must be finite deg C, got {celsius!r}")
-        with self._lock:
-            self._advance()
-            self._model.ambient_C = value
+        self._set_model(ambient_C=_finite(celsius, "ambient temperature must be finite deg C"))
 
     # -- truth for tests -------------------------------------------------------------------
     def _scratch(self) -> PlantModel:
@@ -464,6 +455,14 @@ def te_order(output_angle_deg: np.ndarray, te_arcsec: np.ndarray, order: int) ->
     b = 2.0 * float(np.mean(te * np.sin(order * theta)))
     return {"order": int(order), "per": "output_rev", "amplitude_arcsec": math.hypot(a, b),
             "phase_deg": _wrap_deg(math.degrees(math.atan2(-b, a)))}
+
+
+def _finite(value: float, what: str) -> float:
+    """``value`` as a float; ValueError ``what, got value`` unless it is finite."""
+    number = float(value)
+    if not math.isfinite(number):
+        raise ValueError(f"{what}, got {value!r}")
+    return number
 
 
 def _wrap_deg(value: float) -> float:

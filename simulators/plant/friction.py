@@ -23,6 +23,16 @@ from simulators.plant.config import FrictionConfig
 from simulators.plant.geometry import ARCMIN_PER_RAD
 
 
+def bristle_force(level: float, b0: float, k: float, d: float) -> tuple[float, float]:
+    """(B, dB/dd): the bristle force (N*m) after a move ``d`` (rad) from ``b0`` at the level
+    ``level`` (N*m), ``k = sigma0 / level`` (1/rad); the exact solution above."""
+    if d >= 0.0:
+        e = math.exp(-k * d)
+        return level - (level - b0) * e, k * (level - b0) * e
+    e = math.exp(k * d)
+    return -level + (level + b0) * e, k * (level + b0) * e
+
+
 @dataclass
 class Friction:
     """One friction element with its state ``bristle_Nm``; call :meth:`begin_step` once per
@@ -82,15 +92,7 @@ class Friction:
         b0 = self.bristle_Nm
         if level <= 0.0:
             return self.rate2 * d_rad, self.rate2, 0.0
-        k = self.sigma0_Nm_per_rad / level
-        if d_rad >= 0.0:
-            e = math.exp(-k * d_rad)
-            b = level - (level - b0) * e
-            db = k * (level - b0) * e
-        else:
-            e = math.exp(k * d_rad)
-            b = -level + (level + b0) * e
-            db = k * (level + b0) * e
+        b, db = bristle_force(level, b0, self.sigma0_Nm_per_rad / level, d_rad)
         r1 = self.rate1
         return (b + r1 * (b - b0) + self.rate2 * d_rad, db * (1.0 + r1) + self.rate2, b)
 

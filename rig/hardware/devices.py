@@ -186,7 +186,7 @@ class RigDevices:
 
     def _start_keepalive_process(self) -> None:
         cfg, rig = self.config.drive, self.config.rig
-        if not rig.hardware.keepalive_process or cfg is None or cfg.transport != "tcp":
+        if not rig.keepalive_process or cfg is None or cfg.transport != "tcp":
             return
         process = KeepaliveProcess(KeepaliveTarget(
             host=cfg.host, port=cfg.port, unit=cfg.device_id, address=KEEPALIVE_REGISTER,

@@ -1,6 +1,7 @@
 """Issue 21 item 11: the lost motion measured on a loaded PC against the plant's truth.
 
-The measurement of ``tests/test_measure_modes.py`` (the default unit with LuGre drag, 10 N*m
+The measurement of ``tests/rig/measurement/test_measure_modes.py`` (the default unit with
+LuGre drag, 10 N*m
 rated, lost motion at +-3 %, the slow zero crossing), in both quasi-static loading modes
 that a loaded CI machine put 1.9 % off (equal twist steps, and constant rate), measured with
 ``rig measure --simulated``'s code path (the simulated rig in its own process, the engine in

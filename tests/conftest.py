@@ -11,8 +11,7 @@ from typing import Any
 
 import pytest
 
-REPO = Path(__file__).resolve().parent.parent
-SHARED = REPO.parent / "shared"
+from tests.support.paths import REPO
 
 
 @pytest.fixture
@@ -135,8 +134,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 @pytest.fixture(scope="session")
 def pg_server():
-    """A throw-away PostgreSQL cluster for the whole session (tests/pg_server.py)."""
-    from tests.pg_server import PgServer, required_bin_dir
+    """A throw-away PostgreSQL cluster for the whole session (tests/support/pg_server.py)."""
+    from tests.support.pg_server import PgServer, required_bin_dir
 
     server = PgServer(required_bin_dir())
     server.start()
@@ -196,10 +195,10 @@ def make_store(request) -> StoreMaker:
 
 @pytest.fixture(scope="session")
 def simulated_rig():
-    """The simulated rig shared by the page tests (tests/simulated_page.py): opened by the
+    """The simulated rig shared by the page tests (tests/support/simulated_page.py): opened by the
     first test that uses it, kept open while the next test uses it too, closed as soon as
     one does not (:func:`pytest_runtest_teardown` below) and at the end."""
-    from tests.simulated_page import SHARED
+    from tests.support.simulated_page import SHARED
 
     yield SHARED
     SHARED.close()
@@ -208,7 +207,7 @@ def simulated_rig():
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None):
     yield  # the test's own fixtures (its pages) are closed first
-    shared = sys.modules.get("tests.simulated_page")  # imported by a test that used it
+    shared = sys.modules.get("tests.support.simulated_page")  # imported by a test that used it
     if shared is not None and (
             nextitem is None or "simulated_rig" not in getattr(nextitem, "fixturenames", ())):
         shared.SHARED.close()

@@ -15,7 +15,7 @@ import pytest
 from playwright.sync_api import expect, sync_playwright
 
 from tests.e2e.test_control_page import TOKEN, launch_browser, rig_serve
-from tests.test_html_escaping import hostile, write_hostile_store
+from tests.rig.reports.test_html_escaping import hostile, write_hostile_store
 
 pytestmark = pytest.mark.timeout(360)  # a loaded machine: store, server and SPC take a while
 

@@ -20,7 +20,7 @@ import pytest
 from playwright.sync_api import expect, sync_playwright
 
 from tests.e2e.test_control_page import CHROMIUM, launch_browser
-from tests.test_html_escaping import UNIT, hostile
+from tests.rig.reports.test_html_escaping import UNIT, hostile
 
 pytestmark = [
     pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed"),
@@ -31,7 +31,8 @@ N_UNITS = 6
 
 
 def write_store(root: Path):
-    """Six units of one design, one run each, with hostile serials (tests/test_html_escaping)."""
+    """Six units of one design, one run each, with hostile serials
+    (tests/rig/reports/test_html_escaping)."""
     from rig.store import Store
     from rig.store.synthetic_runs import write_campaign
 

@@ -17,18 +17,18 @@ from pathlib import Path
 
 import pytest
 from playwright.sync_api import expect, sync_playwright
-from test_control_page import (
+
+from rig.hardware.simrig import SimulatedRig
+from rig.measurement.service import plant_config_for, write_plant_toml
+from rig.plans.campaign_file import SimulationSection
+from simulators.plant.config import load_plant_config
+from tests.e2e.test_control_page import (
     ARTIFACTS,
     CHROMIUM,
     TOKEN,
     get_json,
     launch_browser,
 )
-
-from rig.hardware.simrig import SimulatedRig
-from rig.measurement.service import plant_config_for, write_plant_toml
-from rig.plans.campaign_file import SimulationSection
-from simulators.plant.config import load_plant_config
 
 pytestmark = [
     pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed"),

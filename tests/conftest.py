@@ -96,34 +96,16 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
 # PostgreSQL server and a browser, and a scheduling stall of a second can trip a heartbeat or
 # a page's wait. Such a test gets one more try (pytest-rerunfailures: the summary counts it
 # as "rerun", with the first failure's report); a deterministic failure fails twice. Every
-# other test gets no second try. A module is "realtime" when it starts simulated devices:
-# the names below are the simulators' entry points and the fixtures that wrap them.
+# other test gets no second try. A module that starts simulated devices (the simulated rig,
+# an encoder node, a transducer, a Modbus server, a page on the rig) says so itself:
+# ``pytestmark = pytest.mark.realtime``.
 
-REALTIME_SOURCES = ("SimulatedRig", "simulated_rig", "simulated_page", "lab_rig", "rig_serve",
-                    "--simulated", "EncoderNode", "SlcanAdapter", "TransducerSimulator",
-                    "RigModbusServer", "serve_until_signalled", "\"sim\", ", "open_session",
-                    "run_load_scenario", "rig.validate.wire", "sync_playwright",
-                    "simulated=True")
 REALTIME_RERUNS = 1
 REALTIME_RERUN_DELAY_S = 2.0
-_realtime_modules: dict[str, bool] = {}
-
-
-def _measures_in_real_time(item: pytest.Item) -> bool:
-    path = str(item.path)
-    if path not in _realtime_modules:
-        try:
-            text = item.path.read_text(encoding="utf-8")
-        except OSError:
-            text = ""
-        _realtime_modules[path] = any(word in text for word in REALTIME_SOURCES)
-    return _realtime_modules[path]
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
-        if item.get_closest_marker("realtime") is None and _measures_in_real_time(item):
-            item.add_marker(pytest.mark.realtime)
         if item.get_closest_marker("realtime") is not None:
             item.add_marker(pytest.mark.flaky(reruns=REALTIME_RERUNS,
                                               reruns_delay=REALTIME_RERUN_DELAY_S))

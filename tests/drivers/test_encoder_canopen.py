@@ -30,6 +30,8 @@ from simulators.encoder_node import EncoderNode, SweepPlant
 from simulators.plant.api import PlantSnapshot
 from simulators.slcan_adapter import SlcanAdapter
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 CPR = 8_388_608  # 0x6001 of the shipped EDS: 23 bit per revolution
 RANGE = 2_147_483_648  # 0x6002: 256 revolutions
 

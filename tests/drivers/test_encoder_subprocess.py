@@ -19,6 +19,8 @@ from simulators.encoder_node import EncoderNode, SweepPlant
 from simulators.slcan_adapter import SlcanAdapter
 from tests.support.paths import REPO
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 
 @pytest.fixture
 def simulator_process():

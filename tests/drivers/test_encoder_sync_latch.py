@@ -27,6 +27,8 @@ from simulators.plant import GearPlant
 from simulators.plant.config import load_plant_config
 from simulators.slcan_adapter import SlcanAdapter
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 AMPLITUDE_DEG = 10.0
 PERIOD_S = 2.0
 NODE_LATE_S = 0.03

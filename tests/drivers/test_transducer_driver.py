@@ -20,6 +20,8 @@ from drivers.transducer.serial import (
 from simulators.clock import ManualClock
 from simulators.transducer import SineTorqueSource, TransducerSimulator
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 AMPLITUDE_NM = 5.0
 FREQUENCY_HZ = 0.5
 

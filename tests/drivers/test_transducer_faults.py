@@ -19,6 +19,8 @@ from drivers.errors import (
 from drivers.transducer.serial import SerialTorqueTransducer, TorqueReading, TransducerConfig
 from simulators.transducer import SineTorqueSource, TransducerSimulator
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 TIMEOUT_S = 0.4
 BOUND_S = TIMEOUT_S + 5.0  # generous: the machine may be loaded; a hang is what we exclude
 

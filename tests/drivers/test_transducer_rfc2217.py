@@ -18,7 +18,8 @@ from drivers.transducer.serial import SerialTorqueTransducer, TransducerConfig
 from simulators.transducer import SineTorqueSource, TransducerSimulator
 
 # pyserial 3.5's own rfc2217 client thread uses setDaemon()/setName()
-pytestmark = pytest.mark.filterwarnings(r"ignore:set(Daemon|Name)\(\) is deprecated")
+pytestmark = [pytest.mark.realtime,
+              pytest.mark.filterwarnings(r"ignore:set(Daemon|Name)\(\) is deprecated")]
 
 
 class _SocketWriter:

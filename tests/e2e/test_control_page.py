@@ -28,6 +28,7 @@ CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networki
                  "--disable-component-update", "--no-first-run", "--disable-sync"]
 
 pytestmark = [
+    pytest.mark.realtime,
     pytest.mark.skipif(not CHROMIUM.exists(),
                        reason="Debian's chromium is not installed (/usr/bin/chromium missing; "
                               ".ci/install installs it)"),

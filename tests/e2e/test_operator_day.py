@@ -25,6 +25,8 @@ from rig.hardware.config import load_rig_config
 from rig.store import Store
 from tests.e2e.test_control_page import ARTIFACTS, TOKEN, get_json, launch_browser, rig_serve
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 AUTH = {"Authorization": f"Bearer {TOKEN}", "Content-Type": "application/json"}
 
 

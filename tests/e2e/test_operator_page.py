@@ -44,6 +44,7 @@ from tests.e2e.test_control_page import ARTIFACTS, CHROMIUM, REPO, TOKEN, get_js
 from tests.e2e.test_operator_day import post
 
 pytestmark = [
+    pytest.mark.realtime,
     pytest.mark.skipif(not CHROMIUM.exists(),
                        reason="Debian's chromium is not installed (/usr/bin/chromium missing; "
                               ".ci/install installs it)"),

@@ -28,6 +28,7 @@ from rig.store.synthetic_runs import write_campaign
 from tests.e2e.test_control_page import ARTIFACTS, CHROMIUM, get_json, launch_browser, rig_serve
 
 pytestmark = [
+    pytest.mark.realtime,
     pytest.mark.skipif(not CHROMIUM.exists(),
                        reason="Debian's chromium is not installed (/usr/bin/chromium missing; "
                               ".ci/install installs it)"),

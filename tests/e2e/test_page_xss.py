@@ -17,7 +17,8 @@ from playwright.sync_api import expect, sync_playwright
 from tests.e2e.test_control_page import TOKEN, launch_browser, rig_serve
 from tests.rig.reports.test_html_escaping import hostile, write_hostile_store
 
-pytestmark = pytest.mark.timeout(360)  # a loaded machine: store, server and SPC take a while
+# a loaded machine: store, server and SPC take a while
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(360)]
 
 INJECT = """() => new Promise((done) => {
   document.addEventListener("securitypolicyviolation",

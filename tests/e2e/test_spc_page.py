@@ -23,6 +23,7 @@ from tests.e2e.test_control_page import CHROMIUM, launch_browser
 from tests.rig.reports.test_html_escaping import UNIT, hostile
 
 pytestmark = [
+    pytest.mark.realtime,
     pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed"),
     pytest.mark.timeout(300),
 ]

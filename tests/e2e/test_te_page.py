@@ -31,6 +31,7 @@ from tests.e2e.test_control_page import (
 )
 
 pytestmark = [
+    pytest.mark.realtime,
     pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed"),
     pytest.mark.timeout(300),
 ]

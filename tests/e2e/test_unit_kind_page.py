@@ -26,6 +26,7 @@ from tests.e2e.test_control_page import (
 )
 
 pytestmark = [
+    pytest.mark.realtime,
     pytest.mark.skipif(not CHROMIUM.exists(),
                        reason="Debian's chromium is not installed (/usr/bin/chromium missing; "
                               ".ci/install installs it)"),

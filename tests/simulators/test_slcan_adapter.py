@@ -21,6 +21,8 @@ from simulators.slcan_adapter import (
     parse_line,
 )
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 
 def test_parse_frames() -> None:
     cmd = parse_line(b"t1854DEADBEEF")

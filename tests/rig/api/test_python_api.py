@@ -25,6 +25,8 @@ from rig.runformat import Run as RawRun  # noqa: E402
 from rig.runformat import write_run  # noqa: E402
 from tests.support.paths import REPO as ROOT
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 EXAMPLES = ROOT / "rig/examples/runs"
 CAMPAIGN = EXAMPLES / "campaign-pair1-positions"
 UNIT = ROOT / "rig/examples/units/seed000-pair1.json"

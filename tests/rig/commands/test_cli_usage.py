@@ -17,6 +17,8 @@ from rig.cli import app
 from rig.examples import RUNS_DIR
 from tests.support.paths import REPO as ROOT
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 UNIT = ROOT / "rig/examples/units/seed000-pair1.json"
 CAMPAIGN = RUNS_DIR / "campaign-pair1-positions"
 # The console script (it imports only the command named); else the same entry point.

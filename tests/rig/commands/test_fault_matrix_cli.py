@@ -15,8 +15,12 @@ import time
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from tests.rig.commands.test_measure_cli import TINY
 from tests.support.paths import REPO as ROOT
+
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 

@@ -7,7 +7,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from tests.support.paths import REPO as ROOT
+
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 CAMPAIGN = f"""

@@ -12,6 +12,8 @@ import pytest
 
 from tests.support.paths import REPO as ROOT
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 TINY = f"""
 name = "tiny"

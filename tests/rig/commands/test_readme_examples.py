@@ -24,6 +24,8 @@ import pytest
 
 from tests.support.paths import REPO as ROOT
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 README = (ROOT / "README.md").read_text(encoding="utf-8")
 SCRIPT = Path(sysconfig.get_path("scripts")) / "rig"
 RIG = [sys.executable, str(SCRIPT)] if SCRIPT.is_file() else [

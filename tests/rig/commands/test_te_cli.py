@@ -24,6 +24,8 @@ from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 from tests.support.paths import REPO as ROOT
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 CAMPAIGNS = ROOT / "examples" / "campaigns"
 
 

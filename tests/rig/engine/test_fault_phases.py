@@ -27,6 +27,8 @@ from rig.runformat import read_run
 from rig.store import Store
 from simulators.plant.config import load_plant_config
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 UNIT = dict(load_plant_config().unit, serial="fault-matrix")
 PLANT = plant_config_for(UNIT, SimulationSection(seed=3, plant={"effects": {"friction": {
     "enabled": True, "model": "lugre", "viscous_Nms_per_arcmin": 0.002}}}))

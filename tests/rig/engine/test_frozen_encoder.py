@@ -29,6 +29,8 @@ from rig.runformat import read_run
 from rig.store import Store
 from simulators.plant.config import load_plant_config
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 CPR = 2.0 ** 23
 COUNT_DEG = 360.0 / CPR
 K = 29.0  # N*m/arcmin, about the default unit's nominal stiffness

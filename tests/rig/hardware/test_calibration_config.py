@@ -23,6 +23,8 @@ from rig.plans.campaign_file import CampaignError, campaign_from_mapping
 from rig.store import Store
 from tests.support.paths import REPO
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 EXAMPLE = REPO / "examples" / "rigs" / "simulated.toml"
 TODAY = dt.datetime.now(dt.UTC).date()
 

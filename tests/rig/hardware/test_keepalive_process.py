@@ -26,6 +26,8 @@ from rig.hardware.devices import open_rig
 from rig.hardware.simrig import SimulatedRig
 from tests.support.paths import REPO as ROOT
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 
 @pytest.fixture(scope="module")
 def sim(tmp_path_factory):

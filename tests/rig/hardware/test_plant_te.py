@@ -20,6 +20,8 @@ from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 from simulators.plant.config import PlantConfigError, load_plant_config
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 ARCSEC_PER_DEG = 3600.0
 
 

@@ -19,6 +19,8 @@ from rig.hardware.devices import open_rig
 from rig.hardware.simrig import SimulatedRig
 from simulators.plant.config import load_plant_config
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 HOUSING_TAU_S = 1.0
 
 

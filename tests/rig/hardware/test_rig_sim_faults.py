@@ -16,6 +16,8 @@ from rig.hardware.config import load_rig_config
 from rig.hardware.device_check import check_devices
 from rig.hardware.simrig import SimulatedRig
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 
 

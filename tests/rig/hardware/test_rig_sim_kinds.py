@@ -19,6 +19,8 @@ from simulators.plant import GearPlant
 from simulators.plant.config import load_plant_config
 from tests.support.paths import REPO as ROOT
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 TORQUE_NM = 8.0
 

@@ -24,6 +24,8 @@ from rig.hardware.simrig import SimulatedRig
 from simulators.plant import GearPlant
 from simulators.plant.config import load_plant_config
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 TORQUE_NM = 10.0
 

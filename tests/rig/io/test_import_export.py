@@ -28,6 +28,8 @@ from rig.runformat import read_run
 from rig.store import Store
 from tests.support.paths import REPO as ROOT
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 CATMAN_MAP = ROOT / "examples/maps/catman.toml"
 EXAMPLE_CAMPAIGN = ROOT / "rig/examples/runs/campaign-pair1-positions"

@@ -28,6 +28,8 @@ from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 from simulators.plant.config import load_plant_config
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 # a little drag (seals, oil) so the output crosses the free play without a flank impact
 DRAG = {"effects": {"friction": {"enabled": True, "model": "lugre", "coulomb_torque_Nm": 0.02,
                                  "static_torque_Nm": 0.03, "viscous_Nms_per_arcmin": 0.002}}}

@@ -10,6 +10,8 @@ import sys
 import threading
 import time
 
+import pytest
+
 from rig.hardware.config import load_rig_config
 from rig.hardware.devices import open_rig
 from rig.hardware.simrig import SimulatedRig
@@ -25,6 +27,8 @@ from rig.plans.campaign_file import SimulationSection
 from rig.runformat import read_run
 from rig.store import RECOVERED_REASON, Store
 from simulators.plant.config import load_plant_config
+
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 
 DRAG = {"effects": {"friction": {"enabled": True, "model": "lugre",
                                  "viscous_Nms_per_arcmin": 0.002}}}

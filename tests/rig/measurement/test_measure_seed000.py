@@ -20,6 +20,8 @@ from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 from tests.support.paths import REPO as ROOT
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 PAPER_PAIR1_ARCMIN = 6 + 20 / 60  # Table 3, theoretical (worst case)
 PAPER_PAIR3_ARCMIN = 2 + 3 / 60  # Table 3, theoretical (mean center distance)
 

@@ -29,6 +29,8 @@ from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 from simulators.plant.config import load_plant_config
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 UNIT = dict(load_plant_config().unit, serial="te-unit")
 TE_EFFECTS = {"kinematic_error": {"enabled": True, "beta_deg": 25.0},
               "tooth_spacing_error": {"enabled": True, "transition_fraction": 0.5}}

@@ -29,6 +29,8 @@ from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 from simulators.plant.config import load_plant_config
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 DRAG = {"effects": {"friction": {"enabled": True, "model": "lugre", "coulomb_torque_Nm": 0.02,
                                  "static_torque_Nm": 0.03, "viscous_Nms_per_arcmin": 0.002}}}
 UNIT = dict(load_plant_config().unit, serial="load-unit")

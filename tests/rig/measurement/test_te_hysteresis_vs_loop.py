@@ -26,6 +26,8 @@ from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 from tests.rig.measurement.test_measure_te import PARAMS, UNIT
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 PLANT = plant_config_for(UNIT, SimulationSection(seed=5))
 BRAKE_PCT = 100.0 * PARAMS.brake_torque_fraction  # 30 % of 10 N*m: 3 N*m
 LOOP = LoopParams(rated_torque_Nm=PARAMS.rated_torque_Nm, steps_per_quarter=2,

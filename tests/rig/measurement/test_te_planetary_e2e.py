@@ -13,12 +13,16 @@ import sys
 import tomllib
 from pathlib import Path
 
+import pytest
+
 from rig.results.te import analyse_te_run
 from rig.runformat import read_run
 from simulators.clock import ManualClock
 from simulators.plant import GearPlant
 from simulators.plant.config import load_plant_config
 from tests.support.paths import REPO as ROOT
+
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 
 PLANT = ROOT / "simulators" / "planetary_plant.toml"
 RATED_NM, BRAKE = 20.0, 0.1

@@ -34,7 +34,7 @@ from rig.web.simulated import example_unit
 from simulators.plant.config import load_plant_config
 from tests.support.simulated_page import page_on
 
-pytestmark = pytest.mark.timeout(240)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(240)]
 
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 TOKEN = "rig-test-operator"

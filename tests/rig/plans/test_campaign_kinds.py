@@ -24,6 +24,8 @@ from rig.runformat import read_campaign
 from tests.rig.reports.test_html_escaping import page_text
 from tests.support.paths import REPO as ROOT
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 
 def slim_campaign(name: str, positions: list[float], folder: Path) -> Path:
     """The shipped campaign with two positions and the shortest loop (2 steps a quarter, no

@@ -25,6 +25,8 @@ from tests.rig.commands.test_measure_cli import TINY
 from tests.rig.reports.test_html_escaping import page_text
 from tests.support.paths import REPO as ROOT
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 UNIT = ROOT / "rig/examples/units/seed000-pair1.json"
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}

@@ -24,6 +24,8 @@ from rig.results.outcome import campaign_outcome, run_outcome
 from rig.store import Store
 from tests.support.paths import REPO as ROOT
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 UNIT = json.loads((ROOT / "rig/examples/units/seed000-pair1.json").read_text())
 

@@ -29,6 +29,8 @@ from rig.results.analyse import analyse_run
 from rig.runformat import read_run
 from tests.support.paths import REPO as ROOT
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 EXAMPLE_RUN = ROOT / "rig" / "examples" / "runs" / "pair3-pos000"
 EXAMPLE_CAMPAIGN = ROOT / "examples" / "campaigns" / "seed000-pair1.toml"
 UNIT_FILE = ROOT / "rig" / "examples" / "units" / "seed000-pair1.json"

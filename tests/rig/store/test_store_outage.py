@@ -27,7 +27,7 @@ from rig.runformat import RUN_JSON, SAMPLES_PARQUET
 from rig.store import Store
 from simulators.plant.config import load_plant_config
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(300)]
 
 UNIT = dict(load_plant_config().unit, serial="OUTAGE-1")
 PLANT = plant_config_for(UNIT, SimulationSection(seed=5))

@@ -26,7 +26,8 @@ import pytest
 from rig.store import RECOVERED_REASON, Store
 from tests.support.paths import REPO
 
-pytestmark = pytest.mark.alone  # loads the machine on purpose (tests/conftest.py)
+# loads the machine on purpose (tests/conftest.py)
+pytestmark = [pytest.mark.realtime, pytest.mark.alone]
 
 TINY = f"""
 name = "tiny-line"

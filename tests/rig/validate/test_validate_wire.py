@@ -22,7 +22,7 @@ import pytest
 from rig.runformat import read_run_or_campaign
 from rig.validate.wire import SCHEDULE, make_case
 
-pytestmark = [pytest.mark.alone, pytest.mark.timeout(900)]
+pytestmark = [pytest.mark.realtime, pytest.mark.alone, pytest.mark.timeout(900)]
 
 
 def rig(*args: str, cwd: Path) -> subprocess.CompletedProcess:

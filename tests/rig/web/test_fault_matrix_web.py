@@ -17,6 +17,8 @@ import pytest
 
 from tests.e2e.test_control_page import TOKEN, rig_serve
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 BIG_PLAN = {"plan": {"rated_torque_Nm": 10.0, "steps_per_quarter": 50, "cycles": 20},
             "kind": "campaign", "axes": {"positions_deg": [0.0, 45.0, 90.0, 135.0, 180.0,
                                                            225.0, 270.0, 315.0]}}

@@ -19,7 +19,8 @@ import pytest
 from bench.load_scenario import acquisition_figures, run_load_scenario
 from tests.support.paths import REPO
 
-pytestmark = pytest.mark.alone  # loads the machine on purpose (tests/conftest.py)
+# loads the machine on purpose (tests/conftest.py)
+pytestmark = [pytest.mark.realtime, pytest.mark.alone]
 
 
 DEVICE_PRIORITY = 20

@@ -24,6 +24,8 @@ from pathlib import Path
 import httpx
 import pytest
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 STREAMS = 3
 

@@ -19,6 +19,8 @@ import pytest
 
 from tests.e2e.test_control_page import TOKEN
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 BAD_NUMBERS = ["NaN", "Infinity", "-Infinity", "1e999"]
 MEDIA_TYPES = ["application/JSON", "Application/Json; charset=UTF-8", "text/plain", None]
 MARK = "__number__"

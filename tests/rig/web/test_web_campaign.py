@@ -13,7 +13,7 @@ from rig.web.live import LiveHub
 from rig.web.simulated import example_unit
 from tests.support.simulated_page import page_on
 
-pytestmark = pytest.mark.timeout(240)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(240)]
 
 TOKEN = "campaign-operator"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}

@@ -18,7 +18,7 @@ from rig.web.simulated import example_unit, simulated_session_factory
 from tests.support.simulated_page import page_on
 from tests.support.simulated_page import wait_for as wait_until
 
-pytestmark = pytest.mark.timeout(180)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(180)]
 
 TOKEN = "rig-test-operator"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}

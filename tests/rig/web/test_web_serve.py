@@ -9,6 +9,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 
 

@@ -14,6 +14,8 @@ from rig.plans.campaign_file import batch_band
 from rig.web.simulated import example_plant
 from tests.rig.web.test_web_api import AUTH, REPO, client, store  # noqa: F401 (the API's fixtures)
 
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+
 UNITS = REPO / "rig" / "examples" / "units"
 INVOLUTE = json.loads((UNITS / "seed000-pair1.json").read_text())
 CYCLOID = json.loads((UNITS / "cycloid-seed002.json").read_text())

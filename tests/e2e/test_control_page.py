@@ -8,67 +8,27 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
-import signal
-import subprocess
-import sys
-import threading
 import urllib.request
 from pathlib import Path
 
 import pytest
 from playwright.sync_api import expect, sync_playwright
 
-from tests.support.paths import REPO
+from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, launch_browser
+from tests.support.serve import served
 
-CHROMIUM = Path("/usr/bin/chromium")
-ARTIFACTS = REPO / "artifacts" / "e2e"
 TOKEN = "e2e-operator-token"
-CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--no-first-run", "--disable-sync"]
 
-pytestmark = [
-    pytest.mark.realtime,
-    pytest.mark.skipif(not CHROMIUM.exists(),
-                       reason="Debian's chromium is not installed (/usr/bin/chromium missing; "
-                              ".ci/install installs it)"),
-    pytest.mark.timeout(240),
-]
-
-
-def launch_browser(playwright):
-    """Debian's chromium, headless, driven by Playwright (never a downloaded browser)."""
-    return playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True,
-                                      args=CHROMIUM_ARGS)
+pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
 
 
 @contextlib.contextmanager
 def rig_serve(store: Path, *options: str):
     """``rig serve --simulated`` on a free port (with ``options``: ``--plant FILE`` ...);
     yields (url, operator link)."""
-    cmd = [sys.executable, "-c", "from rig.cli import main; main()", "serve", "--simulated",
-           "--port", "0", "--store", str(store), "--token", TOKEN, *options]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=store.parent, env={**os.environ, "PYTHONUNBUFFERED": "1"})
-    stderr: list[str] = []
-    threading.Thread(target=lambda: stderr.extend(proc.stderr), daemon=True).start()
-    try:
-        lines = {}
-        for line in proc.stdout:
-            key, _, value = line.partition(": ")
-            lines[key] = value.strip()
-            if key == "operator link":
-                break
-        assert "operator link" in lines, f"rig serve did not start: {''.join(stderr)}"
+    with served(store, TOKEN, "--simulated", *options) as lines:
         assert lines["operator token"].startswith(TOKEN)
         yield lines["control page"], lines["operator link"]
-    finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=60)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=10)
 
 
 def get_json(url: str):

@@ -23,7 +23,8 @@ from pymodbus.client import ModbusTcpClient
 from drivers.modbus.map import LOADING_DRIVE_MAP, encode_float32
 from rig.hardware.config import load_rig_config
 from rig.store import Store
-from tests.e2e.test_control_page import ARTIFACTS, TOKEN, get_json, launch_browser, rig_serve
+from tests.e2e.test_control_page import TOKEN, get_json, rig_serve
+from tests.support.browser import ARTIFACTS, launch_browser
 
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 

@@ -25,15 +25,10 @@ from playwright.sync_api import expect, sync_playwright
 
 from rig.store import Store
 from rig.store.synthetic_runs import write_campaign
-from tests.e2e.test_control_page import ARTIFACTS, CHROMIUM, get_json, launch_browser, rig_serve
+from tests.e2e.test_control_page import get_json, rig_serve
+from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, launch_browser
 
-pytestmark = [
-    pytest.mark.realtime,
-    pytest.mark.skipif(not CHROMIUM.exists(),
-                       reason="Debian's chromium is not installed (/usr/bin/chromium missing; "
-                              ".ci/install installs it)"),
-    pytest.mark.timeout(240),
-]
+pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
 
 DESKTOP = {"width": 1440, "height": 900}
 PHONE = {"width": 390, "height": 844}

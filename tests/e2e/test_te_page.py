@@ -8,11 +8,6 @@ figure the run stored. About 10 s of rotation at 240 rpm (the 45/40 pair, ratio 
 from __future__ import annotations
 
 import contextlib
-import os
-import signal
-import subprocess
-import sys
-import threading
 from pathlib import Path
 
 import pytest
@@ -22,19 +17,11 @@ from rig.hardware.simrig import SimulatedRig
 from rig.measurement.service import plant_config_for, write_plant_toml
 from rig.plans.campaign_file import SimulationSection
 from simulators.plant.config import load_plant_config
-from tests.e2e.test_control_page import (
-    ARTIFACTS,
-    CHROMIUM,
-    TOKEN,
-    get_json,
-    launch_browser,
-)
+from tests.e2e.test_control_page import TOKEN, get_json
+from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, launch_browser
+from tests.support.serve import served
 
-pytestmark = [
-    pytest.mark.realtime,
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed"),
-    pytest.mark.timeout(300),
-]
+pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(300)]
 
 EFFECTS = {"kinematic_error": {"enabled": True, "beta_deg": 30.0},
            "tooth_spacing_error": {"enabled": True, "transition_fraction": 0.5}}
@@ -43,28 +30,8 @@ EFFECTS = {"kinematic_error": {"enabled": True, "beta_deg": 30.0},
 @contextlib.contextmanager
 def serve_rig(rig_toml: Path, store: Path):
     """``rig serve --rig RIG.toml`` on a free port; yields (url, operator link)."""
-    cmd = [sys.executable, "-c", "from rig.cli import main; main()", "serve", "--rig",
-           str(rig_toml), "--port", "0", "--store", str(store), "--token", TOKEN]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=store.parent, env={**os.environ, "PYTHONUNBUFFERED": "1"})
-    stderr: list[str] = []
-    threading.Thread(target=lambda: stderr.extend(proc.stderr), daemon=True).start()
-    try:
-        lines = {}
-        for line in proc.stdout:
-            key, _, value = line.partition(": ")
-            lines[key] = value.strip()
-            if key == "operator link":
-                break
-        assert "operator link" in lines, f"rig serve did not start: {''.join(stderr)}"
+    with served(store, TOKEN, "--rig", str(rig_toml)) as lines:
         yield lines["control page"], lines["operator link"]
-    finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=60)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=10)
 
 
 def test_operator_measures_the_transmission_error(tmp_path: Path):

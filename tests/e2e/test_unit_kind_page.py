@@ -16,22 +16,11 @@ from playwright.sync_api import expect, sync_playwright
 
 from simulators.plant.config import load_plant_config
 from simulators.plant.truth import generator_block
-from tests.e2e.test_control_page import (
-    ARTIFACTS,
-    CHROMIUM,
-    REPO,
-    get_json,
-    launch_browser,
-    rig_serve,
-)
+from tests.e2e.test_control_page import get_json, rig_serve
+from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, launch_browser
+from tests.support.paths import REPO
 
-pytestmark = [
-    pytest.mark.realtime,
-    pytest.mark.skipif(not CHROMIUM.exists(),
-                       reason="Debian's chromium is not installed (/usr/bin/chromium missing; "
-                              ".ci/install installs it)"),
-    pytest.mark.timeout(240),
-]
+pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
 
 CYCLOID_PLANT = REPO / "simulators" / "cycloid_plant.toml"
 

@@ -1,4 +1,5 @@
-"""`rig campaign run` and `rig measure` as scripts use them: exit codes, --json keys, errors."""
+"""`rig campaign run` and `rig measure` as scripts use them: exit codes, --json keys, errors,
+and a campaign over several amplitudes and repeats end to end on the simulated rig."""
 
 from __future__ import annotations
 
@@ -15,8 +16,7 @@ from tests.support.paths import REPO as ROOT
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
-TINY = f"""
-name = "tiny"
+_UNIT_AND_PLAN = f"""
 [unit]
 file = "{ROOT / 'rig/examples/units/seed000-pair1.json'}"
 [plan]
@@ -27,21 +27,33 @@ dwell_s = 0.0
 pre_cycles = 0
 zero_band_Nm = 0.3
 zero_rate_Nm_per_s = 0.6
-[axes]
-positions_deg = [90.0]
-[limits]
-lost_motion_arcmin_max = LIMIT
-[simulation.plant.effects.friction]
+"""
+_DRAG = """[simulation.plant.effects.friction]
 enabled = true
 model = "lugre"
 coulomb_torque_Nm = 0.02
 static_torque_Nm = 0.03
 viscous_Nms_per_arcmin = 0.002
 """
+TINY = f"""
+name = "tiny"{_UNIT_AND_PLAN}[axes]
+positions_deg = [90.0]
+[limits]
+lost_motion_arcmin_max = LIMIT
+{_DRAG}"""
+"""One run at 90 deg with a limit (``LIMIT``, replaced by the test)."""
+AXES = f"""
+name = "axes"{_UNIT_AND_PLAN}[axes]
+positions_deg = [0.0]
+amplitudes_pct = [50.0, 100.0]
+repeats = 2
+{_DRAG}"""
+"""Two amplitudes, two repeats: four runs at 0 deg."""
 
 
-def _rig(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([*RIG, *args], capture_output=True, text=True, cwd=cwd, timeout=120)
+def _rig(*args: str, cwd: Path, timeout_s: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([*RIG, *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=timeout_s)
 
 
 @pytest.fixture(scope="module")
@@ -123,3 +135,24 @@ def test_bad_input_exits_2_naming_file_and_key(tmp_path: Path) -> None:
     res = _rig("campaign", "run", str(ROOT / "examples/campaigns/seed000-pair1.toml"),
                "--preview", cwd=tmp_path)
     assert res.returncode == 0 and "4 runs, about" in res.stderr
+
+
+def test_amplitudes_and_repeats_make_one_run_each(tmp_path: Path) -> None:
+    camp = tmp_path / "axes.toml"
+    camp.write_text(AXES)
+    out = tmp_path / "axes.json"
+    res = _rig("campaign", "run", str(camp), "--simulated", "--store", str(tmp_path / "s"),
+               "--json", str(out), cwd=tmp_path, timeout_s=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    doc = json.loads(out.read_text())
+    runs = doc["runs"]
+    assert len(runs) == 4 and all(r["status"] == "completed" for r in runs)
+    assert sorted(r["amplitude_pct"] for r in runs) == [50.0, 50.0, 100.0, 100.0]
+    lost = [r["lost_motion_arcmin"] for r in runs]
+    # the lost motion at ±3 % does not depend on the loop amplitude or the repeat (same
+    # position, same unit): all four agree within a few hundredths of an arcmin
+    assert max(lost) - min(lost) < 0.05, lost
+    # the ±100 % runs give a stiffness; the ±50 % runs cannot (they never reach rated torque)
+    with_k = [r for r in runs if r["stiffness_Nm_per_arcmin"] is not None]
+    assert len(with_k) == 2, [r.get("errors") for r in runs]
+    assert doc["lost_motion_arcmin"]["n"] == 4

@@ -38,12 +38,11 @@ TE = PARAMS.model_copy(update={"input_speed_rpm": 240.0})
 
 def test_te_hysteresis_is_the_loops_lost_motion_at_the_brake_torque(tmp_path: Path) -> None:
     store = Store(tmp_path / "store")
-    # one simulated rig each, from the same plant config and seed: the same unit
+    # both runs on one simulated rig: the same unit
     with open_session(simulated=True, plant=PLANT) as session:
         engine, (loop_outcome,) = measure_plan(session, store, hysteresis_plan(LOOP),
                                                run_meta(UNIT, session))
-    assert engine.state == "completed", engine.stopping_reason
-    with open_session(simulated=True, plant=PLANT) as session:
+        assert engine.state == "completed", engine.stopping_reason
         engine, (te_outcome,) = measure_plan(session, store, te_plan(TE),
                                              run_meta(UNIT, session))
     assert engine.state == "completed", engine.stopping_reason

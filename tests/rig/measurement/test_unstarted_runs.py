@@ -11,7 +11,6 @@ the store's index (``rig runs``, ``/api/runs``) and its audit trail with its rea
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -22,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from fastapi.testclient import TestClient
 
 from rig.hardware.simrig import SimulatedRig
 from rig.measurement.service import measure_plan, open_session, plant_config_for, run_meta
@@ -32,7 +30,8 @@ from rig.runformat import read_run
 from rig.store import Store
 from rig.web.simulated import example_unit
 from simulators.plant.config import load_plant_config
-from tests.support.simulated_page import page_on
+from tests.support.serve import page_lines, started
+from tests.support.simulated_page import page_on, wait_for
 
 pytestmark = [pytest.mark.realtime, pytest.mark.timeout(240)]
 
@@ -99,33 +98,12 @@ def page(simulated_rig, tmp_path: Path):
         yield client, store
 
 
-def wait_for(client: TestClient, done, timeout_s: float) -> dict:
-    deadline = time.monotonic() + timeout_s
-    while True:
-        status = client.get("/api/status").json()
-        if done(status):
-            return status
-        assert time.monotonic() < deadline, f"timed out; last status {status}"
-        time.sleep(0.05)
-
-
 def test_sigterm_to_rig_serve_in_the_first_ramp_leaves_an_aborted_run(tmp_path: Path):
     store_dir = tmp_path / "store"
     cmd = [*RIG, "serve", "--simulated", "--port", "0", "--store", str(store_dir),
            "--token", TOKEN]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=tmp_path, env={**os.environ, "PYTHONUNBUFFERED": "1"})
-    stderr: list[str] = []
-    threading.Thread(target=lambda: stderr.extend(proc.stderr), daemon=True).start()
-    try:
-        lines: dict[str, str] = {}
-        for line in proc.stdout:
-            key, _, value = line.partition(": ")
-            lines[key] = value.strip()
-            if key == "operator link":
-                break
-        assert "control page" in lines, f"rig serve did not start: {''.join(stderr)}"
-        url = lines["control page"]
+    with started(cmd, tmp_path) as (proc, stderr):
+        url = page_lines(proc, stderr)["control page"]
 
         def call(path: str, body: dict | None = None) -> Any:
             req = urllib.request.Request(
@@ -156,10 +134,6 @@ def test_sigterm_to_rig_serve_in_the_first_ramp_leaves_an_aborted_run(tmp_path: 
         time.sleep(1.0)  # about -5 N*m
         proc.send_signal(signal.SIGTERM)
         proc.wait(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=10)
     listing = subprocess.run([*RIG, "runs", "--store", str(store_dir), "--json", "-"],
                              capture_output=True, text=True, timeout=60)
     assert listing.returncode == 0, listing.stderr

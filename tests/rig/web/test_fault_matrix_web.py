@@ -11,11 +11,11 @@ import threading
 import time
 from collections.abc import Iterator
 from typing import Any
-from urllib.parse import urlsplit
 
 import pytest
 
 from tests.e2e.test_control_page import TOKEN, rig_serve
+from tests.support.http import request, wait_until_idle
 
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 
@@ -28,29 +28,7 @@ BIG_PLAN = {"plan": {"rated_torque_Nm": 10.0, "steps_per_quarter": 50, "cycles":
 def page(tmp_path_factory) -> Iterator[tuple[str, int]]:
     root = tmp_path_factory.mktemp("web-faults")
     with rig_serve(root / "store") as (url, _link):
-        parts = urlsplit(url)
-        deadline = time.monotonic() + 90
-        while time.monotonic() < deadline:
-            if request(parts.hostname, parts.port, "GET", "/api/status")[1].get("state") \
-                    == "idle":
-                break
-            time.sleep(0.5)
-        yield parts.hostname, parts.port
-
-
-def request(host: str, port: int, method: str, path: str, body: bytes | None = None,
-            headers: dict[str, str] | None = None) -> tuple[int, Any]:
-    conn = http.client.HTTPConnection(host, port, timeout=60)
-    try:
-        conn.request(method, path, body=body, headers=headers or {})
-        r = conn.getresponse()
-        data = r.read()
-        try:
-            return r.status, json.loads(data)
-        except ValueError:
-            return r.status, data.decode(errors="replace")
-    finally:
-        conn.close()
+        yield wait_until_idle(url)
 
 
 def test_cross_site_estop_and_foreign_host_are_refused(page, record_property: Any):

@@ -8,16 +8,14 @@ content type is 415 (a browser sends one from any site without asking)."""
 
 from __future__ import annotations
 
-import http.client
 import json
-import time
 from collections.abc import Iterator
 from typing import Any
-from urllib.parse import urlsplit
 
 import pytest
 
 from tests.e2e.test_control_page import TOKEN
+from tests.support.http import request, wait_until_idle
 
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 
@@ -39,29 +37,7 @@ def page(simulated_rig, tmp_path_factory) -> Iterator[tuple[str, int]]:
     controller = RigController(Store(root), LiveHub(), simulated_rig.factory(), simulated=True)
     app = create_app(resolve_settings(store_root=root, token=TOKEN), controller)
     with BackgroundServer(app) as server:
-        parts = urlsplit(server.url)
-        deadline = time.monotonic() + 90
-        while time.monotonic() < deadline:
-            if request(parts.hostname, parts.port, "GET", "/api/status")[1].get("state") \
-                    == "idle":
-                break
-            time.sleep(0.5)
-        yield parts.hostname, parts.port
-
-
-def request(host: str, port: int, method: str, path: str, body: bytes | None = None,
-            headers: dict[str, str] | None = None) -> tuple[int, Any]:
-    conn = http.client.HTTPConnection(host, port, timeout=60)
-    try:
-        conn.request(method, path, body=body, headers=headers or {})
-        r = conn.getresponse()
-        data = r.read()
-        try:
-            return r.status, json.loads(data)
-        except ValueError:
-            return r.status, data.decode(errors="replace")
-    finally:
-        conn.close()
+        yield wait_until_idle(server.url)
 
 
 def _resolve(schema: dict[str, Any], spec: dict[str, Any]) -> dict[str, Any]:

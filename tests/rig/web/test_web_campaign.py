@@ -4,14 +4,14 @@ and every sample on disk also handed to the live stream."""
 
 from __future__ import annotations
 
-import time
+import functools
 
 import pytest
-from fastapi.testclient import TestClient
 
 from rig.web.live import LiveHub
 from rig.web.simulated import example_unit
 from tests.support.simulated_page import page_on
+from tests.support.simulated_page import wait_for as page_wait_for
 
 pytestmark = [pytest.mark.realtime, pytest.mark.timeout(240)]
 
@@ -19,14 +19,8 @@ TOKEN = "campaign-operator"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 
 
-def wait_for(client: TestClient, done, timeout_s: float) -> dict:
-    deadline = time.monotonic() + timeout_s
-    while True:
-        status = client.get("/api/status").json()
-        if done(status):
-            return status
-        assert time.monotonic() < deadline, f"timed out; last status {status}"
-        time.sleep(0.2)
+wait_for = functools.partial(page_wait_for, poll_s=0.2)
+"""Poll /api/status every 0.2 s until ``done(status)`` (tests/support/simulated_page.py)."""
 
 
 def test_campaign_from_the_page(simulated_rig, tmp_path):

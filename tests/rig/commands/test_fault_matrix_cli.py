@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from tests.rig.commands.test_measure_cli import TINY
+from tests.support.campaigns import TINY
 from tests.support.paths import REPO as ROOT
 
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)

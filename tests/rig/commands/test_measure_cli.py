@@ -11,43 +11,13 @@ from typing import Any
 
 import pytest
 
+from tests.support.campaigns import TINY, campaign_toml
 from tests.support.paths import REPO as ROOT
 
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
-_UNIT_AND_PLAN = f"""
-[unit]
-file = "{ROOT / 'rig/examples/units/seed000-pair1.json'}"
-[plan]
-rated_torque_Nm = 10.0
-steps_per_quarter = 2
-extra_levels_pct = [3.0]
-dwell_s = 0.0
-pre_cycles = 0
-zero_band_Nm = 0.3
-zero_rate_Nm_per_s = 0.6
-"""
-_DRAG = """[simulation.plant.effects.friction]
-enabled = true
-model = "lugre"
-coulomb_torque_Nm = 0.02
-static_torque_Nm = 0.03
-viscous_Nms_per_arcmin = 0.002
-"""
-TINY = f"""
-name = "tiny"{_UNIT_AND_PLAN}[axes]
-positions_deg = [90.0]
-[limits]
-lost_motion_arcmin_max = LIMIT
-{_DRAG}"""
-"""One run at 90 deg with a limit (``LIMIT``, replaced by the test)."""
-AXES = f"""
-name = "axes"{_UNIT_AND_PLAN}[axes]
-positions_deg = [0.0]
-amplitudes_pct = [50.0, 100.0]
-repeats = 2
-{_DRAG}"""
+AXES = campaign_toml("axes", "positions_deg = [0.0]\namplitudes_pct = [50.0, 100.0]\nrepeats = 2")
 """Two amplitudes, two repeats: four runs at 0 deg."""
 
 

@@ -5,10 +5,8 @@ driven over the real protocols: the twist under torque and the gear ratio are th
 from __future__ import annotations
 
 import json
-import select
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -17,6 +15,7 @@ from rig.hardware.config import load_rig_config
 from rig.hardware.devices import open_rig
 from simulators.plant import GearPlant
 from simulators.plant.config import load_plant_config
+from tests.support.devices import first_line, mean_angle, wait_alive
 from tests.support.paths import REPO as ROOT
 
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
@@ -25,29 +24,13 @@ RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 TORQUE_NM = 8.0
 
 
-def _mean_angle(encoder, seconds: float = 0.3) -> float:
-    encoder.readings()
-    time.sleep(seconds)
-    samples = encoder.readings()
-    assert len(samples) >= 10
-    return float(np.mean([s.angle_deg for s in samples]))
-
-
-def _wait(devices, seconds: float) -> None:
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        devices.alive()
-        time.sleep(0.05)
-
-
 @pytest.mark.parametrize("name, ratio", [("cycloid", 39.0), ("beveloid", 1.0)])
 def test_rig_sim_config_runs_the_kinds_plant(name: str, ratio: float) -> None:
     path = ROOT / "simulators" / f"{name}_plant.toml"
     proc = subprocess.Popen([*RIG, "sim", "--config", str(path)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
-        ready, _, _ = select.select([proc.stdout], [], [], 90.0)
-        line = proc.stdout.readline() if ready else ""
+        line = first_line(proc, 90.0)
         assert line, proc.stderr.read() if proc.poll() is not None else "no first line"
         info = json.loads(line)
         truth = GearPlant(load_plant_config(path))
@@ -55,17 +38,17 @@ def test_rig_sim_config_runs_the_kinds_plant(name: str, ratio: float) -> None:
         assert truth.true_parameters()["ratio"] == pytest.approx(ratio)
         twist = truth.true_twist_arcmin(np.linspace(0.0, TORQUE_NM, 201))
         with open_rig(load_rig_config(info["rig_config"])) as rig:
-            before = _mean_angle(rig.encoder)
+            before = mean_angle(rig.encoder)
             rig.drive.set_torque(TORQUE_NM)
             rig.drive.enable()
-            _wait(rig, 0.6)
-            after = _mean_angle(rig.encoder)
-            in0 = _mean_angle(rig.input_encoder)
+            wait_alive(rig, 0.6)
+            after = mean_angle(rig.encoder)
+            in0 = mean_angle(rig.input_encoder)
             state = rig.input_motor.lock_at(in0 + 45.0, timeout_s=10.0)
             assert state.locked
-            _wait(rig, 0.3)
-            moved = _mean_angle(rig.encoder)
-            in1 = _mean_angle(rig.input_encoder)
+            wait_alive(rig, 0.3)
+            moved = mean_angle(rig.encoder)
+            in1 = mean_angle(rig.input_encoder)
             assert rig.safe_state()
         # the kind's play (start on the -1 flank) plus its twist under load
         assert (after - before) * 60.0 == pytest.approx(twist[-1] - twist[0], abs=0.01)

@@ -8,7 +8,6 @@ GearPlant drives them all; SIGTERM stops it cleanly with exit 0.
 from __future__ import annotations
 
 import json
-import select
 import signal
 import subprocess
 import sys
@@ -23,6 +22,7 @@ from rig.hardware.devices import open_rig
 from rig.hardware.simrig import SimulatedRig
 from simulators.plant import GearPlant
 from simulators.plant.config import load_plant_config
+from tests.support.devices import first_line, mean_angle, wait_alive
 
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 
@@ -30,16 +30,11 @@ RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 TORQUE_NM = 10.0
 
 
-def _first_line(proc: subprocess.Popen, timeout_s: float = 60.0) -> str:
-    ready, _, _ = select.select([proc.stdout], [], [], timeout_s)
-    return proc.stdout.readline() if ready else ""
-
-
 @pytest.fixture(scope="module")
 def sim():
     proc = subprocess.Popen([*RIG, "sim", "--seed", "3"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    line = _first_line(proc)
+    line = first_line(proc)
     if not line:
         proc.kill()
         pytest.fail(f"rig sim printed nothing: {proc.stderr.read()}")
@@ -47,21 +42,6 @@ def sim():
     if proc.poll() is None:
         proc.kill()
         proc.wait(timeout=20)
-
-
-def _mean_angle(encoder, seconds: float = 0.3) -> float:
-    encoder.readings()
-    time.sleep(seconds)
-    samples = encoder.readings()
-    assert len(samples) >= 10
-    return float(np.mean([s.angle_deg for s in samples]))
-
-
-def _wait(devices, seconds: float) -> None:
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        devices.alive()
-        time.sleep(0.05)
 
 
 def test_first_line_names_every_device_and_the_rig_config(sim):
@@ -102,16 +82,16 @@ def test_drive_torque_reaches_every_sensor_as_the_plant_says(sim):
     twist = truth.true_twist_arcmin(np.linspace(0.0, TORQUE_NM, 201))
     expected_arcmin = twist[-1] - twist[0]
     with open_rig(config) as rig:
-        before = _mean_angle(rig.encoder)
+        before = mean_angle(rig.encoder)
         rig.drive.set_torque(TORQUE_NM)
         rig.drive.enable()
-        _wait(rig, 0.6)  # drive lag 10 ms; the output settles well within this
-        after = _mean_angle(rig.encoder)
+        wait_alive(rig, 0.6)  # drive lag 10 ms; the output settles well within this
+        after = mean_angle(rig.encoder)
         transducer = np.mean([rig.transducer.read().torque_Nm for _ in range(10)])
         sensor = np.mean([rig.torque_sensor.read().torque_Nm for _ in range(10)])
         status = rig.drive.status()
         assert rig.safe_state()
-        _wait(rig, 0.3)
+        wait_alive(rig, 0.3)
         relaxed = rig.torque_sensor.read().torque_Nm
     assert status.enabled and status.actual_torque_Nm == pytest.approx(TORQUE_NM)
     # noise 0.005 N*m rms per reading (docs/plant.md), averaged over 10
@@ -132,12 +112,12 @@ def test_input_motor_turns_both_encoders_by_the_gear_ratio(sim):
         # the input angle with the default plant's effects off
         rig.drive.set_torque(2.0)
         rig.drive.enable()
-        _wait(rig, 0.5)
-        out0, in0 = _mean_angle(rig.encoder), _mean_angle(rig.input_encoder)
+        wait_alive(rig, 0.5)
+        out0, in0 = mean_angle(rig.encoder), mean_angle(rig.input_encoder)
         state = rig.input_motor.lock_at(in0 + 45.0, timeout_s=10.0)
         assert state.locked and not state.moving
-        _wait(rig, 0.3)
-        out1, in1 = _mean_angle(rig.encoder), _mean_angle(rig.input_encoder)
+        wait_alive(rig, 0.3)
+        out1, in1 = mean_angle(rig.encoder), mean_angle(rig.input_encoder)
         rig.input_motor.lock_at(in0, timeout_s=10.0)
     assert in1 - in0 == pytest.approx(45.0, abs=1e-4)
     assert out1 - out0 == pytest.approx(-45.0 / ratio, abs=2e-4)  # 0.7 arcsec
@@ -163,7 +143,7 @@ def test_simulated_rig_out_of_process_with_rtu_and_tcp_transducer(tmp_path):
         with open_rig(config) as rig:
             rig.drive.set_torque(-5.0)
             rig.drive.enable()
-            _wait(rig, 0.3)
+            wait_alive(rig, 0.3)
             assert rig.transducer.read().torque_Nm == pytest.approx(-5.0, abs=0.03)
             assert rig.torque_sensor.read().torque_Nm == pytest.approx(-5.0, abs=0.03)
         assert sim.process is not None and sim.process.poll() is None
@@ -192,7 +172,7 @@ def test_a_simulator_started_by_a_killed_program_stops_too():
          "print(s.process.pid, flush=True)\ntime.sleep(600)"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        line = _first_line(parent)
+        line = first_line(parent)
         assert line.strip(), parent.stderr.read() if parent.poll() is not None else "no pid"
         child = int(line)
         os.kill(parent.pid, signal.SIGKILL)

@@ -24,27 +24,13 @@ from pathlib import Path
 import pytest
 
 from rig.store import RECOVERED_REASON, Store
+from tests.support.campaigns import campaign_toml
 from tests.support.paths import REPO
 
 # loads the machine on purpose (tests/conftest.py)
 pytestmark = [pytest.mark.realtime, pytest.mark.alone]
 
-TINY = f"""
-name = "tiny-line"
-[unit]
-file = "{REPO / 'rig/examples/units/seed000-pair1.json'}"
-serial = "SIM-1"
-[plan]
-rated_torque_Nm = 10.0
-steps_per_quarter = 2
-extra_levels_pct = [3.0]
-dwell_s = 0.0
-pre_cycles = 0
-zero_band_Nm = 0.3
-zero_rate_Nm_per_s = 0.6
-[axes]
-positions_deg = [90.0]
-"""
+TINY = campaign_toml("tiny-line", "positions_deg = [90.0]", serial="SIM-1", drag=False)
 # No [limits]: this test is about the store (no run lost or duplicated); on a loaded machine the
 # sparse plan can leave a metric unavailable, which a limit would turn into exit code 1.
 

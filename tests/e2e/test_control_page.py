@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from playwright.sync_api import expect, sync_playwright
 
-from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, launch_browser
+from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser, open_page
 from tests.support.serve import served
 
 TOKEN = "e2e-operator-token"
@@ -40,10 +40,7 @@ def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     with rig_serve(tmp_path / "store") as (url, link), sync_playwright() as pw:
         browser = launch_browser(pw)
-        page = browser.new_page(viewport={"width": 1400, "height": 1500})
-        errors: list[str] = []
-        page.on("pageerror", lambda exc: errors.append(str(exc)))
-        page.goto(link)
+        page, errors = open_page(browser, link, 1400, 1500)
         expect(page.locator("#role")).to_have_text("operator")
         expect(page.locator("#estop")).to_be_visible()
         expect(page.locator("#state")).to_have_text("idle", timeout=90_000)
@@ -53,8 +50,7 @@ def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
         # default plan, long enough to be stopped in the middle)
         page.fill("#setup input[name=steps_per_quarter]", "2")
         page.fill("#setup input[name=pre_cycles]", "0")
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         expect(page.locator("#start")).to_be_enabled()
         page.click("#start")
         page.wait_for_function("() => window.rigStats.points > 500", timeout=60_000)
@@ -76,8 +72,7 @@ def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
         # second run: abort it while it runs; the page shows the safe state
         page.fill("#setup input[name=steps_per_quarter]", "4")
         page.fill("#setup input[name=pre_cycles]", "1")
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         first_run = runs[0]["run_id"]
         page.click("#start")
         page.wait_for_function(  # a function, not a string to eval: the page's CSP

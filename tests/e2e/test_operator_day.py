@@ -24,7 +24,7 @@ from drivers.modbus.map import LOADING_DRIVE_MAP, encode_float32
 from rig.hardware.config import load_rig_config
 from rig.store import Store
 from tests.e2e.test_control_page import TOKEN, get_json, rig_serve
-from tests.support.browser import ARTIFACTS, launch_browser
+from tests.support.browser import ARTIFACTS, confirm_lock, launch_browser, open_page
 
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 
@@ -82,10 +82,7 @@ def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
     failed_campaign = seed_a_failed_campaign(tmp_path / "store")
     with rig_serve(tmp_path / "store") as (url, link), sync_playwright() as pw:
         browser = launch_browser(pw)
-        page = browser.new_page(viewport={"width": 1440, "height": 900})
-        errors: list[str] = []
-        page.on("pageerror", lambda exc: errors.append(str(exc)))
-        page.goto(link)
+        page, errors = open_page(browser, link, 1440, 900)
         expect(page.locator("#state")).to_have_text("idle", timeout=90_000)
         page.fill("#setup input[name=operator]", "A. Operator")
         # the shortest loop for both runs (2 steps a quarter, no pre-cycle, the play crossed
@@ -96,8 +93,7 @@ def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
 
         # one completed run for the history, with a limit it fails (a seed 000 pair: 4')
         page.fill("#setup input[name=lost_motion_arcmin_max]", "1")
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         page.click("#start")
         expect(page.locator("#state")).to_have_text("completed", timeout=120_000)
         first = get_json(url + "api/runs")[0]
@@ -138,8 +134,7 @@ def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
         # (the second run at 180 deg: the runout gives it another lost motion; no limit)
         page.fill("#setup input[name=lost_motion_arcmin_max]", "")
         page.fill("#lock-angle", "180")
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         page.click("#start")
         expect(page.locator("#state")).to_have_text("completed", timeout=120_000)
         latest = get_json(url + "api/runs")[0]

@@ -38,7 +38,7 @@ from rig.hardware.config import load_rig_config
 from rig.store import Store
 from tests.e2e.test_control_page import TOKEN, get_json
 from tests.e2e.test_operator_day import post
-from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, launch_browser
+from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser
 from tests.support.paths import REPO
 from tests.support.serve import rig_command, served, started
 
@@ -183,8 +183,7 @@ def test_operator_page(tmp_path: Path):
         # 8: the twist is the twist: locked at 180 deg the output turned by 180/ratio deg,
         # the twist counts from the lock (nearly zero at zero torque)
         page.fill("#lock-angle", "180")
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         # (the idle monitor shows the devices every 0.5 s: wait for a pass after the lock)
         page.wait_for_function(  # a function, not a string to eval: the page's CSP
             "() => Math.abs(parseFloat(document.querySelector('#v-twist').textContent)) < 1.0 && "
@@ -294,8 +293,7 @@ def test_operator_page(tmp_path: Path):
 
         # 6: abort by key, E-stop by Esc and by Space
         page.select_option(f("kind"), "run")
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         expect(page.locator("#start-why")).to_be_empty()
         page.keyboard.press("s")
         expect(page.locator("#state")).to_have_text("running", timeout=10_000)

@@ -26,7 +26,7 @@ from playwright.sync_api import expect, sync_playwright
 from rig.store import Store
 from rig.store.synthetic_runs import write_campaign
 from tests.e2e.test_control_page import get_json, rig_serve
-from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, launch_browser
+from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
 
@@ -250,11 +250,6 @@ def device_names(page) -> list[str]:
     page.wait_for_function("() => document.querySelectorAll('#devices tbody tr').length >= 5",
                            timeout=30_000)
     return page.locator("#devices tbody tr td:nth-child(2)").all_inner_texts()
-
-
-def confirm_lock(page) -> None:
-    page.click("#lock")
-    expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
 
 
 def test_desktop_result_panel_links_and_setup(served):

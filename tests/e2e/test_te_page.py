@@ -18,7 +18,7 @@ from rig.measurement.service import plant_config_for, write_plant_toml
 from rig.plans.campaign_file import SimulationSection
 from simulators.plant.config import load_plant_config
 from tests.e2e.test_control_page import TOKEN, get_json
-from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, launch_browser
+from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser, open_page
 from tests.support.serve import served
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(300)]
@@ -44,10 +44,7 @@ def test_operator_measures_the_transmission_error(tmp_path: Path):
             serve_rig(sim.rig_config_path, tmp_path / "store") as (url, link), \
             sync_playwright() as pw:
         browser = launch_browser(pw)
-        page = browser.new_page(viewport={"width": 1400, "height": 1800})
-        errors: list[str] = []
-        page.on("pageerror", lambda exc: errors.append(str(exc)))
-        page.goto(link)
+        page, errors = open_page(browser, link, 1400, 1800)
         expect(page.locator("#role")).to_have_text("operator", timeout=60_000)
         expect(page.locator("#state")).to_have_text("idle", timeout=90_000)
         expect(page.locator("#te-panel")).to_be_hidden()
@@ -63,8 +60,7 @@ def test_operator_measures_the_transmission_error(tmp_path: Path):
         expect(page.locator("#preview-out")).to_contain_text("turn input forward at 240 rpm",
                                                         timeout=30_000)
 
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         expect(page.locator("#start")).to_be_enabled()
         page.click("#start")
         # the TE drawn live against the output angle, both directions

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from playwright.sync_api import expect
 
 from tests.support.paths import REPO
 
@@ -26,3 +27,19 @@ def launch_browser(playwright: Any) -> Any:
     """Debian's chromium, headless, driven by Playwright (never a downloaded browser)."""
     return playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True,
                                       args=CHROMIUM_ARGS)
+
+
+def open_page(browser: Any, link: str, width: int, height: int) -> tuple[Any, list[str]]:
+    """A new page of ``width`` x ``height`` px at ``link``; returns (page, the JavaScript
+    errors it raises, collected as they come)."""
+    page = browser.new_page(viewport={"width": width, "height": height})
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    page.goto(link)
+    return page, errors
+
+
+def confirm_lock(page: Any) -> None:
+    """Confirm the input lock on the page and wait (30 s at most) until it says so."""
+    page.click("#lock")
+    expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)

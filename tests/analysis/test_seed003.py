@@ -161,34 +161,30 @@ def test_single_sinusoid_closed_form():
     print(f"closed form {expected:.3f} arcsec, ours {result.mean_arcsec:.3f} arcsec")
 
 
-def test_monte_carlo_against_paper(paper_results):
-    """Fig. 10: mean 191", std 53", range 42"-444"; the mean and std within 15 %."""
-    ours = paper_results["monte_carlo"].as_dict()
-    paper = PAPER_FIGURES_ARCSEC["monte_carlo"]
-    diffs = {key: _compare(f"Monte Carlo {key}", paper[key], ours[key]) for key in paper}
+def _assert_mean_and_std_as_paper(paper_results: dict, method: str, label: str) -> None:
+    """The ``method``'s mean and std (arcsec) each within :data:`TOLERANCE` of the paper's
+    (every figure printed beside the paper's)."""
+    ours = paper_results[method].as_dict()
+    paper = PAPER_FIGURES_ARCSEC[method]
+    diffs = {key: _compare(f"{label} {key}", paper[key], ours[key]) for key in paper}
     assert abs(diffs["mean"]) <= TOLERANCE
     assert abs(diffs["std"]) <= TOLERANCE
+
+
+def test_monte_carlo_against_paper(paper_results):
+    """Fig. 10: mean 191", std 53", range 42"-444"; the mean and std within 15 %."""
+    _assert_mean_and_std_as_paper(paper_results, "monte_carlo", "Monte Carlo")
 
 
 def test_max_deviation_against_paper(paper_results):
     """Fig. 11: mean 539", std 36", range 469"-598"; the mean and std within 15 %."""
-    ours = paper_results["max_deviation"].as_dict()
-    paper = PAPER_FIGURES_ARCSEC["max_deviation"]
-    diffs = {key: _compare(f"max deviation {key}", paper[key], ours[key]) for key in paper}
-    assert abs(diffs["mean"]) <= TOLERANCE
-    assert abs(diffs["std"]) <= TOLERANCE
+    _assert_mean_and_std_as_paper(paper_results, "max_deviation", "max deviation")
 
 
 def test_max_deviation_random_phase_against_paper(paper_results):
     """Fig. 12: mean 477", std 71", range 300"-644"; the mean and std within 15 %."""
-    ours = paper_results["max_deviation_random_phase"].as_dict()
-    paper = PAPER_FIGURES_ARCSEC["max_deviation_random_phase"]
-    diffs = {
-        key: _compare(f"max deviation, random phase {key}", paper[key], ours[key])
-        for key in paper
-    }
-    assert abs(diffs["mean"]) <= TOLERANCE
-    assert abs(diffs["std"]) <= TOLERANCE
+    _assert_mean_and_std_as_paper(paper_results, "max_deviation_random_phase",
+                                  "max deviation, random phase")
 
 
 def test_paper_conclusions_hold(paper_results):

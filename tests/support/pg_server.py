@@ -106,6 +106,10 @@ class PgServer:
         self._run("pg_ctl", "stop", "-w", "-t", "60", "-D", str(self.data), "-m", mode,
                   check=False)
 
+    def is_running(self) -> bool:
+        """Whether the server is up (``pg_ctl status``)."""
+        return self._run("pg_ctl", "status", "-D", str(self.data), check=False).returncode == 0
+
     def restart(self) -> None:
         self.stop()
         self.start()

@@ -74,12 +74,18 @@ def test_catman_map_is_the_issues(tmp_path: Path) -> None:
     assert doc["test"]["rated_torque_Nm"] == 10.0
 
 
+def _write_catman_csv(run, path: Path) -> None:
+    """The run as a catman export writes it: time (s), torque (N*m), angle (arcsec), decimal
+    commas, ';' between."""
+    pd.DataFrame({"Time [s]": run.t_s, "Torque [N*m]": run.torque_Nm,
+                  "Angle [arcsec]": run.output_angle_deg * 3600.0}
+                 ).to_csv(path, sep=";", decimal=",", index=False)
+
+
 def test_catman_csv_imports_to_the_native_lost_motion(native: dict, tmp_path: Path) -> None:
     run = native["run"]
     csv = tmp_path / "catman export.csv"
-    pd.DataFrame({"Time [s]": run.t_s, "Torque [N*m]": run.torque_Nm,
-                  "Angle [arcsec]": run.output_angle_deg * 3600.0}
-                 ).to_csv(csv, sep=";", decimal=",", index=False)
+    _write_catman_csv(run, csv)
     assert csv.read_text().splitlines()[1].count(",") == 3  # decimal commas, ';' between
     res = _rig("import", str(csv), "--map", str(CATMAN_MAP), "--unit", str(native["unit"]),
                "--out", "imported", cwd=tmp_path)
@@ -136,9 +142,7 @@ encoder_counts_per_rev = 8388608
 def test_import_into_a_store_is_a_finished_run(native: dict, tmp_path: Path) -> None:
     run = native["run"]
     csv = tmp_path / "catman.csv"
-    pd.DataFrame({"Time [s]": run.t_s, "Torque [N*m]": run.torque_Nm,
-                  "Angle [arcsec]": run.output_angle_deg * 3600.0}
-                 ).to_csv(csv, sep=";", decimal=",", index=False)
+    _write_catman_csv(run, csv)
     res = _rig("import", str(csv), "--map", str(CATMAN_MAP), "--unit", str(native["unit"]),
                "--into", "store", cwd=tmp_path)
     assert res.returncode == 0, res.stderr

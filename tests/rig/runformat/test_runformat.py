@@ -83,11 +83,16 @@ SPECIAL = [
 ]
 
 
+def _hard_floats(rng: np.random.Generator, n: int) -> np.ndarray:
+    """:data:`SPECIAL`, then normal draws scaled by 10 to a power drawn in [-300, 300]."""
+    return np.concatenate([SPECIAL, rng.standard_normal(n - len(SPECIAL)) * 10.0 ** rng.uniform(
+        -300, 300, n - len(SPECIAL))])
+
+
 def test_round_trip_is_bit_exact_for_hard_floats(tmp_path: Path) -> None:
     rng = np.random.default_rng(7)
     n = 400
-    hard = np.concatenate([SPECIAL, rng.standard_normal(n - len(SPECIAL)) * 10.0 ** rng.uniform(
-        -300, 300, n - len(SPECIAL))])
+    hard = _hard_floats(rng, n)
     temperature = 20.0 + rng.standard_normal(n)
     temperature[[3, 50, n - 1]] = np.nan
     run = Run.from_arrays(
@@ -699,8 +704,7 @@ def test_parquet_run_folder_round_trips_bit_exact(tmp_path: Path) -> None:
 
     rng = np.random.default_rng(3)
     n = 500
-    hard = np.concatenate([SPECIAL, rng.standard_normal(n - len(SPECIAL)) * 10.0 ** rng.uniform(
-        -300, 300, n - len(SPECIAL))])
+    hard = _hard_floats(rng, n)
     temperature = 20.0 + rng.standard_normal(n)
     temperature[[0, 7, n - 1]] = np.nan
     run = Run.from_arrays(

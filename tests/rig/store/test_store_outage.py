@@ -40,8 +40,9 @@ CAMPAIGN = {
 }
 
 
-@pytest.fixture
-def server():
+@pytest.fixture(scope="module")
+def cluster():
+    """One throw-away cluster for the module; each test has a database of its own."""
     from tests.support.pg_server import PgServer, required_bin_dir
 
     srv = PgServer(required_bin_dir())
@@ -52,17 +53,62 @@ def server():
         srv.destroy()
 
 
+@pytest.fixture
+def server(cluster):
+    """The module's cluster, running (a failed test may have left it stopped)."""
+    if not cluster.is_running():
+        cluster.start()
+    return cluster
+
+
+@pytest.fixture(scope="module")
+def rig():
+    """The simulated rig in this process and a session on it, for the module: (rig, session)."""
+    with SimulatedRig(PLANT, seed=5, sync_period_s=0.004, stream_rate_Hz=250.0) as sim, \
+            open_session(rig=sim.rig_config_path) as session:
+        yield sim, session
+
+
+def _unreachable_lines(caplog: pytest.LogCaptureFixture) -> list[str]:
+    """The store's log lines that say the database is unreachable."""
+    return [r.getMessage() for r in caplog.records
+            if r.getMessage().startswith("store: PostgreSQL unreachable")]
+
+
+def _paused_by_the_outage(run: Any, paused: threading.Event, sim: SimulatedRig
+                          ) -> tuple[threading.Thread, dict[str, Any]]:
+    """``run()`` (the campaign) on a thread, until the outage has paused it and 2 s more
+    (beyond the retry window); the engine then is paused and the drive disabled. Returns the
+    thread and what it left: ``result``, or ``error``."""
+    done: dict[str, Any] = {}
+
+    def campaign() -> None:
+        try:
+            done["result"] = run()
+        except BaseException as exc:  # reported by the assertions of the test
+            done["error"] = exc
+
+    worker = threading.Thread(target=campaign, daemon=True)
+    worker.start()
+    while not paused.is_set():
+        assert worker.is_alive(), done
+        time.sleep(0.05)
+    time.sleep(2.0)
+    drive = sim.modbus_server.drive
+    assert not drive.enabled and drive.setpoint_Nm == 0.0
+    return worker, done
+
+
 def test_an_outage_at_the_end_of_a_run_pauses_the_campaign_and_keeps_the_verdict(
-        server, tmp_path: Path, monkeypatch, caplog):
+        server, rig, tmp_path: Path, monkeypatch, caplog):
     monkeypatch.setenv("RIG_STORE_RUN_RETRY_S", "0.5")
     caplog.set_level(logging.WARNING, logger="rig")
-    url = server.url()
+    url = server.create_database()
     samples = tmp_path / "samples"
     store = Store(url, samples=samples, reconnect_s=3.0)
     camp = campaign_from_mapping(CAMPAIGN)
     paused, resumed = threading.Event(), threading.Event()
     engines: list[Any] = []
-    done: dict[str, Any] = {}
     stopped = threading.Event()
 
     def progress(event: Any) -> None:
@@ -75,42 +121,28 @@ def test_an_outage_at_the_end_of_a_run_pauses_the_campaign_and_keeps_the_verdict
         if event.kind == "resumed":
             resumed.set()
 
-    with SimulatedRig(PLANT, seed=5, sync_period_s=0.004, stream_rate_Hz=250.0) as sim, \
-            open_session(rig=sim.rig_config_path) as session:
-        def campaign() -> None:
-            try:
-                done["result"] = run_campaign(camp, session, store, progress=progress,
-                                              on_engine=engines.append)
-            except BaseException as exc:  # reported by the assertions below
-                done["error"] = exc
+    sim, session = rig
+    worker, done = _paused_by_the_outage(
+        lambda: run_campaign(camp, session, store, progress=progress,
+                             on_engine=engines.append), paused, sim)
+    # the outage lasts beyond the retry window: paused, safe, the run kept locally
+    (engine,) = engines
+    assert engine.state == "paused"
+    (run_id,) = store.pending_runs()
+    folder = next(samples.glob(f"campaigns/*/{run_id}"))
+    meta = json.loads((folder / RUN_JSON).read_text(encoding="utf-8"))
+    assert meta["status"] == "completed" and meta["outcome"] == "ok", meta
+    kept_lm = meta["result"]["lost_motion_arcmin"]
+    assert kept_lm is not None and 0 < kept_lm < 50
+    assert (folder / SAMPLES_PARQUET).is_file() and meta["n_samples"] > 500
+    lines = _unreachable_lines(caplog)
+    assert len(lines) == 1 and "\n" not in lines[0], lines
+    assert f"run {run_id} kept locally, will be indexed when it returns" in lines[0]
+    assert not resumed.is_set() and worker.is_alive()
 
-        worker = threading.Thread(target=campaign, daemon=True)
-        worker.start()
-        while not paused.is_set():
-            assert worker.is_alive(), done
-            time.sleep(0.05)
-        # the outage lasts beyond the retry window: paused, safe, the run kept locally
-        time.sleep(2.0)
-        (engine,) = engines
-        drive = sim.modbus_server.drive
-        assert engine.state == "paused"
-        assert not drive.enabled and drive.setpoint_Nm == 0.0
-        (run_id,) = store.pending_runs()
-        folder = next(samples.glob(f"campaigns/*/{run_id}"))
-        meta = json.loads((folder / RUN_JSON).read_text(encoding="utf-8"))
-        assert meta["status"] == "completed" and meta["outcome"] == "ok", meta
-        kept_lm = meta["result"]["lost_motion_arcmin"]
-        assert kept_lm is not None and 0 < kept_lm < 50
-        assert (folder / SAMPLES_PARQUET).is_file() and meta["n_samples"] > 500
-        lines = [r.getMessage() for r in caplog.records
-                 if r.getMessage().startswith("store: PostgreSQL unreachable")]
-        assert len(lines) == 1 and "\n" not in lines[0], lines
-        assert f"run {run_id} kept locally, will be indexed when it returns" in lines[0]
-        assert not resumed.is_set() and worker.is_alive()
-
-        server.start()  # the database is back: indexed, resumed, the campaign goes on
-        worker.join(180)
-        assert not worker.is_alive() and "error" not in done, done
+    server.start()  # the database is back: indexed, resumed, the campaign goes on
+    worker.join(180)
+    assert not worker.is_alive() and "error" not in done, done
     result = done["result"]
     assert result["status"] == "completed" and resumed.is_set(), result
     assert [r["status"] for r in result["runs"]] == ["completed", "completed"]
@@ -125,7 +157,7 @@ def test_an_outage_at_the_end_of_a_run_pauses_the_campaign_and_keeps_the_verdict
 
 
 def test_an_outage_before_a_run_begins_pauses_safely_then_restores_the_preload(
-        server, tmp_path: Path, monkeypatch, caplog):
+        server, rig, tmp_path: Path, monkeypatch, caplog):
     """The database goes away during the preload: the run cannot begin, so the campaign
     pauses with the drive disabled (not held at -T for the 60 s of retries); when the
     database is back the engine brings back -T and the run is measured and indexed."""
@@ -133,48 +165,34 @@ def test_an_outage_before_a_run_begins_pauses_safely_then_restores_the_preload(
 
     monkeypatch.setenv("RIG_STORE_RUN_RETRY_S", "0.5")
     caplog.set_level(logging.WARNING, logger="rig")
-    url = server.url()
+    url = server.create_database()
     samples = tmp_path / "samples"
     store = Store(url, samples=samples, reconnect_s=3.0)
     camp = campaign_from_mapping({**CAMPAIGN, "axes": {"positions_deg": [0.0]}})
-    paused = threading.Event()
+    paused, stopped = threading.Event(), threading.Event()
     engines: list[Any] = []
-    done: dict[str, Any] = {}
 
     def progress(event: Any) -> None:
         if event.kind == "step" and event.message.startswith("torque to -10") and \
-                not paused.is_set() and "stopped" not in done:
+                not paused.is_set() and not stopped.is_set():
             server.stop("fast")
-            done["stopped"] = True
+            stopped.set()
         if event.kind == "paused":
             paused.set()
 
-    with SimulatedRig(PLANT, seed=5, sync_period_s=0.004, stream_rate_Hz=250.0) as sim, \
-            open_session(rig=sim.rig_config_path) as session:
-        def campaign() -> None:
-            try:
-                done["result"] = run_campaign(camp, session, store, progress=progress,
-                                              on_engine=engines.append)
-            except BaseException as exc:
-                done["error"] = exc
-
-        worker = threading.Thread(target=campaign, daemon=True)
-        worker.start()
-        while not paused.is_set():
-            assert worker.is_alive(), done
-            time.sleep(0.05)
-        time.sleep(2.0)
-        (engine,) = engines
-        drive = sim.modbus_server.drive
-        assert engine.state == "paused"
-        assert not drive.enabled and drive.setpoint_Nm == 0.0
-        assert not [p for p in samples.glob("campaigns/*/*") if p.is_dir()]  # not begun
-        lines = [r.getMessage() for r in caplog.records
-                 if r.getMessage().startswith("store: PostgreSQL unreachable")]
-        assert len(lines) == 1 and "not begun" in lines[0], lines
-        server.start()
-        worker.join(180)
-        assert not worker.is_alive() and "error" not in done, done
+    sim, session = rig
+    worker, done = _paused_by_the_outage(
+        lambda: run_campaign(camp, session, store, progress=progress,
+                             on_engine=engines.append), paused, sim)
+    # paused before the run began, safe
+    (engine,) = engines
+    assert engine.state == "paused"
+    assert not [p for p in samples.glob("campaigns/*/*") if p.is_dir()]  # not begun
+    lines = _unreachable_lines(caplog)
+    assert len(lines) == 1 and "not begun" in lines[0], lines
+    server.start()
+    worker.join(180)
+    assert not worker.is_alive() and "error" not in done, done
     result = done["result"]
     assert result["status"] == "completed", result
     (run,) = result["runs"]
@@ -190,7 +208,7 @@ def test_a_run_kept_locally_is_indexed_at_the_next_start_not_recovered(server, t
     turn it into "process ended during the run"."""
     from rig.store import RECOVERED_REASON, StoreUnavailable
 
-    url, samples = server.url(), tmp_path / "samples"
+    url, samples = server.create_database(), tmp_path / "samples"
     store = Store(url, samples=samples, run_retry_s=0.3, reconnect_s=2.0)
     rec = store.begin_run({"unit": {"serial": "NEXT-START"},
                            "limits": {"lost_motion_arcmin_max": 3.0}},

@@ -7,6 +7,7 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -142,40 +143,40 @@ def test_unknown_unit_keys_and_missing_face_width_are_reported(tmp_path: Path) -
     assert d["model"]["stiffness_Nm_per_arcmin"] is None  # unknown, never a made-up number
 
 
-def test_cycloid_unit_gets_the_seed002_model() -> None:
-    """Unit kind `cycloid` is compared with the seed 002 compound-cycloid loop model."""
-    from analysis.models.cycloid_nominal import cycloid_nominal_model
+def _analyse_on_the_kinds_model(unit_file: str, model_of: Any, rated_Nm: float,
+                                offset_deg: float, seed: int, name: str) -> tuple[dict, Any]:
+    """A GB/T step run (``rated_Nm``) whose twist is the unit kind's own model plus 0.002'
+    of noise, analysed: its model and backlash are the kind's play. Returns (result, model)."""
     from rig.examples import UNITS_DIR
     from rig.examples.generate import gbt_step_profile
 
-    unit = json.loads((UNITS_DIR / "cycloid-seed002.json").read_text())
-    model, _ = cycloid_nominal_model(unit, reference_torque_Nm=200.0)
-    t_s, torque = gbt_step_profile(200.0)
-    twist = model.twist_arcmin(torque) + np.random.default_rng(5).normal(0, 0.002, t_s.size)
+    unit = json.loads((UNITS_DIR / unit_file).read_text())
+    model, _ = model_of(unit)
+    t_s, torque = gbt_step_profile(rated_Nm)
+    twist = model.twist_arcmin(torque) + np.random.default_rng(seed).normal(0, 0.002, t_s.size)
     run = Run.from_arrays(
-        "cycloid-demo", t_s, torque, 50.0 + twist / 60.0, unit=unit,
-        test={"rated_torque_Nm": 200.0},
+        name, t_s, torque, offset_deg + twist / 60.0, unit=unit,
+        test={"rated_torque_Nm": rated_Nm},
     )
     d = analyse_run(run).to_dict()
     assert d["model"]["backlash_arcmin"] == pytest.approx(model.play_arcmin)
     assert d["backlash_arcmin"] == pytest.approx(model.play_arcmin, abs=0.02)
+    return d, model
+
+
+def test_cycloid_unit_gets_the_seed002_model() -> None:
+    """Unit kind `cycloid` is compared with the seed 002 compound-cycloid loop model."""
+    from analysis.models.cycloid_nominal import cycloid_nominal_model
+
+    d, model = _analyse_on_the_kinds_model(
+        "cycloid-seed002.json", lambda u: cycloid_nominal_model(u, reference_torque_Nm=200.0),
+        200.0, 50.0, 5, "cycloid-demo")
     assert d["stiffness_Nm_per_arcmin"] == pytest.approx(model.stiffness_Nm_per_arcmin, rel=0.05)
 
 
 def test_beveloid_unit_gets_the_seed001_model() -> None:
     """Unit kind `beveloid`: play set by the axial shift (seed 001), loop from its model."""
     from analysis.models.beveloid_nominal import beveloid_nominal_model
-    from rig.examples import UNITS_DIR
-    from rig.examples.generate import gbt_step_profile
 
-    unit = json.loads((UNITS_DIR / "beveloid-seed001.json").read_text())
-    model, _ = beveloid_nominal_model(unit)
-    t_s, torque = gbt_step_profile(20.0)
-    twist = model.twist_arcmin(torque) + np.random.default_rng(6).normal(0, 0.002, t_s.size)
-    run = Run.from_arrays(
-        "beveloid-demo", t_s, torque, 10.0 + twist / 60.0, unit=unit,
-        test={"rated_torque_Nm": 20.0},
-    )
-    d = analyse_run(run).to_dict()
-    assert d["model"]["backlash_arcmin"] == pytest.approx(model.play_arcmin)
-    assert d["backlash_arcmin"] == pytest.approx(model.play_arcmin, abs=0.02)
+    _analyse_on_the_kinds_model("beveloid-seed001.json", beveloid_nominal_model, 20.0, 10.0, 6,
+                                "beveloid-demo")

@@ -75,16 +75,20 @@ def _unreachable_lines(caplog: pytest.LogCaptureFixture) -> list[str]:
             if r.getMessage().startswith("store: PostgreSQL unreachable")]
 
 
-def _paused_by_the_outage(run: Any, paused: threading.Event, sim: SimulatedRig
+def _paused_by_the_outage(camp: Any, rig: tuple[SimulatedRig, Any], store: Store,
+                          progress: Any, paused: threading.Event
                           ) -> tuple[threading.Thread, dict[str, Any]]:
-    """``run()`` (the campaign) on a thread, until the outage has paused it and 2 s more
-    (beyond the retry window); the engine then is paused and the drive disabled. Returns the
-    thread and what it left: ``result``, or ``error``."""
+    """The campaign run on the module's rig on a thread, until the outage has paused it and
+    2 s more (beyond the retry window): its engine is then paused and the drive disabled.
+    Returns the thread and what it left: ``result``, or ``error``."""
+    sim, session = rig
+    engines: list[Any] = []
     done: dict[str, Any] = {}
 
     def campaign() -> None:
         try:
-            done["result"] = run()
+            done["result"] = run_campaign(camp, session, store, progress=progress,
+                                          on_engine=engines.append)
         except BaseException as exc:  # reported by the assertions of the test
             done["error"] = exc
 
@@ -94,6 +98,8 @@ def _paused_by_the_outage(run: Any, paused: threading.Event, sim: SimulatedRig
         assert worker.is_alive(), done
         time.sleep(0.05)
     time.sleep(2.0)
+    (engine,) = engines
+    assert engine.state == "paused"
     drive = sim.modbus_server.drive
     assert not drive.enabled and drive.setpoint_Nm == 0.0
     return worker, done
@@ -108,7 +114,6 @@ def test_an_outage_at_the_end_of_a_run_pauses_the_campaign_and_keeps_the_verdict
     store = Store(url, samples=samples, reconnect_s=3.0)
     camp = campaign_from_mapping(CAMPAIGN)
     paused, resumed = threading.Event(), threading.Event()
-    engines: list[Any] = []
     stopped = threading.Event()
 
     def progress(event: Any) -> None:
@@ -121,13 +126,8 @@ def test_an_outage_at_the_end_of_a_run_pauses_the_campaign_and_keeps_the_verdict
         if event.kind == "resumed":
             resumed.set()
 
-    sim, session = rig
-    worker, done = _paused_by_the_outage(
-        lambda: run_campaign(camp, session, store, progress=progress,
-                             on_engine=engines.append), paused, sim)
+    worker, done = _paused_by_the_outage(camp, rig, store, progress, paused)
     # the outage lasts beyond the retry window: paused, safe, the run kept locally
-    (engine,) = engines
-    assert engine.state == "paused"
     (run_id,) = store.pending_runs()
     folder = next(samples.glob(f"campaigns/*/{run_id}"))
     meta = json.loads((folder / RUN_JSON).read_text(encoding="utf-8"))
@@ -170,7 +170,6 @@ def test_an_outage_before_a_run_begins_pauses_safely_then_restores_the_preload(
     store = Store(url, samples=samples, reconnect_s=3.0)
     camp = campaign_from_mapping({**CAMPAIGN, "axes": {"positions_deg": [0.0]}})
     paused, stopped = threading.Event(), threading.Event()
-    engines: list[Any] = []
 
     def progress(event: Any) -> None:
         if event.kind == "step" and event.message.startswith("torque to -10") and \
@@ -180,13 +179,8 @@ def test_an_outage_before_a_run_begins_pauses_safely_then_restores_the_preload(
         if event.kind == "paused":
             paused.set()
 
-    sim, session = rig
-    worker, done = _paused_by_the_outage(
-        lambda: run_campaign(camp, session, store, progress=progress,
-                             on_engine=engines.append), paused, sim)
+    worker, done = _paused_by_the_outage(camp, rig, store, progress, paused)
     # paused before the run began, safe
-    (engine,) = engines
-    assert engine.state == "paused"
     assert not [p for p in samples.glob("campaigns/*/*") if p.is_dir()]  # not begun
     lines = _unreachable_lines(caplog)
     assert len(lines) == 1 and "not begun" in lines[0], lines

@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 
     from rig.runformat import Campaign
 
-TEMPLATES = Path(__file__).resolve().parent.parent / "templates"
+TEMPLATES = Path(__file__).resolve().parents[2] / "templates"
 NOT_RECORDED = "not recorded"
 LONGEST_UNBROKEN_WORD = 40
 """Words (runs of non-space characters) up to this many characters are never broken across

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-TEMPLATES = Path(__file__).resolve().parent.parent / "templates"
+TEMPLATES = Path(__file__).resolve().parents[2] / "templates"
 DPI = 90
 FIGSIZE_IN = (10.0, 5.2)
 POINT_COLOUR = "#1f77b4"

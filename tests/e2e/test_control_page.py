@@ -6,34 +6,15 @@ then a second run is aborted and the page shows the safe state. Screenshots are 
 
 from __future__ import annotations
 
-import contextlib
-import json
-import urllib.request
 from pathlib import Path
 
 import pytest
 from playwright.sync_api import expect, sync_playwright
 
 from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser, open_page
-from tests.support.serve import served
-
-TOKEN = "e2e-operator-token"
+from tests.support.serve import get_json, rig_serve
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
-
-
-@contextlib.contextmanager
-def rig_serve(store: Path, *options: str):
-    """``rig serve --simulated`` on a free port (with ``options``: ``--plant FILE`` ...);
-    yields (url, operator link)."""
-    with served(store, TOKEN, "--simulated", *options) as lines:
-        assert lines["operator token"].startswith(TOKEN)
-        yield lines["control page"], lines["operator link"]
-
-
-def get_json(url: str):
-    with urllib.request.urlopen(url, timeout=30) as r:
-        return json.loads(r.read())
 
 
 def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):

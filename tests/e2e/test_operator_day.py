@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import json
 import re
-import urllib.error
-import urllib.request
 from pathlib import Path
 
 import pytest
@@ -23,22 +21,11 @@ from pymodbus.client import ModbusTcpClient
 from drivers.modbus.map import LOADING_DRIVE_MAP, encode_float32
 from rig.hardware.config import load_rig_config
 from rig.store import Store
-from tests.e2e.test_control_page import TOKEN, get_json, rig_serve
 from tests.support.browser import ARTIFACTS, confirm_lock, launch_browser, open_page
+from tests.support.serve import get_json, post, rig_serve
 
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 
-AUTH = {"Authorization": f"Bearer {TOKEN}", "Content-Type": "application/json"}
-
-
-def post(url: str, body: dict | None = None) -> tuple[int, dict]:
-    req = urllib.request.Request(url, data=json.dumps(body or {}).encode(), headers=AUTH,
-                                 method="POST")
-    try:
-        with urllib.request.urlopen(req, timeout=60) as r:
-            return r.status, json.loads(r.read())
-    except urllib.error.HTTPError as exc:
-        return exc.code, json.loads(exc.read() or b"{}")
 
 
 def latch_drive_fault_from_outside(url: str) -> None:

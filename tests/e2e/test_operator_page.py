@@ -36,11 +36,9 @@ from pymodbus.client import ModbusTcpClient
 from drivers.modbus.map import TORQUE_SENSOR_MAP, encode_float32
 from rig.hardware.config import load_rig_config
 from rig.store import Store
-from tests.e2e.test_control_page import TOKEN, get_json
-from tests.e2e.test_operator_day import post
 from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser
 from tests.support.paths import REPO
-from tests.support.serve import rig_command, served, started
+from tests.support.serve import TOKEN, get_json, post, rig_command, served, started
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
 

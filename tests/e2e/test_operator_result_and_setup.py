@@ -25,8 +25,8 @@ from playwright.sync_api import expect, sync_playwright
 
 from rig.store import Store
 from rig.store.synthetic_runs import write_campaign
-from tests.e2e.test_control_page import get_json, rig_serve
 from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser
+from tests.support.serve import get_json, rig_serve
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
 

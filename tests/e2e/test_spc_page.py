@@ -19,8 +19,8 @@ from pathlib import Path
 import pytest
 from playwright.sync_api import expect, sync_playwright
 
-from tests.rig.reports.test_html_escaping import UNIT, hostile
 from tests.support.browser import NEEDS_CHROMIUM, launch_browser
+from tests.support.hostile import UNIT, hostile
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(300)]
 WIDTHS = ((1440, 900), (390, 844))

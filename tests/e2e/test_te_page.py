@@ -17,9 +17,8 @@ from rig.hardware.simrig import SimulatedRig
 from rig.measurement.service import plant_config_for, write_plant_toml
 from rig.plans.campaign_file import SimulationSection
 from simulators.plant.config import load_plant_config
-from tests.e2e.test_control_page import TOKEN, get_json
 from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser, open_page
-from tests.support.serve import served
+from tests.support.serve import TOKEN, get_json, served
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(300)]
 

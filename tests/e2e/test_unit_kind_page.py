@@ -16,9 +16,9 @@ from playwright.sync_api import expect, sync_playwright
 
 from simulators.plant.config import load_plant_config
 from simulators.plant.truth import generator_block
-from tests.e2e.test_control_page import get_json, rig_serve
 from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser, open_page
 from tests.support.paths import REPO
+from tests.support.serve import get_json, rig_serve
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
 

@@ -1,17 +1,25 @@
 """``rig`` commands as their own processes for the page tests: ``rig serve`` (on the simulated
-rig, or on a rig configuration) on a free port, and the lines it prints when it is up."""
+rig, or on a rig configuration) on a free port, the lines it prints when it is up, and JSON
+to and from its API as the operator (:data:`TOKEN`)."""
 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import signal
 import subprocess
 import sys
 import threading
+import urllib.error
+import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
+TOKEN = "e2e-operator-token"
+"""The operator token the page tests serve with."""
+AUTH = {"Authorization": f"Bearer {TOKEN}", "Content-Type": "application/json"}
 RIG = [sys.executable, "-c", "from rig.cli import main; main()"]
 """The ``rig`` console script, run by this interpreter."""
 
@@ -64,3 +72,29 @@ def served(store: Path, token: str, *options: str) -> Iterator[dict[str, str]]:
     cmd = rig_command("serve", *options, "--port", "0", "--store", str(store), "--token", token)
     with started(cmd, store.parent) as (proc, stderr):
         yield page_lines(proc, stderr)
+
+
+@contextlib.contextmanager
+def rig_serve(store: Path, *options: str) -> Iterator[tuple[str, str]]:
+    """``rig serve --simulated`` on a free port (with ``options``: ``--plant FILE`` ...);
+    yields (url, operator link)."""
+    with served(store, TOKEN, "--simulated", *options) as lines:
+        assert lines["operator token"].startswith(TOKEN)
+        yield lines["control page"], lines["operator link"]
+
+
+def get_json(url: str) -> Any:
+    """GET ``url``; its JSON."""
+    with urllib.request.urlopen(url, timeout=30) as r:
+        return json.loads(r.read())
+
+
+def post(url: str, body: dict | None = None) -> tuple[int, dict]:
+    """POST ``body`` as JSON to ``url`` as the operator; (status, the JSON answer)."""
+    req = urllib.request.Request(url, data=json.dumps(body or {}).encode(), headers=AUTH,
+                                 method="POST")
+    try:
+        with urllib.request.urlopen(req, timeout=60) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as exc:
+        return exc.code, json.loads(exc.read() or b"{}")

@@ -21,7 +21,7 @@ import pytest
 from analysis.models.by_kind import MODEL_NAMES
 from rig.reports.certificate import resolve_subject, write_certificate
 from rig.runformat import read_campaign
-from tests.rig.reports.test_html_escaping import page_text
+from tests.support.hostile import page_text
 from tests.support.paths import REPO as ROOT
 
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)

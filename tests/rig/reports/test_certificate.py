@@ -21,8 +21,8 @@ import pytest
 
 from rig.reports.certificate import CertificateError, resolve_subject, write_certificate
 from rig.reports.certificate.header import software_version
-from tests.rig.reports.test_html_escaping import page_text
 from tests.support.campaigns import TINY
+from tests.support.hostile import page_text
 from tests.support.paths import REPO as ROOT
 
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)

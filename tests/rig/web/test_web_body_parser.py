@@ -14,8 +14,8 @@ from typing import Any
 
 import pytest
 
-from tests.e2e.test_control_page import TOKEN
 from tests.support.http import request, wait_until_idle
+from tests.support.serve import TOKEN
 
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 

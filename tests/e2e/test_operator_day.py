@@ -27,7 +27,6 @@ from tests.support.serve import get_json, post, rig_serve
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 
 
-
 def latch_drive_fault_from_outside(url: str) -> None:
     """A second Modbus master writes a setpoint over the drive's limit: the drive refuses it
     (exception 3) and latches its fault."""

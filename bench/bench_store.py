@@ -7,7 +7,7 @@ history page's query (``Store.list_runs(..., limit=200)``, the page's default pa
 unit serial, by a one-day date range, and by outcome (newest failures before a random day).
 
 PostgreSQL: ``$BENCH_PG_URL`` if set (an empty database), else a throw-away cluster of
-Debian's ``postgresql`` (tests/pg_server.py). ``BENCH_RUNS`` changes the count;
+Debian's ``postgresql`` (tests/support/pg_server.py). ``BENCH_RUNS`` changes the count;
 ``BENCH_QUERIES`` the queries per kind (default 200).
 """
 
@@ -107,7 +107,7 @@ def run() -> Iterator[dict[str, Any]]:
         url = os.environ.get("BENCH_PG_URL")
         server = None
         if not url:
-            from tests.pg_server import PgServer, find_bin_dir
+            from tests.support.pg_server import PgServer, find_bin_dir
 
             bin_dir = find_bin_dir()
             if bin_dir is None:

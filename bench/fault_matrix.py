@@ -1,7 +1,7 @@
 """docs/reliability.md's fault matrix, generated from the tests' results.
 
-``python -m bench.fault_matrix`` runs the fault tests (``tests/test_fault_phases.py`` and
-every ``tests/test_fault_matrix*.py``) with a JUnit XML report and writes the table between
+``python -m bench.fault_matrix`` runs the fault tests (``tests/rig/engine/test_fault_phases.py`` and
+every ``tests/**/test_fault_matrix*.py``) with a JUnit XML report and writes the table between
 the markers ``<!-- fault-matrix:begin -->`` and ``<!-- fault-matrix:end -->`` of
 docs/reliability.md: fault x phase -> outcome, time to safe state, samples kept, message,
 and whether the test passed. Rows come from each test's ``record_property`` values (fault,
@@ -58,8 +58,8 @@ def render_table(rows: list[dict[str, str]]) -> str:
 
 
 def main() -> int:
-    tests = ["tests/test_fault_phases.py", *sorted(
-        str(p.relative_to(ROOT)) for p in (ROOT / "tests").glob("test_fault_matrix*.py"))]
+    tests = ["tests/rig/engine/test_fault_phases.py", *sorted(
+        str(p.relative_to(ROOT)) for p in (ROOT / "tests").rglob("test_fault_matrix*.py"))]
     with tempfile.TemporaryDirectory() as tmp:
         report = Path(tmp) / "faults.xml"
         proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",

@@ -1,17 +1,17 @@
 """Issue 21 item 11: the lost motion measured on a loaded PC against the plant's truth.
 
-The measurement of ``tests/test_measure_modes.py`` (the default unit with LuGre drag, 10 N*m
-rated, lost motion at +-3 %, the slow zero crossing), in both quasi-static loading modes
-that a loaded CI machine put 1.9 % off (equal twist steps, and constant rate), measured with
-``rig measure --simulated``'s code path (the simulated rig in its own process, the engine in
-this one) while ``busy`` processes spin on the CPU (bench/load_scenario.py's load). The figure
-``load_lost_motion_error_pct`` is the largest |measured - true| / true of the runs, in %;
-target under 0.5 %; ``load_lost_motion_missing`` counts the runs that gave no lost motion
-(each with its reason: never hidden in the figure). ``device_priority``: SCHED_FIFO for the
-simulated devices (they stand in for hardware; None: the normal scheduler, as the test suite
-runs them);
-``realtime_priority``: SCHED_FIFO for them and, through the rig configuration they write
-(``[rig] realtime_priority``), for this measuring process.
+The measurement of ``tests/rig/measurement/test_measure_loop.py``'s loading modes (the default
+unit with LuGre drag, 10 N*m rated, lost motion at +-3 %, the slow zero crossing), in both
+quasi-static loading modes that a loaded CI machine put 1.9 % off (equal twist steps, and
+constant rate), measured with ``rig measure --simulated``'s code path (the simulated rig in its
+own process, the engine in this one) while ``busy`` processes spin on the CPU
+(bench/load_scenario.py's load). The figure ``load_lost_motion_error_pct`` is the largest
+|measured - true| / true of the runs, in %; target under 0.5 %; ``load_lost_motion_missing``
+counts the runs that gave no lost motion (each with its reason: never hidden in the figure).
+``device_priority``: SCHED_FIFO for the simulated devices (they stand in for hardware; None: the
+normal scheduler, as the test suite runs them); ``realtime_priority``: SCHED_FIFO for them and,
+through the rig configuration they write (``[rig] realtime_priority``), for this measuring
+process.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """A campaign on the simulated rig under load, started from the control page's API.
 
-Used by ``python -m bench load`` (figures) and ``tests/test_load.py`` (targets). What runs:
+Used by ``python -m bench load`` (figures) and ``tests/rig/web/test_load.py`` (targets). What runs:
 
 - ``rig serve --simulated`` (the page's server; the rig in its own engine process; the
   simulated devices in ``rig sim``), with ``RIG_SIM_STATS`` set so the simulated loading drive

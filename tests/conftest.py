@@ -11,8 +11,7 @@ from typing import Any
 
 import pytest
 
-REPO = Path(__file__).resolve().parent.parent
-SHARED = REPO.parent / "shared"
+from tests.support.paths import REPO
 
 
 @pytest.fixture
@@ -97,34 +96,16 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
 # PostgreSQL server and a browser, and a scheduling stall of a second can trip a heartbeat or
 # a page's wait. Such a test gets one more try (pytest-rerunfailures: the summary counts it
 # as "rerun", with the first failure's report); a deterministic failure fails twice. Every
-# other test gets no second try. A module is "realtime" when it starts simulated devices:
-# the names below are the simulators' entry points and the fixtures that wrap them.
+# other test gets no second try. A module that starts simulated devices (the simulated rig,
+# an encoder node, a transducer, a Modbus server, a page on the rig) says so itself:
+# ``pytestmark = pytest.mark.realtime``.
 
-REALTIME_SOURCES = ("SimulatedRig", "simulated_rig", "simulated_page", "lab_rig", "rig_serve",
-                    "--simulated", "EncoderNode", "SlcanAdapter", "TransducerSimulator",
-                    "RigModbusServer", "serve_until_signalled", "\"sim\", ", "open_session",
-                    "run_load_scenario", "rig.validate.wire", "sync_playwright",
-                    "simulated=True")
 REALTIME_RERUNS = 1
 REALTIME_RERUN_DELAY_S = 2.0
-_realtime_modules: dict[str, bool] = {}
-
-
-def _measures_in_real_time(item: pytest.Item) -> bool:
-    path = str(item.path)
-    if path not in _realtime_modules:
-        try:
-            text = item.path.read_text(encoding="utf-8")
-        except OSError:
-            text = ""
-        _realtime_modules[path] = any(word in text for word in REALTIME_SOURCES)
-    return _realtime_modules[path]
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
-        if item.get_closest_marker("realtime") is None and _measures_in_real_time(item):
-            item.add_marker(pytest.mark.realtime)
         if item.get_closest_marker("realtime") is not None:
             item.add_marker(pytest.mark.flaky(reruns=REALTIME_RERUNS,
                                               reruns_delay=REALTIME_RERUN_DELAY_S))
@@ -135,8 +116,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 @pytest.fixture(scope="session")
 def pg_server():
-    """A throw-away PostgreSQL cluster for the whole session (tests/pg_server.py)."""
-    from tests.pg_server import PgServer, required_bin_dir
+    """A throw-away PostgreSQL cluster for the whole session (tests/support/pg_server.py)."""
+    from tests.support.pg_server import PgServer, required_bin_dir
 
     server = PgServer(required_bin_dir())
     server.start()
@@ -196,10 +177,10 @@ def make_store(request) -> StoreMaker:
 
 @pytest.fixture(scope="session")
 def simulated_rig():
-    """The simulated rig shared by the page tests (tests/simulated_page.py): opened by the
+    """The simulated rig shared by the page tests (tests/support/simulated_page.py): opened by the
     first test that uses it, kept open while the next test uses it too, closed as soon as
     one does not (:func:`pytest_runtest_teardown` below) and at the end."""
-    from tests.simulated_page import SHARED
+    from tests.support.simulated_page import SHARED
 
     yield SHARED
     SHARED.close()
@@ -208,7 +189,7 @@ def simulated_rig():
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None):
     yield  # the test's own fixtures (its pages) are closed first
-    shared = sys.modules.get("tests.simulated_page")  # imported by a test that used it
+    shared = sys.modules.get("tests.support.simulated_page")  # imported by a test that used it
     if shared is not None and (
             nextitem is None or "simulated_rig" not in getattr(nextitem, "fixturenames", ())):
         shared.SHARED.close()

@@ -5,7 +5,7 @@ Same loop as the reference nominal model (:class:`analysis.models.nominal.Nomina
 
 * **play**: seed 001's pair at its center distance and axial position, from the closed form
   :func:`analysis.models.seed001_beveloid.backlash_closed_form` (checked against the contact
-  equations in tests/test_seed001.py). The output is the gear (``z_gear``).
+  equations in tests/analysis/test_seed001.py). The output is the gear (``z_gear``).
 * **stiffness**: seed 004 eq. (8) ``k_m = b (0.75 eps + 0.25) k'`` with ISO 6336-1's virtual
   tooth numbers ``z / cos^3(beta)`` in ``k'`` and eq. (9)'s transverse contact ratio of each
   flank side at its working pressure angle (tip radii at mid face); at the output

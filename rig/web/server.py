@@ -36,7 +36,7 @@ class RigServer(uvicorn.Server):
     never finishes by itself: without this, each open page held the stop up for the whole
     timeout and then printed an "Exception in ASGI application ... CancelledError" traceback.
     Ended first, the streams complete their responses, the connections close and the stop
-    takes a fraction of a second (tests/test_serve_stop.py).
+    takes a fraction of a second (tests/rig/web/test_serve_stop.py).
     """
 
     async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:

@@ -6,82 +6,22 @@ then a second run is aborted and the page shows the safe state. Screenshots are 
 
 from __future__ import annotations
 
-import contextlib
-import json
-import os
-import signal
-import subprocess
-import sys
-import threading
-import urllib.request
 from pathlib import Path
 
 import pytest
 from playwright.sync_api import expect, sync_playwright
 
-CHROMIUM = Path("/usr/bin/chromium")
-REPO = Path(__file__).resolve().parents[2]
-ARTIFACTS = REPO / "artifacts" / "e2e"
-TOKEN = "e2e-operator-token"
-CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--no-first-run", "--disable-sync"]
+from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser, open_page
+from tests.support.serve import get_json, rig_serve
 
-pytestmark = [
-    pytest.mark.skipif(not CHROMIUM.exists(),
-                       reason="Debian's chromium is not installed (/usr/bin/chromium missing; "
-                              ".ci/install installs it)"),
-    pytest.mark.timeout(240),
-]
-
-
-def launch_browser(playwright):
-    """Debian's chromium, headless, driven by Playwright (never a downloaded browser)."""
-    return playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True,
-                                      args=CHROMIUM_ARGS)
-
-
-@contextlib.contextmanager
-def rig_serve(store: Path, *options: str):
-    """``rig serve --simulated`` on a free port (with ``options``: ``--plant FILE`` ...);
-    yields (url, operator link)."""
-    cmd = [sys.executable, "-c", "from rig.cli import main; main()", "serve", "--simulated",
-           "--port", "0", "--store", str(store), "--token", TOKEN, *options]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=store.parent, env={**os.environ, "PYTHONUNBUFFERED": "1"})
-    stderr: list[str] = []
-    threading.Thread(target=lambda: stderr.extend(proc.stderr), daemon=True).start()
-    try:
-        lines = {}
-        for line in proc.stdout:
-            key, _, value = line.partition(": ")
-            lines[key] = value.strip()
-            if key == "operator link":
-                break
-        assert "operator link" in lines, f"rig serve did not start: {''.join(stderr)}"
-        assert lines["operator token"].startswith(TOKEN)
-        yield lines["control page"], lines["operator link"]
-    finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=60)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=10)
-
-
-def get_json(url: str):
-    with urllib.request.urlopen(url, timeout=30) as r:
-        return json.loads(r.read())
+pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
 
 
 def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     with rig_serve(tmp_path / "store") as (url, link), sync_playwright() as pw:
         browser = launch_browser(pw)
-        page = browser.new_page(viewport={"width": 1400, "height": 1500})
-        errors: list[str] = []
-        page.on("pageerror", lambda exc: errors.append(str(exc)))
-        page.goto(link)
+        page, errors = open_page(browser, link, 1400, 1500)
         expect(page.locator("#role")).to_have_text("operator")
         expect(page.locator("#estop")).to_be_visible()
         expect(page.locator("#state")).to_have_text("idle", timeout=90_000)
@@ -91,8 +31,7 @@ def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
         # default plan, long enough to be stopped in the middle)
         page.fill("#setup input[name=steps_per_quarter]", "2")
         page.fill("#setup input[name=pre_cycles]", "0")
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         expect(page.locator("#start")).to_be_enabled()
         page.click("#start")
         page.wait_for_function("() => window.rigStats.points > 500", timeout=60_000)
@@ -114,8 +53,7 @@ def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
         # second run: abort it while it runs; the page shows the safe state
         page.fill("#setup input[name=steps_per_quarter]", "4")
         page.fill("#setup input[name=pre_cycles]", "1")
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         first_run = runs[0]["run_id"]
         page.click("#start")
         page.wait_for_function(  # a function, not a string to eval: the page's CSP

@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import json
 import re
-import urllib.error
-import urllib.request
 from pathlib import Path
 
 import pytest
@@ -23,19 +21,10 @@ from pymodbus.client import ModbusTcpClient
 from drivers.modbus.map import LOADING_DRIVE_MAP, encode_float32
 from rig.hardware.config import load_rig_config
 from rig.store import Store
-from tests.e2e.test_control_page import ARTIFACTS, TOKEN, get_json, launch_browser, rig_serve
+from tests.support.browser import ARTIFACTS, confirm_lock, launch_browser, open_page
+from tests.support.serve import get_json, post, rig_serve
 
-AUTH = {"Authorization": f"Bearer {TOKEN}", "Content-Type": "application/json"}
-
-
-def post(url: str, body: dict | None = None) -> tuple[int, dict]:
-    req = urllib.request.Request(url, data=json.dumps(body or {}).encode(), headers=AUTH,
-                                 method="POST")
-    try:
-        with urllib.request.urlopen(req, timeout=60) as r:
-            return r.status, json.loads(r.read())
-    except urllib.error.HTTPError as exc:
-        return exc.code, json.loads(exc.read() or b"{}")
+pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 
 
 def latch_drive_fault_from_outside(url: str) -> None:
@@ -79,10 +68,7 @@ def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
     failed_campaign = seed_a_failed_campaign(tmp_path / "store")
     with rig_serve(tmp_path / "store") as (url, link), sync_playwright() as pw:
         browser = launch_browser(pw)
-        page = browser.new_page(viewport={"width": 1440, "height": 900})
-        errors: list[str] = []
-        page.on("pageerror", lambda exc: errors.append(str(exc)))
-        page.goto(link)
+        page, errors = open_page(browser, link, 1440, 900)
         expect(page.locator("#state")).to_have_text("idle", timeout=90_000)
         page.fill("#setup input[name=operator]", "A. Operator")
         # the shortest loop for both runs (2 steps a quarter, no pre-cycle, the play crossed
@@ -93,8 +79,7 @@ def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
 
         # one completed run for the history, with a limit it fails (a seed 000 pair: 4')
         page.fill("#setup input[name=lost_motion_arcmin_max]", "1")
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         page.click("#start")
         expect(page.locator("#state")).to_have_text("completed", timeout=120_000)
         first = get_json(url + "api/runs")[0]
@@ -135,8 +120,7 @@ def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
         # (the second run at 180 deg: the runout gives it another lost motion; no limit)
         page.fill("#setup input[name=lost_motion_arcmin_max]", "")
         page.fill("#lock-angle", "180")
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         page.click("#start")
         expect(page.locator("#state")).to_have_text("completed", timeout=120_000)
         latest = get_json(url + "api/runs")[0]

@@ -27,10 +27,6 @@ import datetime as dt
 import json
 import os
 import re
-import signal
-import subprocess
-import sys
-import threading
 from pathlib import Path
 
 import pytest
@@ -40,15 +36,11 @@ from pymodbus.client import ModbusTcpClient
 from drivers.modbus.map import TORQUE_SENSOR_MAP, encode_float32
 from rig.hardware.config import load_rig_config
 from rig.store import Store
-from tests.e2e.test_control_page import ARTIFACTS, CHROMIUM, REPO, TOKEN, get_json, launch_browser
-from tests.e2e.test_operator_day import post
+from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser
+from tests.support.paths import REPO
+from tests.support.serve import TOKEN, get_json, post, rig_command, served, started
 
-pytestmark = [
-    pytest.mark.skipif(not CHROMIUM.exists(),
-                       reason="Debian's chromium is not installed (/usr/bin/chromium missing; "
-                              ".ci/install installs it)"),
-    pytest.mark.timeout(240),
-]
+pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
 
 DOCS = os.environ.get("RIG_DOC_SCREENSHOTS") == "1"
 SHOTS = REPO / "docs" / "img" if DOCS else ARTIFACTS
@@ -56,27 +48,6 @@ RIG_ID = "bench-3"
 OPERATOR = "A. Operator"
 SERIAL = "SN-0042"
 REASON = "recalibration booked; checked against the reference shaft today"
-
-
-def _cli(*args: str) -> list[str]:
-    return [sys.executable, "-c", "from rig.cli import main; main()", *args]
-
-
-@contextlib.contextmanager
-def _process(cmd: list[str], cwd: Path):
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=cwd, env={**os.environ, "PYTHONUNBUFFERED": "1"})
-    stderr: list[str] = []
-    threading.Thread(target=lambda: stderr.extend(proc.stderr), daemon=True).start()
-    try:
-        yield proc, stderr
-    finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=60)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=10)
 
 
 def rig_toml_with_calibration(written: Path, out: Path) -> Path:
@@ -108,20 +79,12 @@ uncertainty = 0.005
 def lab_rig(tmp: Path):
     """``rig sim`` plus ``rig serve --rig`` on its configuration with calibrations; yields
     (url, operator link)."""
-    with _process(_cli("sim", "--rig-config", str(tmp / "sim-rig.toml"), "--sync-period",
-                       "0.004", "--stream-rate", "250"), tmp) as (sim, sim_err):
+    with started(rig_command("sim", "--rig-config", str(tmp / "sim-rig.toml"), "--sync-period",
+                             "0.004", "--stream-rate", "250"), tmp) as (sim, sim_err):
         line = sim.stdout.readline()
         assert line.startswith("{"), f"rig sim did not start: {''.join(sim_err)}"
         rig = rig_toml_with_calibration(Path(json.loads(line)["rig_config"]), tmp / "lab.toml")
-        with _process(_cli("serve", "--rig", str(rig), "--port", "0", "--store",
-                           str(tmp / "store"), "--token", TOKEN), tmp) as (srv, srv_err):
-            lines = {}
-            for out in srv.stdout:
-                key, _, value = out.partition(": ")
-                lines[key] = value.strip()
-                if key == "operator link":
-                    break
-            assert "operator link" in lines, f"rig serve did not start: {''.join(srv_err)}"
+        with served(tmp / "store", TOKEN, "--rig", str(rig)) as lines:
             yield lines["control page"], lines["operator link"]
 
 
@@ -218,8 +181,7 @@ def test_operator_page(tmp_path: Path):
         # 8: the twist is the twist: locked at 180 deg the output turned by 180/ratio deg,
         # the twist counts from the lock (nearly zero at zero torque)
         page.fill("#lock-angle", "180")
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         # (the idle monitor shows the devices every 0.5 s: wait for a pass after the lock)
         page.wait_for_function(  # a function, not a string to eval: the page's CSP
             "() => Math.abs(parseFloat(document.querySelector('#v-twist').textContent)) < 1.0 && "
@@ -329,8 +291,7 @@ def test_operator_page(tmp_path: Path):
 
         # 6: abort by key, E-stop by Esc and by Space
         page.select_option(f("kind"), "run")
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         expect(page.locator("#start-why")).to_be_empty()
         page.keyboard.press("s")
         expect(page.locator("#state")).to_have_text("running", timeout=10_000)

@@ -25,14 +25,10 @@ from playwright.sync_api import expect, sync_playwright
 
 from rig.store import Store
 from rig.store.synthetic_runs import write_campaign
-from tests.e2e.test_control_page import ARTIFACTS, CHROMIUM, get_json, launch_browser, rig_serve
+from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser
+from tests.support.serve import get_json, rig_serve
 
-pytestmark = [
-    pytest.mark.skipif(not CHROMIUM.exists(),
-                       reason="Debian's chromium is not installed (/usr/bin/chromium missing; "
-                              ".ci/install installs it)"),
-    pytest.mark.timeout(240),
-]
+pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
 
 DESKTOP = {"width": 1440, "height": 900}
 PHONE = {"width": 390, "height": 844}
@@ -254,11 +250,6 @@ def device_names(page) -> list[str]:
     page.wait_for_function("() => document.querySelectorAll('#devices tbody tr').length >= 5",
                            timeout=30_000)
     return page.locator("#devices tbody tr td:nth-child(2)").all_inner_texts()
-
-
-def confirm_lock(page) -> None:
-    page.click("#lock")
-    expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
 
 
 def test_desktop_result_panel_links_and_setup(served):

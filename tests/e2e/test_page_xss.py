@@ -14,10 +14,12 @@ from urllib.parse import quote
 import pytest
 from playwright.sync_api import expect, sync_playwright
 
-from tests.e2e.test_control_page import TOKEN, launch_browser, rig_serve
-from tests.test_html_escaping import hostile, write_hostile_store
+from tests.support.browser import launch_browser
+from tests.support.hostile import hostile, write_hostile_store
+from tests.support.serve import TOKEN, rig_serve
 
-pytestmark = pytest.mark.timeout(360)  # a loaded machine: store, server and SPC take a while
+# a loaded machine: store, server and SPC take a while
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(360)]
 
 INJECT = """() => new Promise((done) => {
   document.addEventListener("securitypolicyviolation",

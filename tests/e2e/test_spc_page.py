@@ -19,19 +19,17 @@ from pathlib import Path
 import pytest
 from playwright.sync_api import expect, sync_playwright
 
-from tests.e2e.test_control_page import CHROMIUM, launch_browser
-from tests.test_html_escaping import UNIT, hostile
+from tests.support.browser import NEEDS_CHROMIUM, launch_browser
+from tests.support.hostile import UNIT, hostile
 
-pytestmark = [
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed"),
-    pytest.mark.timeout(300),
-]
+pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(300)]
 WIDTHS = ((1440, 900), (390, 844))
 N_UNITS = 6
 
 
 def write_store(root: Path):
-    """Six units of one design, one run each, with hostile serials (tests/test_html_escaping)."""
+    """Six units of one design, one run each, with hostile serials
+    (tests/rig/reports/test_html_escaping)."""
     from rig.store import Store
     from rig.store.synthetic_runs import write_campaign
 

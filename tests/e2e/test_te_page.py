@@ -8,32 +8,19 @@ figure the run stored. About 10 s of rotation at 240 rpm (the 45/40 pair, ratio 
 from __future__ import annotations
 
 import contextlib
-import os
-import signal
-import subprocess
-import sys
-import threading
 from pathlib import Path
 
 import pytest
 from playwright.sync_api import expect, sync_playwright
-from test_control_page import (
-    ARTIFACTS,
-    CHROMIUM,
-    TOKEN,
-    get_json,
-    launch_browser,
-)
 
 from rig.hardware.simrig import SimulatedRig
 from rig.measurement.service import plant_config_for, write_plant_toml
 from rig.plans.campaign_file import SimulationSection
 from simulators.plant.config import load_plant_config
+from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser, open_page
+from tests.support.serve import TOKEN, get_json, served
 
-pytestmark = [
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed"),
-    pytest.mark.timeout(300),
-]
+pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(300)]
 
 EFFECTS = {"kinematic_error": {"enabled": True, "beta_deg": 30.0},
            "tooth_spacing_error": {"enabled": True, "transition_fraction": 0.5}}
@@ -42,28 +29,8 @@ EFFECTS = {"kinematic_error": {"enabled": True, "beta_deg": 30.0},
 @contextlib.contextmanager
 def serve_rig(rig_toml: Path, store: Path):
     """``rig serve --rig RIG.toml`` on a free port; yields (url, operator link)."""
-    cmd = [sys.executable, "-c", "from rig.cli import main; main()", "serve", "--rig",
-           str(rig_toml), "--port", "0", "--store", str(store), "--token", TOKEN]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=store.parent, env={**os.environ, "PYTHONUNBUFFERED": "1"})
-    stderr: list[str] = []
-    threading.Thread(target=lambda: stderr.extend(proc.stderr), daemon=True).start()
-    try:
-        lines = {}
-        for line in proc.stdout:
-            key, _, value = line.partition(": ")
-            lines[key] = value.strip()
-            if key == "operator link":
-                break
-        assert "operator link" in lines, f"rig serve did not start: {''.join(stderr)}"
+    with served(store, TOKEN, "--rig", str(rig_toml)) as lines:
         yield lines["control page"], lines["operator link"]
-    finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=60)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=10)
 
 
 def test_operator_measures_the_transmission_error(tmp_path: Path):
@@ -76,10 +43,7 @@ def test_operator_measures_the_transmission_error(tmp_path: Path):
             serve_rig(sim.rig_config_path, tmp_path / "store") as (url, link), \
             sync_playwright() as pw:
         browser = launch_browser(pw)
-        page = browser.new_page(viewport={"width": 1400, "height": 1800})
-        errors: list[str] = []
-        page.on("pageerror", lambda exc: errors.append(str(exc)))
-        page.goto(link)
+        page, errors = open_page(browser, link, 1400, 1800)
         expect(page.locator("#role")).to_have_text("operator", timeout=60_000)
         expect(page.locator("#state")).to_have_text("idle", timeout=90_000)
         expect(page.locator("#te-panel")).to_be_hidden()
@@ -95,8 +59,7 @@ def test_operator_measures_the_transmission_error(tmp_path: Path):
         expect(page.locator("#preview-out")).to_contain_text("turn input forward at 240 rpm",
                                                         timeout=30_000)
 
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         expect(page.locator("#start")).to_be_enabled()
         page.click("#start")
         # the TE drawn live against the output angle, both directions

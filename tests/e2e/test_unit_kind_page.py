@@ -16,21 +16,11 @@ from playwright.sync_api import expect, sync_playwright
 
 from simulators.plant.config import load_plant_config
 from simulators.plant.truth import generator_block
-from tests.e2e.test_control_page import (
-    ARTIFACTS,
-    CHROMIUM,
-    REPO,
-    get_json,
-    launch_browser,
-    rig_serve,
-)
+from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser, open_page
+from tests.support.paths import REPO
+from tests.support.serve import get_json, rig_serve
 
-pytestmark = [
-    pytest.mark.skipif(not CHROMIUM.exists(),
-                       reason="Debian's chromium is not installed (/usr/bin/chromium missing; "
-                              ".ci/install installs it)"),
-    pytest.mark.timeout(240),
-]
+pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
 
 CYCLOID_PLANT = REPO / "simulators" / "cycloid_plant.toml"
 
@@ -40,10 +30,7 @@ def test_operator_measures_a_cycloid_unit_and_sees_its_model_and_band(tmp_path):
     with rig_serve(tmp_path / "store", "--plant", str(CYCLOID_PLANT)) as (url, link), \
             sync_playwright() as pw:
         browser = launch_browser(pw)
-        page = browser.new_page(viewport={"width": 1400, "height": 1500})
-        errors: list[str] = []
-        page.on("pageerror", lambda exc: errors.append(str(exc)))
-        page.goto(link)
+        page, errors = open_page(browser, link, 1400, 1500)
         expect(page.locator("#role")).to_have_text("operator")
         expect(page.locator("#state")).to_have_text("idle", timeout=90_000)
         form = page.locator("#setup")
@@ -82,8 +69,7 @@ def test_operator_measures_a_cycloid_unit_and_sees_its_model_and_band(tmp_path):
             "nominal model, cycloid (seed 002 compound cycloid pair", timeout=30_000)
         expect(page.locator("#preview-out")).to_contain_text("seed 002 modification budget")
 
-        page.click("#lock")
-        expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+        confirm_lock(page)
         expect(page.locator("#start")).to_be_enabled()
         page.click("#start")
         expect(page.locator("#state")).to_have_text("completed", timeout=120_000)

@@ -1,0 +1,45 @@
+"""The browser of the page tests: Debian's chromium, headless, driven by Playwright (never a
+downloaded browser), and the folder their screenshots go to."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+from playwright.sync_api import expect
+
+from tests.support.paths import REPO
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--no-first-run", "--disable-sync"]
+ARTIFACTS = REPO / "artifacts" / "e2e"
+"""Screenshots of the page tests."""
+NEEDS_CHROMIUM = pytest.mark.skipif(
+    not CHROMIUM.exists(),
+    reason="Debian's chromium is not installed (/usr/bin/chromium missing; .ci/install "
+           "installs it)")
+"""The mark of a module that drives the browser."""
+
+
+def launch_browser(playwright: Any) -> Any:
+    """Debian's chromium, headless, driven by Playwright (never a downloaded browser)."""
+    return playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True,
+                                      args=CHROMIUM_ARGS)
+
+
+def open_page(browser: Any, link: str, width: int, height: int) -> tuple[Any, list[str]]:
+    """A new page of ``width`` x ``height`` px at ``link``; returns (page, the JavaScript
+    errors it raises, collected as they come)."""
+    page = browser.new_page(viewport={"width": width, "height": height})
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    page.goto(link)
+    return page, errors
+
+
+def confirm_lock(page: Any) -> None:
+    """Confirm the input lock on the page and wait (30 s at most) until it says so."""
+    page.click("#lock")
+    expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import grimp
 
-REPO = Path(__file__).resolve().parents[1]
+from tests.support.paths import REPO
+
 PACKAGES = ("rig", "simulators", "drivers", "analysis")
 MAX_LOOSE_MODULES = 6
 MAX_FUNCTION_LINES = 120

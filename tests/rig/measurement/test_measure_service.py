@@ -20,8 +20,8 @@ from rig.measurement.single_run import (
 )
 from rig.plans import TE_KIND, LoopParams, TEParams
 from rig.plans.campaign_file import Limits
+from tests.support.paths import REPO as ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 UNIT = ROOT / "rig/examples/units/seed000-pair1.json"
 
 

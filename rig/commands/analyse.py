@@ -11,6 +11,8 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from rig.commands.options import json_option
+
 if TYPE_CHECKING:
     from rig.results.analyse import RunAnalysis
 
@@ -152,9 +154,7 @@ def register(app: typer.Typer) -> None:
         hd_t2: Annotated[
             float | None, typer.Option(help="Harmonic Drive T2 (N·m) for K1/K2/K3.")
         ] = None,
-        json_file: Annotated[
-            Path | None, typer.Option("--json", help="Write the metrics as JSON ('-': stdout).")
-        ] = None,
+        json_file: json_option("Write the metrics as JSON") = None,
         plot: Annotated[
             Path | None, typer.Option(help="Write the Fig. 6-style loop picture (PNG).")
         ] = None,

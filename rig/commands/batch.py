@@ -9,6 +9,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from rig.commands.options import json_option
+
 
 def register(app: typer.Typer) -> None:
     @app.command()
@@ -22,8 +24,7 @@ def register(app: typer.Typer) -> None:
         ] = False,
         rated_torque: Annotated[float, typer.Option(help="Rated torque, N·m.")] = 10.0,
         percent: Annotated[float, typer.Option(help="Lost-motion band, % of rated.")] = 3.0,
-        json_file: Annotated[Path | None, typer.Option(
-            "--json", help="Write the report as JSON ('-': stdout).")] = None,
+        json_file: json_option("Write the report as JSON") = None,
     ) -> None:
         """Monte Carlo lost motion of a batch built to this design within seed 000 Table 1.
 

@@ -16,6 +16,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
+from rig.commands.options import json_option
 from rig.commands.output import (
     console,
     exit_2_on_ctrl_c,
@@ -67,9 +68,8 @@ def register(app: typer.Typer) -> None:
         ] = None,
         store: StoreOption = DEFAULT_STORE,
         samples: SamplesOption = None,
-        json_file: Annotated[Path | None, typer.Option(
-            "--json", help="Write the per-run metrics and the campaign summary as JSON "
-            "('-': stdout).")] = None,
+        json_file: json_option(
+            "Write the per-run metrics and the campaign summary as JSON") = None,
         preview: Annotated[bool, typer.Option(
             "--preview", help="List the plan's steps and its duration; measure nothing.")
         ] = False,

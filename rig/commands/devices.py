@@ -10,6 +10,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from rig.commands.options import json_option
+
 
 def _fmt(value: float | None, digits: int = 6) -> str:
     return "" if value is None else f"{value:.{digits}g}"
@@ -39,8 +41,7 @@ def register(app: typer.Typer) -> None:
     def devices(
         rig_file: Annotated[Path, typer.Option("--rig", help="Rig configuration (TOML).")],
         seconds: Annotated[float, typer.Option(min=0.1, help="How long to read, s.")] = 5.0,
-        json_file: Annotated[Path | None, typer.Option(
-            "--json", help="Also write the report as JSON here ('-' for stdout).")] = None,
+        json_file: json_option("Also write the report as JSON") = None,
     ) -> None:
         """Connect to every device of a rig, read for a while and report each one.
 

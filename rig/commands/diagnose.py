@@ -9,15 +9,14 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from rig.commands.options import json_option
+
 
 def register(app: typer.Typer) -> None:
     @app.command()
     def diagnose(
         campaign: Annotated[Path, typer.Argument(help="A campaign folder (or one run folder).")],
-        json_file: Annotated[
-            Path | None, typer.Option("--json", help="Write the rig-diagnosis/1 report "
-                                      "('-': stdout).")
-        ] = None,
+        json_file: json_option("Write the rig-diagnosis/1 report") = None,
         html_file: Annotated[
             Path | None, typer.Option("--html", help="Write the HTML report (self-contained).")
         ] = None,

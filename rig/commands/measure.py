@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
+from rig.commands.options import json_option
 from rig.commands.output import (
     console,
     exit_2_on_ctrl_c,
@@ -84,9 +85,7 @@ def register(app: typer.Typer) -> None:
             help="Limit: stiffness at least this, N·m/arcmin.")] = None,
         store: StoreOption = DEFAULT_STORE,
         samples: SamplesOption = None,
-        json_file: Annotated[Path | None, typer.Option(
-            "--json", help="Write the run's metrics, status and reason as JSON ('-': stdout).")
-        ] = None,
+        json_file: json_option("Write the run's metrics, status and reason as JSON") = None,
         preview: Annotated[bool, typer.Option(
             "--preview", help="List the plan's steps and its duration; measure nothing.")
         ] = False,

@@ -11,6 +11,7 @@ from rich.table import Table
 
 from analysis.errors import AnalysisError
 from analysis.models.seed000 import Seed000Design, design_chain, format_arcmin
+from rig.commands.options import json_option
 from rig.runformat.unit_file import load_unit_mapping
 
 
@@ -74,10 +75,7 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def model(
         unit_file: Annotated[Path, typer.Argument(help="unit JSON (or a whole run.json)")],
-        json_out: Annotated[
-            Path | None, typer.Option("--json", help="Write the model as JSON to this file "
-                                      "('-': stdout).")
-        ] = None,
+        json_out: json_option("Write the model as JSON") = None,
     ) -> None:
         """Seed 000 design chain (eqs. 1-16) and the reference nominal model of a gear unit."""
         from rig.commands.output import JsonOutput

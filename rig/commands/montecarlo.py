@@ -8,7 +8,6 @@ the comparison with the paper and optionally writes JSON.
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Annotated, Any
 
 import typer
@@ -18,6 +17,7 @@ from rich.table import Table
 
 from analysis.models.seed003_montecarlo import PAPER_FIGURES_ARCSEC, check_sample_count
 from analysis.models.seed003_planetary import PaperReading
+from rig.commands.options import json_option
 from rig.core.errors import RigError
 from rig.reports.montecarlo import montecarlo_report
 
@@ -69,10 +69,7 @@ def register(app: typer.Typer) -> None:
     def montecarlo(
         samples: Annotated[int, typer.Option("--samples", "-n", help="Samples.")] = 50_000,
         seed: Annotated[int, typer.Option("--seed", help="Random seed.")] = 0,
-        json_path: Annotated[
-            Path | None, typer.Option("--json", help="Write the report (JSON) here ('-': "
-                                      "stdout).")
-        ] = None,
+        json_path: json_option("Write the report as JSON") = None,
         signs: Annotated[
             str, typer.Option("--signs", help="Table 1 signs: " + "|".join(SIGNS))
         ] = "printed",

@@ -2,23 +2,20 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Annotated
 
 import typer
 from rich.console import Console
 from rich.table import Table
 
+from rig.commands.options import json_option
 from rig.core.errors import RigError
 
 
 def register(app: typer.Typer) -> None:
     @app.command()
     def rotor(
-        json_file: Annotated[
-            Path | None, typer.Option("--json", help="Write all critical speeds as JSON "
-                                      "('-': stdout).")
-        ] = None,
+        json_file: json_option("Write all critical speeds as JSON") = None,
         disc_at: Annotated[
             float, typer.Option(help="Disc position, fraction of each shaft's length.")
         ] = 1.0 / 3.0,

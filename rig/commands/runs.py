@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 import sys
-from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
@@ -13,6 +12,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from rig.commands.options import json_option
 from rig.commands.output import outcome_markup
 from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
 
@@ -95,10 +95,7 @@ def register(app: typer.Typer) -> None:
     def runs(
         store: StoreOption = DEFAULT_STORE,
         samples: SamplesOption = None,
-        json_file: Annotated[
-            Path | None,
-            typer.Option("--json", help="Also write the list as JSON to this file ('-': stdout)."),
-        ] = None,
+        json_file: json_option("Also write the list as JSON") = None,
         status: Annotated[
             str | None,
             typer.Option(help="Only runs with this status: running, completed, aborted."),

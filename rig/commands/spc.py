@@ -8,6 +8,7 @@ from typing import Annotated
 
 import typer
 
+from rig.commands.options import json_option
 from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
 
 
@@ -24,8 +25,7 @@ def register(app: typer.Typer) -> None:
             "(ISO 8601, e.g. 2026-11-01).")] = None,
         html: Annotated[Path | None, typer.Option(
             "--html", help="Write the charts as an HTML page.")] = None,
-        json_file: Annotated[Path | None, typer.Option(
-            "--json", help="Write every figure as JSON ('-': stdout).")] = None,
+        json_file: json_option("Write every figure as JSON") = None,
     ) -> None:
         """Lost motion, backlash and stiffness per unit over time: individuals/moving-range
         charts with control limits (one-sided, LCL 0, where centre - 3 sigma < 0), the

@@ -10,15 +10,15 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
+from rig.commands.options import json_option
+
 
 def register(app: typer.Typer) -> None:
     @app.command("te-calibrate")
     def te_calibrate(
         run_a: Annotated[Path, typer.Argument(help="TE run, coupling as mounted.")],
         run_b: Annotated[Path, typer.Argument(help="TE run, coupling indexed by 180 deg.")],
-        json_file: Annotated[
-            Path | None, typer.Option("--json", help="Write the result as JSON ('-': stdout).")
-        ] = None,
+        json_file: json_option("Write the result as JSON") = None,
     ) -> None:
         """Separate the output encoder's once-per-turn eccentricity from the unit's own TE by
         the reversal of two runs; print the rig configuration lines that remove it."""

@@ -20,6 +20,7 @@ from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
+from rig.commands.options import json_option
 from rig.core.errors import RigError
 
 console = Console()
@@ -248,10 +249,7 @@ def register(app: typer.Typer) -> None:
         jobs: Annotated[int, typer.Option(min=1, help="Worker processes (with "
                                           "--over-the-wire: simulated rigs at a time).")] = 1,
         verbose: Annotated[bool, typer.Option("--verbose", help="One line per case.")] = False,
-        json_file: Annotated[
-            Path | None, typer.Option("--json", help="Write the summary as JSON ('-': "
-                                      "stdout).")
-        ] = None,
+        json_file: json_option("Write the summary as JSON") = None,
     ) -> None:
         """Diagnose labelled campaigns blind and grade them: per-effect confusion, false alarms,
         also recall/precision, median shrink, one summary line per generator. Without

@@ -266,7 +266,7 @@ class Store:
             folder_parent = camp.path
         started_at = utc_now_iso()
         label = safe_label(fields["unit_serial"], "unit")
-        folder, run_id = self._claim_folder(folder_parent, label)
+        folder, run_id = self._claim_folder(folder_parent, label, self._index.run_exists)
         unit = meta.get("unit") or {}
         design = unit.get("design") if unit.get("design") is not None else unit.get("model")
         full_meta: dict[str, Any] = {
@@ -313,17 +313,20 @@ class Store:
             log.warning("run %s: %s", run_id, message)
         return RunRecorder(self, run_id, folder, full_meta, appender, lock, warnings)
 
-    def _claim_folder(self, parent: Path, label: str) -> tuple[Path, str]:
-        """Create ``parent/<new id>`` atomically (mkdir is the claim); return it and the id."""
-        for run_id in id_candidates(label):
-            if self._index.run_exists(run_id):
+    @staticmethod
+    def _claim_folder(parent: Path, label: str,
+                      indexed: Callable[[str], bool] = lambda _id: False) -> tuple[Path, str]:
+        """Create ``parent/<new id>`` atomically (mkdir is the claim), skipping the ids
+        ``indexed`` says are taken; return it and the id."""
+        for new_id in id_candidates(label):
+            if indexed(new_id):
                 continue
-            folder = parent / run_id
+            folder = parent / new_id
             try:
                 folder.mkdir()
             except FileExistsError:
                 continue
-            return folder, run_id
+            return folder, new_id
         raise AssertionError("unreachable: id_candidates is endless")
 
     def _finalize_run(
@@ -567,13 +570,8 @@ class Store:
         _reject_reserved(meta, CAMPAIGN_RESERVED_KEYS, "campaign meta")
         to_json(meta)
         started_at = utc_now_iso()
-        for campaign_id in id_candidates(safe_label(name, "campaign")):
-            folder = self.root / "campaigns" / campaign_id
-            try:
-                folder.mkdir()
-            except FileExistsError:
-                continue
-            break
+        folder, campaign_id = self._claim_folder(self.root / "campaigns",
+                                                 safe_label(name, "campaign"))
         cmeta = {
             "format": CAMPAIGN_FORMAT, "name": name, "campaign_id": campaign_id,
             "status": "running", "started_at": started_at, **meta, "runs": [],

@@ -48,6 +48,11 @@ def _jsonb(value: Any) -> Any:
     return None if value is None else Jsonb(value)
 
 
+def _row(row: dict[str, Any]) -> dict[str, Any]:
+    """A fetched row as it is: dict rows, jsonb already decoded by psycopg."""
+    return row
+
+
 POSTGRES = Dialect(
     placeholder="%s",
     order_column="seq",
@@ -56,7 +61,7 @@ POSTGRES = Dialect(
     order_declaration=" seq BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,",
     history_order="started_at, seq",
     json_param=_jsonb,
-    row=dict,
+    row=_row,
     transaction=psycopg.Connection.transaction,
     row_lock=" FOR UPDATE",
     on_duplicate=" ON CONFLICT ({key}) DO NOTHING",

@@ -113,10 +113,10 @@ class RunInfo:
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict of every field, plus ``calibration_warnings``."""
-        return _json_ready(self, _RUN_DICT_KEYS)
+        return _json_ready(self, RUN_DICT_KEYS)
 
 
-_RUN_DICT_KEYS = (
+RUN_DICT_KEYS = (  # the keys of RunInfo.to_dict, in order
     "run_id", "campaign_id", "status", "reason", "unit_serial", "operator", "rig_id",
     "plan_name", "plan_version", "software_version", "started_at", "finished_at",
     "n_samples", "path", "calibration", "calibration_warnings", "metrics", "writer_pid",

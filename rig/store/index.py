@@ -61,17 +61,8 @@ def _row_dict(row: sqlite3.Row) -> dict[str, Any]:
     return {k: (from_json(row[k]) if k in JSON_COLUMNS else row[k]) for k in row.keys()}  # noqa: SIM118
 
 
-SQLITE = Dialect(
-    placeholder="?",
-    order_column="rowid",
-    json_type="TEXT",
-    serial_key="INTEGER PRIMARY KEY AUTOINCREMENT",
-    order_declaration="",
-    history_order="started_at",
-    json_param=to_json,
-    row=_row_dict,
-    transaction=write_transaction,
-)
+# SQLite's words are the dialect's defaults: "?", the rowid, JSON as TEXT, no row locks.
+SQLITE = Dialect(json_param=to_json, row=_row_dict, transaction=write_transaction)
 
 
 def create_index(db_path: Path, busy_timeout_s: float) -> None:

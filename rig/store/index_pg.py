@@ -54,15 +54,15 @@ def _row(row: dict[str, Any]) -> dict[str, Any]:
 
 
 POSTGRES = Dialect(
+    json_param=_jsonb,
+    row=_row,
+    transaction=psycopg.Connection.transaction,
     placeholder="%s",
     order_column="seq",
     json_type="JSONB",
     serial_key="BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY",
     order_declaration=" seq BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,",
     history_order="started_at, seq",
-    json_param=_jsonb,
-    row=_row,
-    transaction=psycopg.Connection.transaction,
     row_lock=" FOR UPDATE",
     on_duplicate=" ON CONFLICT ({key}) DO NOTHING",
 )

@@ -36,30 +36,31 @@ Connection = Any
 
 @dataclass(frozen=True)
 class Dialect:
-    """How one database spells what the shared schema and queries need."""
+    """How one database spells what the shared schema and queries need. The words default
+    to SQLite's (the embedded back-end); a database overrides those it spells otherwise."""
 
-    #: The parameter marker ("?" or "%s").
-    placeholder: str
-    #: The column that keeps insertion order ("rowid", or an identity column "seq").
-    order_column: str
-    #: The type of a JSON column ("TEXT" or "JSONB").
-    json_type: str
-    #: The type of an automatically numbered primary key.
-    serial_key: str
-    #: The declaration of the insertion-order column of runs and campaigns, after their
-    #: key ("": the implicit rowid).
-    order_declaration: str
-    #: The trailing columns of the history indexes: started_at, then insertion order where
-    #: the index does not keep it implicitly.
-    history_order: str
     #: The JSON adapter: a Python value (None stays None) as a query parameter.
     json_param: Callable[[Any], Any]
     #: A fetched row as a dict, JSON columns as Python objects.
     row: Callable[[Any], dict[str, Any]]
     #: The write transaction of a connection (a context manager; rolls back on error).
     transaction: Callable[[Connection], AbstractContextManager[Any]]
-    #: Appended to a read of the row a write transaction changes: the row lock ("" when
-    #: the transaction holds the whole database).
+    #: The parameter marker.
+    placeholder: str = "?"
+    #: The column that keeps insertion order (SQLite's implicit rowid, or an identity column).
+    order_column: str = "rowid"
+    #: The type of a JSON column.
+    json_type: str = "TEXT"
+    #: The type of an automatically numbered primary key.
+    serial_key: str = "INTEGER PRIMARY KEY AUTOINCREMENT"
+    #: The declaration of the insertion-order column of runs and campaigns, after their
+    #: key ("": the implicit rowid).
+    order_declaration: str = ""
+    #: The trailing columns of the history indexes: started_at, then insertion order where
+    #: an index does not keep it implicitly (SQLite's indexes end in the rowid).
+    history_order: str = "started_at"
+    #: Appended to a read of the row a write transaction changes: the row lock ("": the
+    #: transaction holds the whole database, SQLite's BEGIN IMMEDIATE).
     row_lock: str = ""
     #: Appended to an insert whose retry after a lost commit may find its own row; ``{key}``
     #: is the key column ("": a duplicate is an error, no retry can have written it).

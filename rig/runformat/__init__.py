@@ -366,8 +366,8 @@ def write_run(run: Run, folder: str | Path) -> Path:
     _check_run(run)
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
-    _atomic_write(out / SAMPLES_CSV, samples_text(run.columns, run.data))
-    _atomic_write(out / RUN_JSON, json.dumps(run.meta, indent=2, ensure_ascii=False) + "\n")
+    atomic_write_text(out / SAMPLES_CSV, samples_text(run.columns, run.data))
+    atomic_write_text(out / RUN_JSON, json.dumps(run.meta, indent=2, ensure_ascii=False) + "\n")
     return out
 
 
@@ -400,7 +400,7 @@ def write_campaign(campaign: Campaign, folder: str | Path) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     for name, run in zip(names, campaign.runs, strict=True):
         write_run(run, out / name)
-    _atomic_write(out / CAMPAIGN_JSON, json.dumps(meta, indent=2, ensure_ascii=False) + "\n")
+    atomic_write_text(out / CAMPAIGN_JSON, json.dumps(meta, indent=2, ensure_ascii=False) + "\n")
     return out
 
 
@@ -648,7 +648,8 @@ def _read_text(path: Path) -> str:
     return decode(path, read_bytes(path))
 
 
-def _atomic_write(path: Path, text: str) -> None:
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path``: a temp file beside it, fsync, rename."""
     tmp = path.with_name(f".{path.name}.tmp")
     with open(tmp, "w", encoding="utf-8", newline="") as f:
         f.write(text)

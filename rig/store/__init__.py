@@ -27,6 +27,7 @@ import logging
 import os
 import shutil
 import socket
+from collections.abc import Callable, Mapping
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -45,6 +46,7 @@ from rig.runformat import (
     SamplesAppender,
     read_run,
 )
+from rig.store.backend import IndexBackend, RunFilter, to_json
 from rig.store.files import (
     WriterLock,
     cut_incomplete_tail,
@@ -63,23 +65,17 @@ from rig.store.ids import (
     utc_now_iso,
     validate_id,
 )
-from rig.store.index import (
-    INDEX_NAME,
-    IndexBackend,
-    RunFilter,
-    SqliteIndex,
-    campaign_info,
-    run_info,
-    to_json,
-)
+from rig.store.index import INDEX_NAME, SqliteIndex
 from rig.store.recorder import RunRecorder
 from rig.store.records import (
     FINAL_STATUSES,
     RUN_STATUSES,
     CampaignInfo,
     RunInfo,
+    campaign_info,
     check_calibration,
     past_due,
+    run_info,
 )
 
 __all__ = [
@@ -270,7 +266,7 @@ class Store:
             folder_parent = camp.path
         started_at = utc_now_iso()
         label = safe_label(fields["unit_serial"], "unit")
-        folder, run_id = self._claim_folder(folder_parent, label)
+        folder, run_id = self._claim_folder(folder_parent, label, self._index.run_exists)
         unit = meta.get("unit") or {}
         design = unit.get("design") if unit.get("design") is not None else unit.get("model")
         full_meta: dict[str, Any] = {
@@ -317,17 +313,20 @@ class Store:
             log.warning("run %s: %s", run_id, message)
         return RunRecorder(self, run_id, folder, full_meta, appender, lock, warnings)
 
-    def _claim_folder(self, parent: Path, label: str) -> tuple[Path, str]:
-        """Create ``parent/<new id>`` atomically (mkdir is the claim); return it and the id."""
-        for run_id in id_candidates(label):
-            if self._index.run_exists(run_id):
+    @staticmethod
+    def _claim_folder(parent: Path, label: str,
+                      indexed: Callable[[str], bool] = lambda _id: False) -> tuple[Path, str]:
+        """Create ``parent/<new id>`` atomically (mkdir is the claim), skipping the ids
+        ``indexed`` says are taken; return it and the id."""
+        for new_id in id_candidates(label):
+            if indexed(new_id):
                 continue
-            folder = parent / run_id
+            folder = parent / new_id
             try:
                 folder.mkdir()
             except FileExistsError:
                 continue
-            return folder, run_id
+            return folder, new_id
         raise AssertionError("unreachable: id_candidates is endless")
 
     def _finalize_run(
@@ -538,11 +537,7 @@ class Store:
 
     def get_run(self, run_id: str) -> RunInfo:
         """The index row of one run (InvalidIdError / UnknownIdError)."""
-        validate_id(run_id, "run")
-        row = self._index.get_run(run_id)
-        if row is None:
-            raise UnknownIdError(f"no run {run_id!r} in the store {self.location}")
-        return run_info(row, self.root)
+        return run_info(self._indexed("run", run_id, self._index.get_run), self.root)
 
     def run_path(self, run_id: str) -> Path:
         """The folder of a run (validated id, known to the index)."""
@@ -575,13 +570,8 @@ class Store:
         _reject_reserved(meta, CAMPAIGN_RESERVED_KEYS, "campaign meta")
         to_json(meta)
         started_at = utc_now_iso()
-        for campaign_id in id_candidates(safe_label(name, "campaign")):
-            folder = self.root / "campaigns" / campaign_id
-            try:
-                folder.mkdir()
-            except FileExistsError:
-                continue
-            break
+        folder, campaign_id = self._claim_folder(self.root / "campaigns",
+                                                 safe_label(name, "campaign"))
         cmeta = {
             "format": CAMPAIGN_FORMAT, "name": name, "campaign_id": campaign_id,
             "status": "running", "started_at": started_at, **meta, "runs": [],
@@ -624,11 +614,18 @@ class Store:
 
     def get_campaign(self, campaign_id: str) -> CampaignInfo:
         """The index row of one campaign (InvalidIdError / UnknownIdError)."""
-        validate_id(campaign_id, "campaign")
-        row = self._index.get_campaign(campaign_id)
+        return campaign_info(
+            self._indexed("campaign", campaign_id, self._index.get_campaign), self.root)
+
+    def _indexed(self, kind: str, id_: str,
+                 get: Callable[[str], Mapping[str, Any] | None]) -> Mapping[str, Any]:
+        """The index row of a run or campaign (``kind``) by ``get`` (InvalidIdError /
+        UnknownIdError)."""
+        validate_id(id_, kind)
+        row = get(id_)
         if row is None:
-            raise UnknownIdError(f"no campaign {campaign_id!r} in the store {self.location}")
-        return campaign_info(row, self.root)
+            raise UnknownIdError(f"no {kind} {id_!r} in the store {self.location}")
+        return row
 
     def list_campaigns(self) -> list[CampaignInfo]:
         """All campaigns, newest first."""

@@ -19,6 +19,7 @@ from typing import Any
 
 import pyarrow.parquet as pq
 
+from rig.runformat import atomic_write_text
 from rig.runformat.base import SAMPLES_CSV, SAMPLES_PARQUET
 from rig.runformat.csvread import read_samples_csv
 from rig.runformat.parquet import write_samples_parquet
@@ -32,13 +33,8 @@ def write_json_atomic(path: Path, obj: Any) -> None:
     Raises ValueError (before touching the file) if ``obj`` is not strict JSON (NaN, inf,
     objects that are not dicts/lists/str/numbers/bools/None).
     """
-    text = json.dumps(obj, indent=2, ensure_ascii=False, allow_nan=False) + "\n"
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", encoding="utf-8", newline="") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    atomic_write_text(path, json.dumps(obj, indent=2, ensure_ascii=False, allow_nan=False)
+                      + "\n")
     sync_dir(path.parent)
 
 

@@ -15,19 +15,16 @@ import pandas as pd
 
 from rig.results.analyse import METRIC_KEYS
 from rig.results.outcome import outcome_word, parse_outcome
+from rig.store.records import RUN_DICT_KEYS
 
 if TYPE_CHECKING:
     from rig.store import Store
 
 __all__ = ["RUN_COLUMNS", "runs_frame"]
 
-RUN_COLUMNS = (
-    "run_id", "campaign_id", "status", "reason", "unit_serial", "operator", "rig_id",
-    "plan_name", "plan_version", "software_version", "started_at", "finished_at",
-    "n_samples", "path", "calibration", "calibration_warnings", "metrics", "writer_pid",
-    "writer_host", "outcome", "verdict", "design",
-)
-"""The keys of one run of ``rig runs --json``, in order."""
+RUN_COLUMNS = (*RUN_DICT_KEYS[:-1], "verdict", RUN_DICT_KEYS[-1])
+"""The keys of one run of ``rig runs --json``, in order: :meth:`RunInfo.to_dict`'s with
+``verdict`` before the last (``design``)."""
 
 
 def runs_frame(store: Store, *, serial: str | None = None, since: str | None = None,

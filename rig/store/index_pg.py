@@ -1,9 +1,10 @@
 """The store's index in PostgreSQL (``--store postgresql://...``), through psycopg 3.
 
-Same tables, columns and versioned migrations as the SQLite index (:mod:`rig.store.index`);
-JSON columns are ``jsonb``, insertion order is a ``seq`` identity column. Migrations run
-under a transaction-scoped advisory lock, so rigs starting at once never race on them; the
-version is kept in the table ``rig_schema``.
+The schema and the queries are the shared ones of :mod:`rig.store.sql` in the PostgreSQL
+dialect (:data:`POSTGRES`): JSON columns are ``jsonb``, insertion order is a ``seq``
+identity column, a write reads the rows it changes ``FOR UPDATE``. Migrations run under a
+transaction-scoped advisory lock, so rigs starting at once never race on them; the version
+is kept in the table ``rig_schema``.
 
 Connections: one per thread and process, opened on first use, autocommit with explicit
 transactions. Once a process has reached the database, a lost connection (the server
@@ -16,108 +17,25 @@ wrong URL fails at once with a clear error.
 from __future__ import annotations
 
 import contextlib
-import itertools
 import logging
 import os
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from typing import Any, TypeVar
+from typing import Any
 
 import psycopg
 from psycopg.rows import dict_row
 from psycopg.types.json import Jsonb
 
 from rig.core.redact import redact
+from rig.store.backend import SCHEMA_VERSION, check_version, json_text_params
 from rig.store.ids import StoreError, StoreUnavailable
-from rig.store.index import (
-    JSON_COLUMNS,
-    RUN_INSERT_COLUMNS,
-    SCHEMA_VERSION,
-    IndexBackend,
-    RunFilter,
-    RunUpdate,
-    check_version,
-    to_json,
-)
+from rig.store.sql import Dialect, SqlIndex, T, first_and_rest, migrate, migrations
 
 log = logging.getLogger("rig.store")
 
-T = TypeVar("T")
 _LOCK_KEY = 0x726967  # "rig": the advisory lock of schema migrations
-
-_PG_MIGRATIONS: dict[int, tuple[str, ...]] = {
-    1: (
-        """CREATE TABLE IF NOT EXISTS campaigns (
-            campaign_id TEXT PRIMARY KEY,
-            seq BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,
-            name TEXT NOT NULL,
-            status TEXT NOT NULL CHECK (status IN ('running', 'completed', 'aborted')),
-            started_at TEXT NOT NULL,
-            finished_at TEXT,
-            path TEXT NOT NULL,
-            meta JSONB NOT NULL,
-            summary JSONB
-        )""",
-        """CREATE TABLE IF NOT EXISTS runs (
-            run_id TEXT PRIMARY KEY,
-            seq BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,
-            campaign_id TEXT REFERENCES campaigns (campaign_id),
-            unit_serial TEXT,
-            operator TEXT,
-            rig_id TEXT,
-            calibration JSONB NOT NULL,
-            software_version TEXT NOT NULL,
-            plan_name TEXT,
-            plan_version TEXT,
-            status TEXT NOT NULL CHECK (status IN ('running', 'completed', 'aborted')),
-            reason TEXT,
-            started_at TEXT NOT NULL,
-            finished_at TEXT,
-            n_samples INTEGER,
-            path TEXT NOT NULL,
-            metrics JSONB,
-            writer_pid INTEGER,
-            writer_host TEXT
-        )""",
-        "CREATE INDEX IF NOT EXISTS runs_by_status ON runs (status)",
-        "CREATE INDEX IF NOT EXISTS runs_by_campaign ON runs (campaign_id)",
-    ),
-    2: (
-        "ALTER TABLE runs ADD COLUMN outcome TEXT",
-        "ALTER TABLE runs ADD COLUMN meta JSONB",
-        "ALTER TABLE runs ADD COLUMN design TEXT",
-        "CREATE INDEX runs_by_start ON runs (started_at, seq)",
-        "CREATE INDEX runs_by_serial ON runs (unit_serial, started_at, seq)",
-        "CREATE INDEX runs_by_outcome ON runs (outcome, started_at, seq)",
-        "CREATE INDEX runs_by_design ON runs (design, started_at, seq)",
-        """CREATE TABLE results (
-            result_id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
-            run_id TEXT REFERENCES runs (run_id),
-            campaign_id TEXT REFERENCES campaigns (campaign_id),
-            software_version TEXT NOT NULL,
-            computed_at TEXT NOT NULL,
-            metrics JSONB,
-            diagnosis JSONB,
-            error TEXT,
-            CHECK ((run_id IS NULL) <> (campaign_id IS NULL))
-        )""",
-        "CREATE UNIQUE INDEX results_of_run ON results (run_id, software_version)"
-        " WHERE run_id IS NOT NULL",
-        "CREATE UNIQUE INDEX results_of_campaign ON results (campaign_id, software_version)"
-        " WHERE campaign_id IS NOT NULL",
-        """CREATE TABLE audit (
-            audit_id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
-            at TEXT NOT NULL,
-            action TEXT NOT NULL,
-            target TEXT NOT NULL,
-            pid INTEGER,
-            host TEXT,
-            detail JSONB
-        )""",
-        "CREATE INDEX audit_by_target ON audit (target)",
-    ),
-}
 
 
 def first_line(error: BaseException) -> str:
@@ -126,16 +44,35 @@ def first_line(error: BaseException) -> str:
     return text.splitlines()[0].strip() if text else type(error).__name__
 
 
-def _json(value: Any) -> Any:
+def _jsonb(value: Any) -> Any:
     return None if value is None else Jsonb(value)
 
 
-def _params(row: Mapping[str, Any], cols: Iterable[str]) -> list[Any]:
-    return [_json(row[c]) if c in JSON_COLUMNS else row[c] for c in cols]
+def _row(row: dict[str, Any]) -> dict[str, Any]:
+    """A fetched row as it is: dict rows, jsonb already decoded by psycopg."""
+    return row
 
 
-class PostgresIndex(IndexBackend):
+POSTGRES = Dialect(
+    json_param=_jsonb,
+    row=_row,
+    transaction=psycopg.Connection.transaction,
+    placeholder="%s",
+    order_column="seq",
+    json_type="JSONB",
+    serial_key="BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY",
+    order_declaration=" seq BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,",
+    history_order="started_at, seq",
+    row_lock=" FOR UPDATE",
+    on_duplicate=" ON CONFLICT ({key}) DO NOTHING",
+)
+_PG_MIGRATIONS = migrations(POSTGRES)  # (the tests build a version-1 schema from it)
+
+
+class PostgresIndex(SqlIndex):
     """The index in the PostgreSQL database named by ``url`` (see the module doc)."""
+
+    dialect = POSTGRES
 
     def __init__(self, url: str, *, reconnect_s: float = 60.0, connect_timeout_s: int = 5
                  ) -> None:
@@ -224,190 +161,28 @@ class PostgresIndex(IndexBackend):
         def q(conn: psycopg.Connection, _: int) -> int:
             if conn.execute("SELECT to_regclass('rig_schema') AS t").fetchone()["t"] is None:
                 return 0
-            row = conn.execute("SELECT max(version) AS v FROM rig_schema").fetchone()
-            return int(row["v"] or 0)
+            return _recorded_version(conn)
         return self._call(q)
 
     def ensure_schema(self) -> None:
         if self.schema_version() == SCHEMA_VERSION:
             return
 
-        def migrate(conn: psycopg.Connection, _: int) -> None:
+        def migrate_locked(conn: psycopg.Connection, _: int) -> None:
             with conn.transaction():
                 conn.execute("SELECT pg_advisory_xact_lock(%s)", (_LOCK_KEY,))
                 conn.execute("CREATE TABLE IF NOT EXISTS rig_schema (version INTEGER NOT NULL)")
-                row = conn.execute("SELECT max(version) AS v FROM rig_schema").fetchone()
-                version = int(row["v"] or 0)
+                version = _recorded_version(conn)
                 check_version(version, self.location)
-                for step in range(version + 1, SCHEMA_VERSION + 1):
-                    for statement in _PG_MIGRATIONS[step]:
-                        conn.execute(statement)
-                    conn.execute("INSERT INTO rig_schema (version) VALUES (%s)", (step,))
-        self._call(migrate)
+                migrate(conn, POSTGRES, version, lambda step: conn.execute(
+                    "INSERT INTO rig_schema (version) VALUES (%s)", (step,)))
+        self._call(migrate_locked)
 
-    # ------------------------------------------------------------------ runs
-
-    @staticmethod
-    def _audit(conn: psycopg.Connection, audit: Mapping[str, Any]) -> None:
-        conn.execute(
-            "INSERT INTO audit (at, action, target, pid, host, detail) "
-            "VALUES (%s, %s, %s, %s, %s, %s)",
-            (audit["at"], audit["action"], audit["target"], audit.get("pid"),
-             audit.get("host"), _json(audit.get("detail"))),
-        )
-
-    def run_exists(self, run_id: str) -> bool:
-        return self._call(lambda c, _: c.execute(
-            "SELECT 1 FROM runs WHERE run_id = %s", (run_id,)).fetchone() is not None)
-
-    def add_audit(self, audit: Mapping[str, Any]) -> None:
-        """One audit record on its own (an operator's action: a fault reset, an override)."""
-
-        def add(conn: psycopg.Connection, attempt: int) -> None:
-            with conn.transaction():
-                self._audit(conn, audit)
-        self._call(add)
-
-    def insert_run(self, row: Mapping[str, Any]) -> None:
-        cols = ", ".join(RUN_INSERT_COLUMNS)
-        marks = ", ".join(["%s"] * len(RUN_INSERT_COLUMNS))
-
-        def ins(conn: psycopg.Connection, attempt: int) -> None:
-            with conn.transaction():
-                # a retry after a lost commit finds its own row: the id was claimed by mkdir
-                cur = conn.execute(f"INSERT INTO runs ({cols}) VALUES ({marks}) "
-                                   "ON CONFLICT (run_id) DO NOTHING",
-                                   _params(row, RUN_INSERT_COLUMNS))
-                if cur.rowcount == 1:
-                    self._audit(conn, {"at": row["started_at"], "action": "run started",
-                                       "target": row["run_id"], "pid": row["writer_pid"],
-                                       "host": row["writer_host"]})
-                elif attempt == 0:
-                    raise StoreError(f"run id {row['run_id']} is in the index already")
-        self._call(ins)
-
-    def finalize_run(self, run_id: str, update: Callable[[str | None], RunUpdate | None],
-                     audit: Mapping[str, Any]) -> bool:
-        def fin(conn: psycopg.Connection, _: int) -> bool:
-            with conn.transaction():
-                row = conn.execute(
-                    "SELECT status, campaign_id FROM runs WHERE run_id = %s FOR UPDATE",
-                    (run_id,)).fetchone()
-                if row is None or row["status"] != "running":
-                    return False
-                if row["campaign_id"] is not None:  # campaign.json: one writer at a time
-                    conn.execute("SELECT 1 FROM campaigns WHERE campaign_id = %s FOR UPDATE",
-                                 (row["campaign_id"],))
-                values = update(row["campaign_id"])
-                if values is None:
-                    return False
-                cols = list(values)
-                conn.execute(
-                    f"UPDATE runs SET {', '.join(f'{c} = %s' for c in cols)} "
-                    "WHERE run_id = %s AND status = 'running'",
-                    [*_params(values, cols), run_id])
-                self._audit(conn, audit)
-                return True
-        return self._call(fin)
-
-    def running_runs(self) -> list[tuple[str, str]]:
-        rows = self._call(lambda c, _: c.execute(
-            "SELECT run_id, path FROM runs WHERE status = 'running' ORDER BY seq").fetchall())
-        return [(r["run_id"], r["path"]) for r in rows]
-
-    def query_runs(self, flt: RunFilter) -> list[Mapping[str, Any]]:
-        where, args = flt.where("%s")
-        sql = f"SELECT * FROM runs{where} ORDER BY started_at DESC, seq DESC"
-        if flt.limit is not None:
-            sql += f" LIMIT {int(flt.limit)}"
-        return self._call(lambda c, _: c.execute(sql, args).fetchall())
-
-    def get_run(self, run_id: str) -> Mapping[str, Any] | None:
-        return self._call(lambda c, _: c.execute(
-            "SELECT * FROM runs WHERE run_id = %s", (run_id,)).fetchone())
-
-    # ------------------------------------------------------------------ campaigns
-
-    def insert_campaign(self, row: Mapping[str, Any]) -> None:
-        def ins(conn: psycopg.Connection, attempt: int) -> None:
-            with conn.transaction():
-                cur = conn.execute(
-                    "INSERT INTO campaigns (campaign_id, name, status, started_at, path, meta) "
-                    "VALUES (%s, %s, 'running', %s, %s, %s) ON CONFLICT DO NOTHING",
-                    (row["campaign_id"], row["name"], row["started_at"], row["path"],
-                     Jsonb(row["meta"])))
-                if cur.rowcount == 1:
-                    self._audit(conn, {"at": row["started_at"], "action": "campaign started",
-                                       "target": row["campaign_id"], "pid": row.get("pid"),
-                                       "host": row.get("host")})
-                elif attempt == 0:
-                    raise StoreError(f"campaign id {row['campaign_id']} is in the index already")
-        self._call(ins)
-
-    def finish_campaign(self, campaign_id: str,
-                        update: Callable[[Mapping[str, Any]], RunUpdate]) -> None:
-        def fin(conn: psycopg.Connection, _: int) -> None:
-            with conn.transaction():
-                row = conn.execute("SELECT * FROM campaigns WHERE campaign_id = %s FOR UPDATE",
-                                   (campaign_id,)).fetchone()
-                if row is None:
-                    raise StoreError(f"no campaign {campaign_id!r} in the store {self.location}")
-                if row["status"] != "running":
-                    raise StoreError(f"campaign {campaign_id} is already {row['status']}")
-                values = update(row)
-                audit = values.pop("audit")
-                conn.execute(
-                    "UPDATE campaigns SET status = %s, finished_at = %s, summary = %s "
-                    "WHERE campaign_id = %s",
-                    (values["status"], values["finished_at"], _json(values["summary"]),
-                     campaign_id))
-                self._audit(conn, audit)
-        self._call(fin)
-
-    def get_campaign(self, campaign_id: str) -> Mapping[str, Any] | None:
-        return self._call(lambda c, _: c.execute(
-            "SELECT * FROM campaigns WHERE campaign_id = %s", (campaign_id,)).fetchone())
-
-    def list_campaigns(self) -> list[Mapping[str, Any]]:
-        return self._call(lambda c, _: c.execute(
-            "SELECT * FROM campaigns ORDER BY seq DESC").fetchall())
-
-    # ------------------------------------------------------------------ results, audit
-
-    def add_result(self, row: Mapping[str, Any]) -> bool:
-        def ins(conn: psycopg.Connection, attempt: int) -> bool:
-            cur = conn.execute(
-                """INSERT INTO results (run_id, campaign_id, software_version, computed_at,
-                metrics, diagnosis, error) VALUES (%s, %s, %s, %s, %s, %s, %s)
-                ON CONFLICT DO NOTHING""",
-                (row.get("run_id"), row.get("campaign_id"), row["software_version"],
-                 row["computed_at"], _json(row.get("metrics")), _json(row.get("diagnosis")),
-                 row.get("error")))
-            return cur.rowcount == 1 or attempt > 0
-        return self._call(ins)
-
-    def results(self, *, run_id: str | None = None, campaign_id: str | None = None,
-                software_version: str | None = None) -> list[Mapping[str, Any]]:
-        parts, args = [], []
-        for column, value in (("run_id", run_id), ("campaign_id", campaign_id),
-                              ("software_version", software_version)):
-            if value is not None:
-                parts.append(f"{column} = %s")
-                args.append(value)
-        where = " WHERE " + " AND ".join(parts) if parts else ""
-        return self._call(lambda c, _: c.execute(
-            f"SELECT * FROM results{where} ORDER BY result_id", args).fetchall())
-
-    def audit_records(self, target: str | None = None) -> list[Mapping[str, Any]]:
-        sql, args = "SELECT * FROM audit", []
-        if target is not None:
-            sql, args = sql + " WHERE target = %s", [target]
-        return self._call(lambda c, _: c.execute(sql + " ORDER BY audit_id", args).fetchall())
+    # ------------------------------------------------------------------ bulk
 
     def bulk_insert_runs(self, rows: Iterable[Mapping[str, Any]]) -> int:
         """COPY in one transaction (JSON columns as JSON text)."""
-        rows = iter(rows)
-        first = next(rows, None)
+        first, rows = first_and_rest(rows)
         if first is None:
             return 0
         cols = list(first)
@@ -418,8 +193,14 @@ class PostgresIndex(IndexBackend):
             n = 0
             with conn.transaction(), conn.cursor() as cur, cur.copy(
                     f"COPY runs ({', '.join(cols)}) FROM STDIN") as copy:
-                for r in itertools.chain([first], rows):
-                    copy.write_row([to_json(r[c]) if c in JSON_COLUMNS else r[c] for c in cols])
+                for r in rows:
+                    copy.write_row(json_text_params(r, cols))
                     n += 1
             return n
         return self._call(copy_all)
+
+
+def _recorded_version(conn: psycopg.Connection) -> int:
+    """The newest version in ``rig_schema`` (0: none)."""
+    row = conn.execute("SELECT max(version) AS v FROM rig_schema").fetchone()
+    return int(row["v"] or 0)

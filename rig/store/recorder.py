@@ -10,9 +10,9 @@ from typing import Any, Protocol
 
 from rig.core.errors import RigError
 from rig.runformat import SamplesAppender
+from rig.store.backend import to_json
 from rig.store.files import WriterLock, finalise_samples
 from rig.store.ids import StoreError
-from rig.store.index import to_json
 from rig.store.records import FINAL_STATUSES, RunInfo
 
 

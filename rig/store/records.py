@@ -8,10 +8,13 @@ the UTC date on which the run started.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import date, datetime
 from pathlib import Path
 from typing import Any
+
+from rig.store.backend import from_json
 
 RUN_STATUSES = ("running", "completed", "aborted")
 FINAL_STATUSES = ("completed", "aborted")
@@ -110,29 +113,15 @@ class RunInfo:
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict of every field, plus ``calibration_warnings``."""
-        return {
-            "run_id": self.run_id,
-            "campaign_id": self.campaign_id,
-            "status": self.status,
-            "reason": self.reason,
-            "unit_serial": self.unit_serial,
-            "operator": self.operator,
-            "rig_id": self.rig_id,
-            "plan_name": self.plan_name,
-            "plan_version": self.plan_version,
-            "software_version": self.software_version,
-            "started_at": self.started_at,
-            "finished_at": self.finished_at,
-            "n_samples": self.n_samples,
-            "path": str(self.path),
-            "calibration": self.calibration,
-            "calibration_warnings": self.calibration_warnings,
-            "metrics": self.metrics,
-            "writer_pid": self.writer_pid,
-            "writer_host": self.writer_host,
-            "outcome": self.outcome,
-            "design": self.design,
-        }
+        return _json_ready(self, RUN_DICT_KEYS)
+
+
+RUN_DICT_KEYS = (  # the keys of RunInfo.to_dict, in order
+    "run_id", "campaign_id", "status", "reason", "unit_serial", "operator", "rig_id",
+    "plan_name", "plan_version", "software_version", "started_at", "finished_at",
+    "n_samples", "path", "calibration", "calibration_warnings", "metrics", "writer_pid",
+    "writer_host", "outcome", "design",
+)
 
 
 @dataclass(frozen=True)
@@ -149,13 +138,61 @@ class CampaignInfo:
     summary: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "campaign_id": self.campaign_id,
-            "name": self.name,
-            "status": self.status,
-            "started_at": self.started_at,
-            "finished_at": self.finished_at,
-            "path": str(self.path),
-            "meta": self.meta,
-            "summary": self.summary,
-        }
+        """A JSON-ready dict of every field."""
+        return _json_ready(self, _CAMPAIGN_DICT_KEYS)
+
+
+_CAMPAIGN_DICT_KEYS = (
+    "campaign_id", "name", "status", "started_at", "finished_at", "path", "meta", "summary",
+)
+
+
+def _json_ready(record: RunInfo | CampaignInfo, keys: tuple[str, ...]) -> dict[str, Any]:
+    """``record``'s attributes ``keys`` in that order, its path as text."""
+    out = {key: getattr(record, key) for key in keys}
+    out["path"] = str(record.path)
+    return out
+
+
+def run_info(row: Mapping[str, Any], root: Path) -> RunInfo:
+    """A :class:`RunInfo` from a ``runs`` row; ``path`` made absolute under ``root``."""
+    return RunInfo(
+        **{key: row[key] for key in _RUN_PLAIN_COLUMNS},
+        calibration=from_json(row["calibration"]),
+        path=root / row["path"],
+        metrics=from_json(row["metrics"]),
+        outcome=_indexed_outcome(row),
+        design=row.get("design"),
+    )
+
+
+# The columns a RunInfo takes as they are.
+_RUN_PLAIN_COLUMNS = (
+    "run_id", "campaign_id", "unit_serial", "operator", "rig_id", "software_version",
+    "plan_name", "plan_version", "status", "reason", "started_at", "finished_at",
+    "n_samples", "writer_pid", "writer_host",
+)
+
+
+def _indexed_outcome(row: Mapping[str, Any]) -> str | None:
+    """The run's outcome as every view shows it (rig/results/outcome.py ``recorded_outcome``) when
+    the row keeps the run's record (``meta``); else the indexed word as it is."""
+    from rig.results.outcome import recorded_outcome
+
+    meta = from_json(row.get("meta"))
+    if not isinstance(meta, dict):
+        return row.get("outcome")
+    metrics = from_json(row.get("metrics"))
+    return recorded_outcome({**meta, "status": row["status"], "outcome": row.get("outcome"),
+                             "result": metrics if metrics is not None else meta.get("result")})
+
+
+def campaign_info(row: Mapping[str, Any], root: Path) -> CampaignInfo:
+    """A :class:`CampaignInfo` from a ``campaigns`` row."""
+    return CampaignInfo(
+        **{key: row[key] for key in ("campaign_id", "name", "status", "started_at",
+                                     "finished_at")},
+        path=root / row["path"],
+        meta=from_json(row["meta"]),
+        summary=from_json(row["summary"]),
+    )

@@ -59,18 +59,23 @@ def _cell(value: Any, u: Any, fmt: Any, factor: float) -> str:
     return _num(value * factor, fmt) + ("" if u is None else f" ± {_num(u, fmt)}")
 
 
+def _metric_table(title: str, model_header: str) -> Table:
+    """The columns of both tables: run, metric, measured ± u, the model, unit."""
+    table = Table(title=title)
+    table.add_column("run", overflow="fold")
+    table.add_column("metric", no_wrap=True)
+    table.add_column("measured ± u", justify="right", no_wrap=True)
+    table.add_column(model_header, justify="right", no_wrap=True)
+    table.add_column("unit", no_wrap=True)
+    return table
+
+
 def _table(items: list[RunAnalysis]) -> Table:
     """One row per metric of each run (run, metric, measured ± standard uncertainty, the
     model's prediction, unit): narrow enough for an 80-column terminal with every header and
     figure whole (nine metric columns side by side cut them: "backl…")."""
-    table = Table(
-        title=f"Hysteresis loop metrics (±{items[0].lost_motion_pct:g} % of rated torque)"
-    )
-    table.add_column("run", overflow="fold")
-    table.add_column("metric", no_wrap=True)
-    table.add_column("measured ± u", justify="right", no_wrap=True)
-    table.add_column("model", justify="right", no_wrap=True)
-    table.add_column("unit", no_wrap=True)
+    table = _metric_table(
+        f"Hysteresis loop metrics (±{items[0].lost_motion_pct:g} % of rated torque)", "model")
     for item in items:
         d = item.to_dict()
         u = d.get("uncertainty") or {}
@@ -102,12 +107,7 @@ TE_ROWS: tuple[tuple[str, str, str], ...] = (
 def _te_table(items: list[Any]) -> Table:
     """One row per TE figure (run, metric, measured ± u, model [band], unit), then the
     largest orders."""
-    table = Table(title="Transmission error")
-    table.add_column("run", overflow="fold")
-    table.add_column("metric", no_wrap=True)
-    table.add_column("measured ± u", justify="right", no_wrap=True)
-    table.add_column("model [band]", justify="right", no_wrap=True)
-    table.add_column("unit", no_wrap=True)
+    table = _metric_table("Transmission error", "model [band]")
     for item in items:
         d = item.to_dict()
         metrics, model = d["metrics"], d.get("model") or {}

@@ -16,7 +16,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from rig.commands.options import json_option
+from rig.commands.options import DEFAULT_STORE, SamplesOption, StoreOption, json_option
 from rig.commands.output import (
     console,
     exit_2_on_ctrl_c,
@@ -26,7 +26,6 @@ from rig.commands.output import (
     progress_bar,
     write_json,
 )
-from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
 
 
 def _summary_table(result: dict[str, Any]) -> Table:

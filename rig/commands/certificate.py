@@ -7,15 +7,13 @@ from typing import Annotated
 
 import typer
 
-from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
+from rig.commands.options import DEFAULT_STORE, RunOrCampaignArgument, SamplesOption, StoreOption
 
 
 def register(app: typer.Typer) -> None:
     @app.command()
     def certificate(
-        target: Annotated[str, typer.Argument(
-            metavar="RUN_OR_CAMPAIGN",
-            help="A run or campaign folder, or a run or campaign id of the --store.")],
+        target: RunOrCampaignArgument,
         pdf: Annotated[Path | None, typer.Option(
             "--pdf", help="Write the certificate as PDF (one A4 page).")] = None,
         html: Annotated[Path | None, typer.Option(

@@ -8,15 +8,13 @@ from typing import Annotated
 
 import typer
 
-from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
+from rig.commands.options import DEFAULT_STORE, RunOrCampaignArgument, SamplesOption, StoreOption
 
 
 def register(app: typer.Typer) -> None:
     @app.command()
     def export(
-        target: Annotated[str, typer.Argument(
-            metavar="RUN_OR_CAMPAIGN",
-            help="A run or campaign folder, or a run or campaign id of the --store.")],
+        target: RunOrCampaignArgument,
         fmt: Annotated[str, typer.Option(
             "--format", help="csv (a rig-run/1 run folder; a campaign's table), parquet, "
             "mat (MATLAB) or xlsx (Excel).")],

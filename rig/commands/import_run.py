@@ -10,7 +10,7 @@ from typing import Annotated
 
 import typer
 
-from rig.store.options import SAMPLES_HELP
+from rig.commands.options import SAMPLES_HELP
 
 
 def register(app: typer.Typer) -> None:

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from rig.commands.options import json_option
+from rig.commands.options import DEFAULT_STORE, SamplesOption, StoreOption, json_option
 from rig.commands.output import (
     console,
     exit_2_on_ctrl_c,
@@ -24,7 +24,6 @@ from rig.commands.output import (
     progress_bar,
     write_json,
 )
-from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
 
 if TYPE_CHECKING:
     from rich.console import Console

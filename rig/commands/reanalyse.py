@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
+from rig.commands.options import DEFAULT_STORE, SamplesOption, StoreOption
 
 
 def register(app: typer.Typer) -> None:

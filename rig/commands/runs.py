@@ -12,9 +12,8 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from rig.commands.options import json_option
+from rig.commands.options import DEFAULT_STORE, SamplesOption, StoreOption, json_option
 from rig.commands.output import outcome_markup
-from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
 
 if TYPE_CHECKING:
     from rig.store.records import RunInfo

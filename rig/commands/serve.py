@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from rig.store.options import SamplesOption
+from rig.commands.options import SamplesOption
 
 
 def register(app: typer.Typer) -> None:

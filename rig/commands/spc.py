@@ -8,8 +8,7 @@ from typing import Annotated
 
 import typer
 
-from rig.commands.options import json_option
-from rig.store.options import DEFAULT_STORE, SamplesOption, StoreOption
+from rig.commands.options import DEFAULT_STORE, SamplesOption, StoreOption, json_option
 
 
 def register(app: typer.Typer) -> None:

@@ -16,6 +16,7 @@ import numpy as np
 
 from analysis.errors import AnalysisError
 from rig.core.errors import RigError
+from rig.core.json_files import json_safe
 from rig.engine.merge import MergedRow
 from rig.results.analyse import METRIC_KEYS, analyse_run
 from rig.results.outcome import run_outcome
@@ -23,19 +24,6 @@ from rig.runformat import Run
 from rig.store import RunRecorder
 
 log = logging.getLogger(__name__)
-
-
-def json_safe(value: Any) -> Any:
-    """A copy with NaN/inf floats as None and numpy scalars as Python numbers (strict JSON)."""
-    if isinstance(value, dict):
-        return {str(k): json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_safe(v) for v in value]
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 @dataclass

@@ -21,6 +21,7 @@ import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
+from rig.core.durable import fsync_path
 from rig.core.errors import RigError
 
 __all__ = ["MARKER", "WriteTargetError", "atomic_file", "atomic_folder", "check_target"]
@@ -108,14 +109,6 @@ def _umask() -> int:
     return mask
 
 
-def _fsync(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 @contextlib.contextmanager
 def atomic_file(out: Path) -> Iterator[Path]:
     """Yield a temporary path beside ``out``; on success sync it and rename it to ``out``,
@@ -129,9 +122,9 @@ def atomic_file(out: Path) -> Iterator[Path]:
     os.chmod(tmp, 0o666 & ~_umask())  # as open() would make it (mkstemp makes 0600)
     try:
         yield tmp
-        _fsync(tmp)
+        fsync_path(tmp)
         os.replace(tmp, out)
-        _fsync(out.absolute().parent)
+        fsync_path(out.absolute().parent)
     except BaseException as exc:
         with contextlib.suppress(OSError):
             tmp.unlink()
@@ -157,7 +150,7 @@ def atomic_folder(out: Path) -> Iterator[Path]:
         yield tmp
         (tmp / MARKER).write_text("written by rig; rig may replace this folder (--force)\n")
         for child in tmp.iterdir():
-            _fsync(child)
+            fsync_path(child)
         if out.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
             os.replace(out, old / out.name)
@@ -167,7 +160,7 @@ def atomic_folder(out: Path) -> Iterator[Path]:
             if old is not None:
                 os.replace(old / out.name, out)
             raise
-        _fsync(out.absolute().parent)
+        fsync_path(out.absolute().parent)
     except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         if isinstance(exc, KeyboardInterrupt | SystemExit | RigError):

@@ -19,11 +19,11 @@ from typing import Any
 
 from analysis.loop import PROFILES
 from rig.core.errors import RigError
+from rig.core.json_files import json_safe
 from rig.core.realtime import apply_realtime_priority
 from rig.engine import Engine, EngineOptions
 from rig.engine.devices import DevicesIO
 from rig.engine.events import ProgressEvent
-from rig.engine.record import json_safe
 from rig.hardware.config import RigConfig, dump_rig_toml, load_rig_config
 from rig.hardware.devices import RigDevices, open_rig
 from rig.hardware.simulated_tolerances import SIMULATED_HEARTBEAT_MS, SIMULATED_MISSED_PERIODS

@@ -19,6 +19,7 @@ from typing import Any
 
 import pyarrow.parquet as pq
 
+from rig.core.durable import fsync_path
 from rig.runformat import atomic_write_text
 from rig.runformat.base import SAMPLES_CSV, SAMPLES_PARQUET
 from rig.runformat.csvread import read_samples_csv
@@ -40,11 +41,7 @@ def write_json_atomic(path: Path, obj: Any) -> None:
 
 def sync_dir(folder: Path) -> None:
     """fsync a folder so that a rename or a new entry in it survives a power loss."""
-    fd = os.open(folder, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+    fsync_path(folder)
 
 
 class WriterLock:

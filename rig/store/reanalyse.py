@@ -21,13 +21,13 @@ result (the same software would fail again).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from rig import __version__
+from rig.core.json_files import json_safe
 from rig.store import Store
 
 BATCH = 16  # jobs per Dask task: keeps the scheduler's per-task overhead small
@@ -60,21 +60,6 @@ class Summary:
         return dict(self.__dict__)
 
 
-def _finite(obj: Any) -> Any:
-    """Strict-JSON copy: NaN/inf as None, numpy scalars as Python numbers."""
-    import numpy as np
-
-    if isinstance(obj, dict):
-        return {str(k): _finite(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_finite(v) for v in obj]
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
-
-
 def run_job(job: Job) -> dict[str, Any]:
     """Do one job (on a worker): ``{"job", "status": ok|error|unreadable, "metrics" or
     "diagnosis", "error"}``."""
@@ -95,11 +80,11 @@ def run_job(job: Job) -> dict[str, Any]:
             from rig.results.any_run import analyse_any_run, result_record
 
             profile = job.profile or data.meta.get("profile")
-            out["metrics"] = _finite(result_record(analyse_any_run(data, profile=profile)))
+            out["metrics"] = json_safe(result_record(analyse_any_run(data, profile=profile)))
         else:
             from rig.results.diagnose import diagnose_campaign, report_dict
 
-            out["diagnosis"] = _finite(report_dict(data, diagnose_campaign(data)))
+            out["diagnosis"] = json_safe(report_dict(data, diagnose_campaign(data)))
     except (AnalysisError, RigError, ValueError) as exc:
         out.update(status="error", error=f"{type(exc).__name__}: {exc}")
     return out

@@ -27,9 +27,9 @@ from typing import Any
 
 from drivers.errors import DeviceError
 from rig.core.errors import RigError
+from rig.core.json_files import json_safe
 from rig.engine import Engine
 from rig.engine.events import ProgressEvent
-from rig.engine.record import json_safe
 from rig.engine.safety import PlanRejected, preflight
 from rig.hardware.calibration import CalibrationExpired, calibration_meta, calibration_status
 from rig.measurement.service import RigSession, run_campaign

@@ -20,7 +20,7 @@ def diagnose_campaign_folder(campaign_path: Path) -> tuple[dict[str, Any], str]:
     """Diagnose the campaign folder: its rig-diagnosis/1 report (JSON-safe) and the HTML page
     of :func:`rig.reports.diagnosis_html.render_html` (figures inline); the plain tables of
     :func:`plain_report_html` if that page cannot be drawn for this report."""
-    from rig.engine.record import json_safe
+    from rig.core.json_files import json_safe
     from rig.reports.certificate.header import header_for_campaign
     from rig.reports.diagnosis_html import render_html
     from rig.results.diagnose import diagnose_path, report_dict

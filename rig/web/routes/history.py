@@ -18,7 +18,7 @@ from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 
 from rig.core.errors import RigError
-from rig.engine.record import json_safe
+from rig.core.json_files import json_safe
 from rig.results.outcome import (
     OUTCOME_MEANINGS,
     OUTCOME_WORDS,

@@ -104,6 +104,11 @@ def _campaign(tmp: Path, edit: Callable[[str], str]) -> Path:
     return path
 
 
+def _swap(old: str, new: str) -> Callable[[str], str]:
+    """The campaign text with ``old`` replaced by ``new``."""
+    return lambda text: text.replace(old, new)
+
+
 CAMPAIGN_CASES: dict[str, tuple[Callable[[str], str], str]] = {
     "3d 10,000 positions": (lambda s: s.replace(
         "positions_deg = [0.0, 90.0, 180.0, 270.0]",
@@ -114,25 +119,18 @@ CAMPAIGN_CASES: dict[str, tuple[Callable[[str], str], str]] = {
                                       "steps (at most 200000)"),
     "3e unit file /dev/zero": (lambda s: s.replace(json.dumps(str(UNIT_FILE)), '"/dev/zero"'),
                                "/dev/zero: the unit file must be a regular file"),
-    "3f steps_per_quarter = true": (lambda s: s.replace("steps_per_quarter = 4",
-                                                        "steps_per_quarter = true"),
+    "3f steps_per_quarter = true": (_swap("steps_per_quarter = 4", "steps_per_quarter = true"),
                                     "plan.steps_per_quarter"),
-    "3f rate_Nm_per_s = true": (lambda s: s.replace("rate_Nm_per_s = 25.0",
-                                                    "rate_Nm_per_s = true"),
+    "3f rate_Nm_per_s = true": (_swap("rate_Nm_per_s = 25.0", "rate_Nm_per_s = true"),
                                 "plan.rate_Nm_per_s"),
-    "3f extra_levels_pct = [true]": (lambda s: s.replace("extra_levels_pct = [3.0]",
-                                                         "extra_levels_pct = [true]"),
+    "3f extra_levels_pct = [true]": (_swap("extra_levels_pct = [3.0]", "extra_levels_pct = [true]"),
                                      "plan.extra_levels_pct.0"),
-    "16 profile typo": (lambda s: s.replace('profile = "nabtesco"',
-                                            'profile = "harmonic_drive"'),
+    "16 profile typo": (_swap('profile = "nabtesco"', 'profile = "harmonic_drive"'),
                         "'harmonic-drive'"),
-    "16 cycles = true": (lambda s: s.replace("\ncycles = 1\n", "\ncycles = true\n"),
-                         "plan.cycles"),
-    "16 extra_levels_pct = [500]": (lambda s: s.replace("extra_levels_pct = [3.0]",
-                                                        "extra_levels_pct = [500]"),
+    "16 cycles = true": (_swap("\ncycles = 1\n", "\ncycles = true\n"), "plan.cycles"),
+    "16 extra_levels_pct = [500]": (_swap("extra_levels_pct = [3.0]", "extra_levels_pct = [500]"),
                                     "less than 100"),
-    "16 extra_levels_pct = [nan]": (lambda s: s.replace("extra_levels_pct = [3.0]",
-                                                        "extra_levels_pct = [nan]"),
+    "16 extra_levels_pct = [nan]": (_swap("extra_levels_pct = [3.0]", "extra_levels_pct = [nan]"),
                                     "finite number"),
     "3b TOML 5,000 levels deep": (lambda s: s + "\n[x]\ny = " + "[" * 5000 + "]" * 5000 + "\n",
                                   "nested too deeply"),

@@ -89,15 +89,23 @@ def _hard_floats(rng: np.random.Generator, n: int) -> np.ndarray:
         -300, 300, n - len(SPECIAL))])
 
 
+def _hard_samples(rng: np.random.Generator, n: int, nan_rows: list[int]
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Times, :func:`_hard_floats` and temperatures with NaN at ``nan_rows``, drawn in the
+    order hard floats, temperatures, time steps."""
+    hard = _hard_floats(rng, n)
+    temperature = 20.0 + rng.standard_normal(n)
+    temperature[nan_rows] = np.nan
+    return np.cumsum(rng.uniform(1e-9, 1.0, n)), hard, temperature
+
+
 def test_round_trip_is_bit_exact_for_hard_floats(tmp_path: Path) -> None:
     rng = np.random.default_rng(7)
     n = 400
-    hard = _hard_floats(rng, n)
-    temperature = 20.0 + rng.standard_normal(n)
-    temperature[[3, 50, n - 1]] = np.nan
+    t_s, hard, temperature = _hard_samples(rng, n, [3, 50, n - 1])
     run = Run.from_arrays(
         "hard",
-        np.cumsum(rng.uniform(1e-9, 1.0, n)),
+        t_s,
         hard,
         hard[::-1].copy(),
         input_angle_deg=rng.standard_normal(n) * 1e6,
@@ -704,11 +712,9 @@ def test_parquet_run_folder_round_trips_bit_exact(tmp_path: Path) -> None:
 
     rng = np.random.default_rng(3)
     n = 500
-    hard = _hard_floats(rng, n)
-    temperature = 20.0 + rng.standard_normal(n)
-    temperature[[0, 7, n - 1]] = np.nan
+    t_s, hard, temperature = _hard_samples(rng, n, [0, 7, n - 1])
     run = Run.from_arrays(
-        "stored", np.cumsum(rng.uniform(1e-9, 1.0, n)), hard, hard[::-1].copy(),
+        "stored", t_s, hard, hard[::-1].copy(),
         temperature_C=temperature,
         extra_columns={"step": np.floor(np.arange(n) / 50.0),
                        "note": [f"row {i}, ok" if i % 7 else "" for i in range(n)]},

@@ -34,6 +34,7 @@ from analysis.transmission import analyse_te
 from analysis.transmission import model_internal as mi
 from analysis.transmission.model import internal_prediction
 from analysis.transmission.synthetic import synthetic_te
+from bench.timing import timed
 from rig.engine.devices import DevicesIO
 from rig.hardware.config import load_rig_config
 from rig.hardware.devices import open_rig
@@ -74,14 +75,11 @@ def analysis_speed() -> Iterator[dict]:
     kin = geo.kinematics()
     w = synthetic_te(te, ratio=geo.ratio, samples_per_output_rev=5_000)
     analyse_te(w.output_angle_deg, w.input_angle_deg, w.direction, kin)  # warm up
-    load_before = os.getloadavg()[0]
-    cpu_start, start = time.process_time(), time.perf_counter()
-    result = analyse_te(s.output_angle_deg, s.input_angle_deg, s.direction, kin,
-                        output_counts_per_rev=2**23, input_counts_per_rev=2**17)
-    elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu_start
-    yield {"name": "te_analysis_1M_samples", "value": round(elapsed, 3), "unit": "s",
-           "target": TARGET_S, "ok": elapsed < TARGET_S, "samples": int(s.t_s.size),
-           "cpu_s": round(cpu, 3), "load_avg_1min_before": round(load_before, 2),
+    t = timed(lambda: analyse_te(s.output_angle_deg, s.input_angle_deg, s.direction, kin,
+                                 output_counts_per_rev=2**23, input_counts_per_rev=2**17))
+    result = t.result
+    yield {"name": "te_analysis_1M_samples", **t.fields(),
+           "target": TARGET_S, "ok": t.wall_s < TARGET_S, "samples": int(s.t_s.size),
            "pp_arcsec": round(result.metrics["te_pp_arcsec"], 2),
            "pp_error_arcsec": round(result.metrics["te_pp_arcsec"] - truth, 3),
            "peak_rss_MiB": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}

@@ -11,7 +11,14 @@ from pathlib import Path
 import pytest
 from playwright.sync_api import expect, sync_playwright
 
-from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser, open_page
+from tests.support.browser import (
+    ARTIFACTS,
+    NEEDS_CHROMIUM,
+    confirm_lock,
+    launch_browser,
+    open_page,
+    start_run,
+)
 from tests.support.serve import get_json, rig_serve
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
@@ -31,9 +38,7 @@ def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
         # default plan, long enough to be stopped in the middle)
         page.fill("#setup input[name=steps_per_quarter]", "2")
         page.fill("#setup input[name=pre_cycles]", "0")
-        confirm_lock(page)
-        expect(page.locator("#start")).to_be_enabled()
-        page.click("#start")
+        start_run(page)
         page.wait_for_function("() => window.rigStats.points > 500", timeout=60_000)
         expect(page.locator("#state")).to_have_text("completed", timeout=90_000)
         expect(page.locator("#m-lost")).not_to_have_text("–", timeout=10_000)

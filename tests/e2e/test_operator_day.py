@@ -21,7 +21,7 @@ from pymodbus.client import ModbusTcpClient
 from drivers.modbus.map import LOADING_DRIVE_MAP, encode_float32
 from rig.hardware.config import load_rig_config
 from rig.store import Store
-from tests.support.browser import ARTIFACTS, confirm_lock, launch_browser, open_page
+from tests.support.browser import ARTIFACTS, launch_browser, open_page, start_run
 from tests.support.serve import get_json, post, rig_serve
 
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
@@ -79,8 +79,7 @@ def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
 
         # one completed run for the history, with a limit it fails (a seed 000 pair: 4')
         page.fill("#setup input[name=lost_motion_arcmin_max]", "1")
-        confirm_lock(page)
-        page.click("#start")
+        start_run(page)
         expect(page.locator("#state")).to_have_text("completed", timeout=120_000)
         first = get_json(url + "api/runs")[0]
 
@@ -120,8 +119,7 @@ def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
         # (the second run at 180 deg: the runout gives it another lost motion; no limit)
         page.fill("#setup input[name=lost_motion_arcmin_max]", "")
         page.fill("#lock-angle", "180")
-        confirm_lock(page)
-        page.click("#start")
+        start_run(page)
         expect(page.locator("#state")).to_have_text("completed", timeout=120_000)
         latest = get_json(url + "api/runs")[0]
         assert latest["run_id"] != first["run_id"]

@@ -25,7 +25,7 @@ from playwright.sync_api import expect, sync_playwright
 
 from rig.store import Store
 from rig.store.synthetic_runs import write_campaign
-from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser
+from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser, start_run
 from tests.support.serve import get_json, rig_serve
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
@@ -262,8 +262,7 @@ def test_desktop_result_panel_links_and_setup(served):
     ok_run = served["runs"]["ok"][0]["run_id"]
     page.locator(f"a[data-run='{ok_run}']").click()
     expect(page.locator("#m-verdict")).to_have_text("OK")
-    confirm_lock(page)
-    page.click("#start")
+    start_run(page)
     expect(page.locator("#state")).to_have_text("running", timeout=15_000)
     # 15: no earlier verdict beside the run measured now
     expect(page.locator("#m-verdict")).to_have_text("–", timeout=10_000)

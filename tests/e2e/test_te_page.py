@@ -17,7 +17,13 @@ from rig.hardware.simrig import SimulatedRig
 from rig.measurement.service import plant_config_for, write_plant_toml
 from rig.plans.campaign_file import SimulationSection
 from simulators.plant.config import load_plant_config
-from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser, open_page
+from tests.support.browser import (
+    ARTIFACTS,
+    NEEDS_CHROMIUM,
+    launch_browser,
+    open_page,
+    start_run,
+)
 from tests.support.serve import TOKEN, get_json, served
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(300)]
@@ -59,9 +65,7 @@ def test_operator_measures_the_transmission_error(tmp_path: Path):
         expect(page.locator("#preview-out")).to_contain_text("turn input forward at 240 rpm",
                                                         timeout=30_000)
 
-        confirm_lock(page)
-        expect(page.locator("#start")).to_be_enabled()
-        page.click("#start")
+        start_run(page)
         # the TE drawn live against the output angle, both directions
         page.wait_for_function("() => (window.rigStats.te_points || 0) > 300", timeout=90_000)
         expect(page.locator("#state")).to_have_text("completed", timeout=120_000)

@@ -16,7 +16,13 @@ from playwright.sync_api import expect, sync_playwright
 
 from simulators.plant.config import load_plant_config
 from simulators.plant.truth import generator_block
-from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser, open_page
+from tests.support.browser import (
+    ARTIFACTS,
+    NEEDS_CHROMIUM,
+    launch_browser,
+    open_page,
+    start_run,
+)
 from tests.support.paths import REPO
 from tests.support.serve import get_json, rig_serve
 
@@ -69,9 +75,7 @@ def test_operator_measures_a_cycloid_unit_and_sees_its_model_and_band(tmp_path):
             "nominal model, cycloid (seed 002 compound cycloid pair", timeout=30_000)
         expect(page.locator("#preview-out")).to_contain_text("seed 002 modification budget")
 
-        confirm_lock(page)
-        expect(page.locator("#start")).to_be_enabled()
-        page.click("#start")
+        start_run(page)
         expect(page.locator("#state")).to_have_text("completed", timeout=120_000)
         expect(page.locator("#result")).to_contain_text("unit kind cycloid", timeout=30_000)
         page.screenshot(path=str(ARTIFACTS / "unit-kind-cycloid.png"), full_page=True)

@@ -43,3 +43,10 @@ def confirm_lock(page: Any) -> None:
     """Confirm the input lock on the page and wait (30 s at most) until it says so."""
     page.click("#lock")
     expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
+
+
+def start_run(page: Any) -> None:
+    """Confirm the input lock, wait until Start is enabled and press it."""
+    confirm_lock(page)
+    expect(page.locator("#start")).to_be_enabled()
+    page.click("#start")

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from simulators.plant.friction import Friction, bristle_force
+from simulators.plant.friction import Friction
 
 _MAX_ITER = 80
 
@@ -152,13 +152,21 @@ class FrictionStep(NamedTuple):
     def residual(self) -> Callable[[float], tuple[float, float, float]]:
         """``free(phi)``: (residual without the chain, its derivative, bristle force)."""
         drive_Nm, mass, phi_pred, phi0, level, b0, k, r1, r2 = self
+        exp = math.exp
 
         def free(phi: float) -> tuple[float, float, float]:
+            # the bristle force (friction.bristle_force) inlined: the solver's hot loop
             d = phi - phi0
             if k == 0.0:
                 b, db = 0.0, 0.0
+            elif d >= 0.0:
+                e = exp(-k * d)
+                b = level - (level - b0) * e
+                db = k * (level - b0) * e
             else:
-                b, db = bristle_force(level, b0, k, d)
+                e = exp(k * d)
+                b = -level + (level + b0) * e
+                db = k * (level + b0) * e
             return (mass * (phi - phi_pred) + b + r1 * (b - b0) + r2 * d - drive_Nm,
                     mass + db * (1.0 + r1) + r2, b)
 

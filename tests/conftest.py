@@ -106,7 +106,8 @@ REALTIME_RERUN_DELAY_S = 2.0
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
-        if item.get_closest_marker("realtime") is not None:
+        if (item.get_closest_marker("realtime") is not None
+                and item.get_closest_marker("flaky") is None):  # a module's own tries stand
             item.add_marker(pytest.mark.flaky(reruns=REALTIME_RERUNS,
                                               reruns_delay=REALTIME_RERUN_DELAY_S))
 

@@ -24,7 +24,11 @@ from rig.store import Store
 from tests.support.browser import ARTIFACTS, launch_browser, open_page, start_run
 from tests.support.serve import get_json, post, rig_serve
 
-pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
+# measures on simulated devices in real time; alone: beside the other worker's test the live
+# panel's last event of the second run could land after the history click (the suite's CI on
+# 2026-11-28 failed it twice in a row, the test alone passed; the race itself is issue 33
+# item 16)
+pytestmark = [pytest.mark.realtime, pytest.mark.alone]
 
 
 def latch_drive_fault_from_outside(url: str) -> None:

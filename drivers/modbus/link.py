@@ -198,9 +198,8 @@ class ReportsModbusHealth:
 
     name: str
     link: ModbusLink
-
-    def _health_check(self) -> tuple[bool, str]:
-        raise NotImplementedError
+    _health_check: Callable[[], tuple[bool, str]]
+    """Each device's one read (sensor, drive, input motor, climate chamber define it)."""
 
     def health(self) -> ModbusHealth:
         """Read once and say whether the device answers sensibly; never raises."""

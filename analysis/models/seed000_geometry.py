@@ -10,7 +10,6 @@ import math
 from typing import Literal
 
 import numpy as np
-from scipy.optimize import brentq
 
 from analysis.errors import AnalysisError
 
@@ -34,6 +33,8 @@ def inverse_involute(value: float) -> float:
         raise AnalysisError(
             f"involute value {value!r} outside (0, inv(1.5 rad)): no pressure angle"
         )
+    from scipy.optimize import brentq  # imported here: scipy.optimize costs a CLI start ~1 s
+
     return brentq(lambda t: involute(t) - value, 1e-9, 1.5, xtol=1e-15, rtol=1e-15)
 
 

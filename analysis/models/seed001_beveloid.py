@@ -38,7 +38,6 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
-from scipy.optimize import fsolve
 
 from analysis.errors import AnalysisError
 from analysis.models.seed001_surfaces import BeveloidGear, RackFlank, radial
@@ -392,6 +391,8 @@ def tooth_pair_contact(
     origin = _phi1_origin(pair)
     if phi1 is None:
         phi1 = np.linspace(-1.0, 1.0, 81) * 2 * math.pi / pair.pinion.teeth
+    from scipy.optimize import fsolve  # imported here: scipy.optimize costs every start ~1 s
+
     phi1 = np.atleast_1d(np.asarray(phi1, dtype=float))
     n = phi1.size
     best_phi2 = np.full(n, np.nan)

@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from fractions import Fraction
 
 import numpy as np
-from scipy.special import ndtr, ndtri
 
 from analysis.errors import AnalysisError
 from analysis.models.seed003_planetary import (
@@ -221,6 +220,8 @@ def draw_values_um(
     sigma0 = bounds / RAYLEIGH_TRUNCATION_SIGMA
     q = math.exp(-(RAYLEIGH_TRUNCATION_SIGMA**2) / 2.0)
     eccentric = sigma0 * np.sqrt(-2.0 * np.log1p(-u * (1.0 - q)))
+    from scipy.special import ndtr, ndtri  # imported here: scipy.special costs a CLI start
+
     lo = ndtr(-NORMAL_TRUNCATION_SIGMA)
     hi = ndtr(NORMAL_TRUNCATION_SIGMA)
     tooth = (bounds / NORMAL_TRUNCATION_SIGMA) * ndtri(lo + u * (hi - lo))

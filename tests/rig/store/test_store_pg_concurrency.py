@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 
 from rig.store import RECOVERED_REASON, Store
-from tests.support.campaigns import campaign_toml
+from tests.support.campaigns import campaign_toml, ok_or_out_of_step
 from tests.support.paths import REPO
 
 # loads the machine on purpose (tests/conftest.py)
@@ -113,8 +113,13 @@ def test_four_simulated_rigs_one_killed_lose_nothing(pg_url, tmp_path):
         victim.send_signal(signal.SIGKILL)
         assert victim.wait(30) == -signal.SIGKILL
         errors = [r.communicate(timeout=240)[1] for r in rigs]
-        for r, err in zip(rigs, errors, strict=True):
-            assert r.returncode == 0, err[-2000:]
+        for r, err, serial in zip(rigs, errors, serials, strict=True):
+            # exit 2 (INCOMPLETE) only for runs whose channels came out of step: four rigs
+            # measuring at once on two cores starve a channel (the torque 35-39 ms late in
+            # two CI runs of 2026-11-28); what this test is about is checked below
+            assert r.returncode == 0 or (r.returncode == 2 and all(
+                ok_or_out_of_step(run) for run in json.loads(
+                    (tmp_path / f"{serial}.json").read_text())["runs"])), err[-2000:]
     finally:
         for p in (*rigs, victim):
             if p.poll() is None:

@@ -51,4 +51,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"imported {file}: {run.n_samples} samples -> run folder {folder}")
         else:
             stored = store_imported(run, into, samples=samples)
-            typer.echo(f"imported {file}: {run.n_samples} samples -> run {stored} in {into}")
+            from rig.core.redact import redact
+
+            typer.echo(f"imported {file}: {run.n_samples} samples -> run {stored} in "
+                       f"{redact(into)}")

@@ -155,6 +155,30 @@ def test_import_into_a_store_is_a_finished_run(native: dict, tmp_path: Path) -> 
         native["lost_motion"], rel=1e-6)
 
 
+PASSWORD = "Imp0rtPW-s3cret"
+
+
+@pytest.mark.parametrize("form", ["userinfo", "postgres scheme", "query"])
+def test_import_into_postgresql_never_prints_the_password(native: dict, tmp_path: Path,
+                                                          pg_url: str, form: str) -> None:
+    """Issue 33 item 2: ``rig import --into postgresql://user:PW@...`` printed the password
+    on success. The throw-away cluster trusts every connection, so the password is carried
+    but not needed: the run is stored and the line names the store with ``***``."""
+    rest = pg_url.removeprefix("postgresql://postgres@")
+    into = {"userinfo": f"postgresql://postgres:{PASSWORD}@{rest}",
+            "postgres scheme": f"postgres://postgres:{PASSWORD}@{rest}",
+            "query": f"{pg_url}{'&' if '?' in pg_url else '?'}password={PASSWORD}"}[form]
+    csv = tmp_path / "catman.csv"
+    _write_catman_csv(native["run"], csv)
+    res = _rig("import", str(csv), "--map", str(CATMAN_MAP), "--unit", str(native["unit"]),
+               "--into", into, "--samples", str(tmp_path / "samples"), cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert PASSWORD not in res.stdout + res.stderr
+    assert "***" in res.stdout and "-> run " in res.stdout
+    (info,) = Store(pg_url, samples=tmp_path / "samples").list_runs()
+    assert info.status == "completed"
+
+
 def test_export_run_formats_read_back(native: dict, tmp_path: Path) -> None:
     run = native["run"]
     for fmt, out in (("csv", "run-folder"), ("parquet", "run.parquet"), ("mat", "run.mat"),

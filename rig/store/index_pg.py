@@ -25,10 +25,11 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 from typing import Any
 
 import psycopg
+import psycopg.conninfo
 from psycopg.rows import dict_row
 from psycopg.types.json import Jsonb
 
-from rig.core.redact import redact
+from rig.core.redact import redact, redact_text
 from rig.store.backend import SCHEMA_VERSION, check_version, json_text_params
 from rig.store.ids import StoreError, StoreUnavailable
 from rig.store.sql import Dialect, SqlIndex, T, first_and_rest, migrate, migrations
@@ -78,6 +79,11 @@ class PostgresIndex(SqlIndex):
                  ) -> None:
         self.url = url
         self.location = redact(url)
+        try:  # parsed once where the URL enters: a malformed one is the user's, not a bug
+            psycopg.conninfo.conninfo_to_dict(url)
+        except psycopg.ProgrammingError as e:
+            raise StoreError(f"the store URL {self.location} is malformed: "
+                             f"{redact_text(first_line(e)).split(' in URI: ')[0]}") from e
         self.reconnect_s = float(reconnect_s)
         self.connect_timeout_s = int(connect_timeout_s)
         self._local = threading.local()

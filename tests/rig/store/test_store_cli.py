@@ -127,6 +127,18 @@ def test_store_folder_defaults_to_rig_store_env_then_cwd(store_dir, tmp_path):
     assert out.returncode == 0 and "RIG_STORE" in out.stdout and "rig-store" in out.stdout
 
 
+@pytest.mark.parametrize("command", ["runs", "spc"])
+def test_a_malformed_database_url_is_one_line_naming_it(tmp_path, command: str):
+    """Issue 33 item 7: a malformed PostgreSQL URL (``[::1:bad``) was an internal error."""
+    out = rig(command, "--store", "postgresql://rig2:Pw-s3cret@[::1:bad/db", "--samples",
+              str(tmp_path / "samples"), cwd=tmp_path)
+    assert out.returncode == 2, out.stderr
+    (line,) = out.stderr.strip().splitlines()
+    assert line.startswith("rig: error: ") and "internal error" not in line, line
+    assert "malformed" in line and "postgresql://rig2:***@[::1:bad/db" in line, line
+    assert "Pw-s3cret" not in out.stdout + out.stderr
+
+
 def test_missing_store_and_bad_status_exit_2_with_a_message(tmp_path):
     out = rig("runs", "--store", str(tmp_path / "none"), cwd=tmp_path)
     assert out.returncode == 2

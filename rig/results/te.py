@@ -224,11 +224,25 @@ def analyse_te_run(run: Run, *, with_model: bool = True, model_samples: int | No
     return TERunAnalysis(run, result, prediction, comparison, notes)
 
 
+def _two_measurements(run_a: Run, run_b: Run) -> None:
+    """Refuse one run given twice (the same folder, run id or samples): the reversal needs a
+    second measurement, with the coupling indexed by 180 deg."""
+    same_folder = (run_a.path is not None and run_b.path is not None
+                   and run_a.path.resolve() == run_b.path.resolve())
+    same_samples = run_a.n_samples == run_b.n_samples and all(
+        np.array_equal(run_a.data[k], run_b.data.get(k), equal_nan=True) for k in run_a.data)
+    if same_folder or run_a.run_id == run_b.run_id or same_samples:
+        raise RigError(f"{_where(run_b)}: the same run as {_where(run_a)}; the reversal needs "
+                       "a second TE run of the unit with the encoder's coupling indexed by "
+                       "180 deg")
+
+
 def reversal_calibration(run_a: Run, run_b: Run) -> dict[str, float]:
     """The output encoder's mounting eccentricity from two TE runs of one unit, the second
     with the coupling indexed by 180 deg (:func:`analysis.transmission.eccentricity.reversal`):
     the ``[calibration.encoder]`` keys :data:`ECCENTRICITY_KEYS` and ``unit_order1_arcsec``
     (the unit's own once-per-output-turn TE), from both directions' order-1 fits averaged."""
+    _two_measurements(run_a, run_b)
     phasors = []
     for run in (run_a, run_b):
         if not is_te_run(run):

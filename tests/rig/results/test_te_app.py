@@ -5,6 +5,7 @@ the encoder eccentricity calibration. TE runs come from tests/support/te_runs.py
 from __future__ import annotations
 
 import json
+import shutil
 import math
 import subprocess
 import sys
@@ -201,6 +202,22 @@ def test_export_of_a_te_run_round_trips(te_folder: Path, tmp_path: Path) -> None
     assert json.loads(table.schema.metadata[b"run.json"])["test"]["kind"] == \
         "transmission_error"
     assert np.array_equal(table["te_arcsec"].to_numpy(), te, equal_nan=True)
+
+
+def test_te_calibrate_refuses_one_run_given_twice(tmp_path: Path) -> None:
+    """Issue 33 item 11: ``rig te-calibrate RUN RUN`` exited 0 and printed an eccentricity
+    "to add" from one run given twice (or a copy of it): the second run has to be the
+    coupling indexed by 180 deg, another measurement. One line, exit 2, nothing printed."""
+    write_run(te_run("a", index_deg=0.0, ecc_arcsec=20.0, ecc_phase_deg=50.0), tmp_path / "a")
+    copy = tmp_path / "copy"
+    shutil.copytree(tmp_path / "a", copy)
+    for second in (tmp_path / "a", tmp_path / "." / "a", copy):
+        res = _rig("te-calibrate", str(tmp_path / "a"), str(second), "--json", "-")
+        assert res.returncode == 2, res.stdout + res.stderr
+        (line,) = res.stderr.strip().splitlines()
+        assert line.startswith("rig: error: ") and "the same run" in line, line
+        assert "indexed by 180" in line and "[calibration.encoder]" not in res.stderr
+        assert res.stdout == ""
 
 
 def test_encoder_eccentricity_calibrated_by_reversal_is_removed(tmp_path: Path) -> None:

@@ -5,8 +5,8 @@ the encoder eccentricity calibration. TE runs come from tests/support/te_runs.py
 from __future__ import annotations
 
 import json
-import shutil
 import math
+import shutil
 import subprocess
 import sys
 from pathlib import Path

@@ -104,9 +104,10 @@ def _plain_words(report: dict[str, Any]) -> str:
                 f"{html.escape(', '.join(report.get('candidates', [])))}. "
                 f"Next: {html.escape(str(report.get('next_experiment')))}.")
     if v == "unexplained":
+        closest = report.get("candidates") or []
         return (f"A systematic gap of {before:.2f} arcsec RMS remains that no effect of the "
-                f"vocabulary closes (closest: "
-                f"{html.escape(', '.join(report.get('candidates', [])))}).")
+                + (f"vocabulary closes (closest: {html.escape(', '.join(closest))})." if closest
+                   else "vocabulary closes; no effect of the vocabulary comes close."))
     after = report.get("gap_after", {}).get("rms_arcsec", math.nan)
     text = (f"The gap is caused by <b>{html.escape(v)}</b>: adding it shrinks the held-out gap "
             f"from {before:.2f} to {after:.2f} arcsec RMS (shrink {report.get('shrink', 0):.0%}).")

@@ -49,6 +49,7 @@ def register(app: typer.Typer) -> None:
         json_out.write(doc)
         if html is not None:
             html.write_text(render_html(doc), encoding="utf-8")
+            typer.echo(f"charts written to {html}", err=json_out.to_stdout)
         if json_out.to_stdout:
             return
         out = Console(width=None if sys.stdout.isatty() else 160)

@@ -102,6 +102,8 @@ def test_rig_spc_json_and_html_on_a_small_store(make_store, tmp_path):
          "--json", str(tmp_path / "spc.json"), "--html", str(tmp_path / "spc.html")],
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
+    # issue 33 item 18: the page's file said, as every command that writes one says it
+    assert f"charts written to {tmp_path / 'spc.html'}" in out.stdout.splitlines()
     doc = json.loads((tmp_path / "spc.json").read_text())
     (d,) = doc["designs"]
     assert (d["design"], d["n_tests"], d["n_runs"]) == ("SYN-1", 5, 10)

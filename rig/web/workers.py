@@ -18,6 +18,7 @@ import multiprocessing
 import os
 import signal
 import threading
+import time
 from collections.abc import Callable
 from concurrent.futures import BrokenExecutor, CancelledError, Future, ProcessPoolExecutor
 from multiprocessing import resource_tracker
@@ -60,6 +61,22 @@ def _worker_start(increment: int) -> None:
     worker_initializer()
     if increment:
         os.nice(increment)
+    threading.Thread(target=_end_with_parent, args=(os.getppid(),), daemon=True,
+                     name="parent-watch").start()
+
+
+PARENT_POLL_S = 0.5
+"""How often a worker checks that the server that started it is still its parent (s)."""
+
+
+def _end_with_parent(parent: int) -> None:
+    """End this worker once the server is gone (``kill -9``: no shutdown ends it; reparented,
+    it would hold its memory, and the resource tracker, for ever). A parent-death signal
+    would not do: it fires when the *thread* that spawned the worker ends, and the page's
+    request threads come and go."""
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os._exit(0)
 
 
 def _executor(pool: str) -> ProcessPoolExecutor:

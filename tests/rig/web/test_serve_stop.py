@@ -12,6 +12,7 @@ depends on the machine's load: a test would only time the machine).
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -183,3 +184,46 @@ def test_a_ctrl_c_while_a_page_worker_is_still_starting_prints_no_traceback() ->
             os.killpg(proc.pid, signal.SIGKILL)
     assert proc.returncode == 0, err
     assert "KeyboardInterrupt" not in err and "Traceback" not in err, err
+
+
+ORPHANED_WORKERS = """
+import json, time
+from multiprocessing import resource_tracker
+from rig.web.workers import run_in_worker, warm_up, worker_pids
+warm_up("preview", "analysis")
+assert run_in_worker(abs, -1, pool="preview") == run_in_worker(abs, -1) == 1
+print(json.dumps({"workers": worker_pids("preview") + worker_pids("analysis"),
+                  "tracker": resource_tracker._resource_tracker._pid}), flush=True)
+time.sleep(600)
+"""
+
+
+def _alive(pid: int) -> bool:
+    """Running (a zombie waiting for PID 1 to reap it counts as ended)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state not in ("Z", "X")
+
+
+def test_the_page_workers_end_with_a_killed_server() -> None:
+    """Issue 33 item 6: ``kill -9`` of ``rig serve`` left a page worker (150 MB) and its
+    resource tracker running for 40 s or more, reparented to PID 1. The workers watch their
+    parent and end with it; the tracker ends when the last of them has."""
+    proc = subprocess.Popen([sys.executable, "-c", ORPHANED_WORKERS], stdout=subprocess.PIPE,
+                            text=True)
+    try:
+        started = json.loads(proc.stdout.readline())
+    finally:
+        proc.kill()
+        proc.wait(10)
+    pids = [*started["workers"], started["tracker"]]
+    assert len(started["workers"]) == 2 and all(pids), started
+    deadline = time.monotonic() + 10.0
+    while any(_alive(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    alive = [pid for pid in pids if _alive(pid)]
+    for pid in alive:  # leave nothing behind either way
+        os.kill(pid, signal.SIGKILL)
+    assert not alive, f"still running 10 s after the server was killed: {alive} of {started}"

@@ -47,47 +47,78 @@ def pytest_configure(config: pytest.Config) -> None:
 # timeout (the outermost wrapper of the test protocol), so waiting for it is not counted.
 # Consecutive alone tests of a worker hold it throughout: one wait for the other worker's
 # test in progress per run of alone tests, not one per test.
+#
+# Tests marked ``realtime`` (below) also take a second lock exclusively: one measurement on
+# simulated devices at a time, beside at most a test that only computes. Two at once (two
+# simulated rigs, two engines, a browser) overcommitted the two cores: in the CI runs of
+# 2026-11-28 the torque channel came 30-40 ms late against the twist, encoder heartbeats
+# went unread for 1.5 s and TE runs dropped rows, 4-6 failures a run, each passing alone.
 
 
-def _machine_lock_path() -> Path | None:
+def _lock_path(name: str) -> Path | None:
     run = os.environ.get("PYTEST_XDIST_TESTRUNUID")
-    return None if run is None else Path(tempfile.gettempdir()) / f"rig-tests-{run}.lock"
+    return None if run is None else Path(tempfile.gettempdir()) / f"rig-tests-{run}-{name}.lock"
 
 
-_lock: dict[str, Any] = {"file": None, "mode": None}
-"""This worker's open lock file and the mode it holds (None: not held)."""
+class _WorkerLock:
+    """One flock shared by the workers: this worker's open file and the mode it holds."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.file: Any = None
+        self.mode: int | None = None
+
+    def hold(self, mode: int | None) -> None:
+        """Hold ``mode`` (LOCK_EX or LOCK_SH), or nothing (None)."""
+        if self.mode == mode:
+            return
+        if self.file is None:
+            self.file = open(_lock_path(self.name), "a+")  # noqa: SIM115 - the worker's life
+        if self.mode is not None:
+            fcntl.flock(self.file, fcntl.LOCK_UN)
+            self.mode = None
+        if mode is not None:
+            fcntl.flock(self.file, mode)
+            self.mode = mode
+
+
+_machine = _WorkerLock("machine")
+"""``alone`` tests hold it exclusively, every other test shared."""
+_measuring = _WorkerLock("realtime")
+"""``realtime`` tests hold it exclusively: one measurement on simulated devices at a time."""
 
 
 def _alone(item: pytest.Item | None) -> bool:
     return item is not None and item.get_closest_marker("alone") is not None
 
 
+def _realtime(item: pytest.Item | None) -> bool:
+    return item is not None and item.get_closest_marker("realtime") is not None
+
+
 @pytest.hookimpl(hookwrapper=True, tryfirst=True)
 def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
-    path = _machine_lock_path()
-    if path is None:  # one process: nothing to share
+    if _lock_path("machine") is None:  # one process: nothing to share
         yield
         return
-    if _lock["file"] is None:
-        _lock["file"] = open(path, "a+")  # noqa: SIM115 - kept for the worker's life
-    f = _lock["file"]
-    mode = fcntl.LOCK_EX if _alone(item) else fcntl.LOCK_SH
-    if _lock["mode"] != mode:
-        if _lock["mode"] is not None:
-            fcntl.flock(f, fcntl.LOCK_UN)
-        fcntl.flock(f, mode)
-        _lock["mode"] = mode
+    # always the machine's lock first, then the measuring one: no two workers wait on each
+    # other in opposite orders
+    _machine.hold(fcntl.LOCK_EX if _alone(item) else fcntl.LOCK_SH)
+    _measuring.hold(fcntl.LOCK_EX if _realtime(item) else None)
     try:
         yield
     finally:
-        # The exclusive lock is kept into the next test when that one runs alone too (a
-        # module of alone tests, or the next module's): released between them, the other
-        # worker slipped one of its tests in each time, and this worker waited for it to
-        # end, idle, before each alone test. A shared lock is never kept (it would keep
-        # the other worker's alone tests waiting).
+        # An exclusive lock is kept into the next test when that one needs it too (a
+        # module of alone or realtime tests): released between them, the other worker
+        # slipped one of its tests in each time, and this worker waited for it to end,
+        # idle, before each. A shared lock is never kept (it would keep the other worker's
+        # alone tests waiting). The measuring lock is let go with the machine's, so that
+        # the next test takes them in order again.
         if not (_alone(item) and _alone(nextitem)):
-            fcntl.flock(f, fcntl.LOCK_UN)
-            _lock["mode"] = None
+            _measuring.hold(None)
+            _machine.hold(None)
+        elif not _realtime(nextitem):
+            _measuring.hold(None)
 
 
 # --------------------------------------------------- tests that measure on the simulated rig

@@ -53,7 +53,28 @@ def read_source(path: Path, mapping: ImportMap) -> SourceData:
         raise RunImportError(f"{path}: no such file")
     if mapping.file_format(path) == "tdms":
         return _read_tdms(path, mapping)
+    _refuse_binary(path)
     return _read_delimited(path, mapping)
+
+
+BINARY_FORMATS = ((b"PAR1", "a Parquet file"), (b"PK\x03\x04", "an Excel (xlsx) workbook"),
+                  (b"MATLAB 5.0 MAT-file", "a MATLAB .mat file"),
+                  (b"\x89HDF\r\n\x1a\n", "a MATLAB v7.3 (HDF5) .mat file"))
+"""Leading bytes of the binary files ``rig export`` writes (and HDF5 .mat): no text encoding
+reads them."""
+
+
+def _refuse_binary(path: Path) -> None:
+    """One line for a binary file given where delimited text is read: its format, and the
+    way that works (the run's CSV export), instead of a text decoding error."""
+    with open(path, "rb") as f:
+        head = f.read(32)
+    for magic, name in BINARY_FORMATS:
+        if head.startswith(magic):
+            raise RunImportError(
+                f"{path}: {name}, not delimited text: rig import reads delimited text and NI "
+                "TDMS; for a run this rig exported, import its CSV export instead (rig "
+                "export RUN --format csv)")
 
 
 def _wanted(mapping: ImportMap) -> dict[str, str]:

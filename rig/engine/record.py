@@ -161,6 +161,8 @@ class OpenRun:
                 result[key] = analysis.get(key)
             result["uncertainty"] = analysis.get("uncertainty", {})
             result["model"] = analysis.get("model")
+            if analysis.get("encoder_faults"):  # no verdict on them (issue 33 item 1)
+                result["encoder_faults"] = analysis["encoder_faults"]
         except (AnalysisError, RigError, ValueError) as exc:
             result["analysis_error"] = str(exc)
             log.warning("run %s: not analysed: %s", self.recorder.run_id, exc)

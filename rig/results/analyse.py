@@ -88,6 +88,7 @@ class RunAnalysis:
     lost_motion_pct: float = 3.0
     profile: str = "nabtesco"
     channel_lag_s: float = 0.0
+    encoder_faults: list[str] = field(default_factory=list)
 
     def model_twist_arcmin(self) -> np.ndarray | None:
         """The model loop for this run's torque history, shifted onto the measured twist.
@@ -119,6 +120,7 @@ class RunAnalysis:
         out["n_samples"] = self.run.n_samples
         out["n_cycles"] = self.loop.n_cycles
         out["channel_lag_s"] = self.channel_lag_s
+        out["encoder_faults"] = list(self.encoder_faults)
         if self.model is not None:
             out["model"] = {
                 "name": "reference nominal model (rig-run/1)",
@@ -263,7 +265,11 @@ def analyse_run(
 
     model, model_assumptions = nominal_model_for_unit(run.unit, rated)
     assumptions.extend(model_assumptions)
+    faults = encoder_faults(run, twist, loop, model, rated,
+                            ARCMIN_PER_REV / float(counts) if counts else 0.0, lag_s)
+    assumptions.extend(f"no verdict: {fault}" for fault in faults)
     return RunAnalysis(
+        encoder_faults=faults,
         channel_lag_s=lag_s,
         run=run,
         twist_arcmin=twist,
@@ -295,6 +301,50 @@ def channel_lag_s(t_s: np.ndarray, torque_Nm: np.ndarray, twist: np.ndarray) -> 
     sigma = max(white_noise_std(tw), 1e-9)
     lag = channel_lag_samples(t, torque, tw, sigma)
     return float(-lag * np.median(np.diff(t))) if lag else 0.0
+
+
+def encoder_faults(run: Run, twist: np.ndarray, loop: LoopResult, model: LoopModel | None,
+                   rated_Nm: float, count_arcmin: float, lag_s: float) -> list[str]:
+    """The twist steps and frozen readings the torque does not explain, one line each
+    (:func:`analysis.loop.encoder_faults.find_encoder_faults`; issue 33 item 1). The
+    stiffness is the unit's nominal (the run's own without a model), the play the nominal's
+    (the run's backlash without one). A step the input encoder's own reading accounts for
+    names the input encoder."""
+    from analysis.loop.branches import white_noise_std
+    from analysis.loop.encoder_faults import find_encoder_faults
+
+    metrics = loop.metrics
+
+    def measured(key: str) -> float | None:
+        return metrics[key].value if key in metrics else None
+
+    k = model.stiffness_Nm_per_arcmin if model is not None else None
+    if not (k is not None and np.isfinite(k) and k > 0):
+        k = measured("stiffness_Nm_per_arcmin")
+    if not (k is not None and np.isfinite(k) and k > 0):
+        return []
+    play = model.play_arcmin if model is not None else None
+    if not (play is not None and np.isfinite(play)):
+        play = measured("backlash_arcmin") or 0.0
+    t = np.asarray(run.t_s, dtype=float)
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    found = find_encoder_faults(
+        run.torque_Nm, twist, run.output_angle_deg, loop.branches.sample_direction(),
+        rated_torque_Nm=rated_Nm, stiffness_Nm_per_arcmin=float(k), count_arcmin=count_arcmin,
+        twist_noise_arcmin=white_noise_std(twist), torque_noise_Nm=white_noise_std(run.torque_Nm),
+        torque_offset_Nm=measured("torque_offset_Nm") or 0.0,
+        play_arcmin=float(play), row_period_s=dt, channel_lag_s=lag_s)
+    ratio = run.test.get("ratio")
+    out = []
+    for fault in found:
+        device = "output encoder"
+        if fault.kind == "step" and run.input_angle_deg is not None and ratio:
+            d_out = float(run.output_angle_deg[fault.stop] - run.output_angle_deg[fault.start])
+            d_in = float(run.input_angle_deg[fault.stop] - run.input_angle_deg[fault.start])
+            if abs(d_in / float(ratio)) > abs(d_out):
+                device = "input encoder"
+        out.append(fault.describe(t, device))
+    return out
 
 
 def _numeric_column(run: Run, name: str) -> np.ndarray | None:

@@ -134,12 +134,18 @@ few % of the rated torque paired with the wrong twist; the loop is no measuremen
 
 
 def impossible_metrics(run: dict[str, Any]) -> list[str]:
-    """Metrics that are physically impossible (below zero beyond three of their standard
-    uncertainties; a stiffness at or below zero always), one line each."""
+    """Why the run's figures are no measurement, one line each: channels out of step, a twist
+    the torque does not explain (``encoder_faults``: a jump or a frozen encoder reading,
+    issue 33 item 1), metrics physically impossible (below zero beyond three of their
+    standard uncertainties; a stiffness at or below zero always)."""
     metrics = {**run, **(run.get("result") or {})}
     sigma = metrics.get("uncertainty") or {}
     label = run.get("label") or run.get("run_id") or "run"
     out = []
+    faults = metrics.get("encoder_faults")
+    if isinstance(faults, list):
+        out.extend(f"run {label}: {fault}: no verdict" for fault in faults[:3]
+                   if isinstance(fault, str))
     lag = metrics.get("channel_lag_s")
     if finite_number(lag) and abs(lag) >= CHANNEL_LAG_LIMIT_S:
         out.append(f"run {label}: the torque channel is {'late' if lag > 0 else 'ahead'} by "

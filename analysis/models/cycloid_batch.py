@@ -23,6 +23,20 @@ um of shift (a center distance change is a shift of the other sign), ``-4`` per 
 The assembled pair's own play over the mesh phases comes from the nominal model
 (:func:`analysis.models.cycloid_nominal.cycloid_nominal_model`: ``play_min`` / ``play_max``).
 Lengths um, angles arcmin at the output (gear 1), ``arcmin = 3437.75 j / (1000 r1)``.
+
+**Nominal and band are different quantities** (issue 33 item 17). The nominal model is a
+perfect unit, its play averaged over the mesh phases (example unit: 1.664 arcmin at 3 % of
+10 N*m). The batch band (``band_arcmin``, what campaigns, certificates and the page print) is
+each unit's lost motion at its *worst* crank position, where three terms only add: the runouts
+(``2 cot(chi) (e_1 + e_2) >= 0``), the crank bearings' clearances (``>= 0``) and the thinnest
+tooth pair in mesh. So the band lies *above* the nominal by their size (example unit 2.403 ..
+3.831 arcmin; about +1' of runout alone with Delta_frt = 16 um per gear); the nominal
+is not wrong and neither is the band. The centred terms alone (eccentricity error, shift and
+rotation as ground; no runout, bearing or tooth errors) give a worst-position band that
+brackets the nominal, and so does ``position_arcmin``, the lost motion at one random position
+(uniform runout phases, a random mesh phase and tooth pair in mesh; example unit 0.77 ..
+3.00 arcmin), whose centre lies above the nominal only by the bearings'
+``2 cot(chi) E[sum u_r] / 2`` (+0.22').
 """
 
 from __future__ import annotations
@@ -62,6 +76,7 @@ CycloidBatch = KindBatch
 
 
 def _pair(unit: Mapping[str, Any]) -> CompoundCycloidPair:
+    """The unit's pair from its seed 002 eq. (15) data (m, z2, z1, h1, f1; e)."""
     ecc = unit.get("eccentricity_mm")
     return CompoundCycloidPair(
         module_mm=float(unit["module_mm"]), z_internal=int(unit["z_internal"]),
@@ -91,8 +106,12 @@ def cycloid_batch(unit: Mapping[str, Any], tolerances: Seed002Tolerances | None 
                   rated_torque_Nm: float = 10.0, lost_motion_pct: float = 3.0,
                   samples: int = 5000, seed: int = 0,
                   rotation_mm: float | None = None) -> CycloidBatch:
-    """Monte Carlo lost motion of a batch built to ``unit``'s design (see the module doc);
-    ``rotation_mm`` replaces the unit's Delta2 (for :func:`cycloid_advice`)."""
+    """Monte Carlo lost motion (arcmin) of a batch built to ``unit``'s design (see the module
+    doc): per unit at its worst crank position (``worst_arcmin``) and at one random position
+    (``position_arcmin``). Errors become play by seed 002's first-order clearances at the pitch
+    circle (eqs. 9-10: ``2 cot chi`` per um of shift or of O1O2 shortening; eqs. 11-12: ``-4``
+    per um of Delta2). ``rotation_mm`` replaces the unit's Delta2 (for
+    :func:`cycloid_advice`)."""
     if samples < 2:
         raise AnalysisError(f"samples must be >= 2, got {samples}")
     tol = tolerances or Seed002Tolerances()
@@ -107,6 +126,7 @@ def cycloid_batch(unit: Mapping[str, Any], tolerances: Seed002Tolerances | None 
     extra_rot = 0.0 if rotation_mm is None else -4000.0 * rotation_mm
     play_max_um = model.play_max_arcmin * to_um + extra_rot
     play_min_um = model.play_min_arcmin * to_um + extra_rot
+    phase_um = np.asarray(model.play_phases_arcmin or (model.play_arcmin,)) * to_um + extra_rot
     elastic = 2.0 * lost_motion_pct / 100.0 * rated_torque_Nm / model.stiffness_Nm_per_arcmin
     rng = np.random.default_rng(seed)
     n = samples
@@ -125,7 +145,17 @@ def cycloid_batch(unit: Mapping[str, Any], tolerances: Seed002Tolerances | None 
     worst_um = play_max_um + common + 2.0 * cot_chi * (e1 + e2) + pair_sums.max(axis=1)
     least_um = play_min_um + common - 2.0 * cot_chi * (e1 + e2) + pair_sums.min(axis=1)
     worst = np.clip(worst_um, 0.0, None) / to_um + elastic
-    return CycloidBatch(worst, least_um / to_um, rated_torque_Nm, lost_motion_pct, samples)
+    # one random position: the runout phases, the mesh phase and the tooth pair in mesh drawn
+    # (a stream of its own, so the worst-position draws above stay as they were)
+    at = np.random.default_rng([seed, 1])
+    swing = e1 * np.cos(at.uniform(0.0, 2.0 * math.pi, n)) + e2 * np.cos(
+        at.uniform(0.0, 2.0 * math.pi, n))
+    in_mesh = pair_sums[np.arange(n), at.integers(0, pair_sums.shape[1], n)]
+    position_um = (phase_um[at.integers(0, phase_um.size, n)] + common
+                   + 2.0 * cot_chi * swing + in_mesh)
+    position = np.clip(position_um, 0.0, None) / to_um + elastic
+    return CycloidBatch(worst, least_um / to_um, rated_torque_Nm, lost_motion_pct, samples,
+                        position_arcmin=position)
 
 
 def cycloid_advice(unit: Mapping[str, Any], tolerances: Seed002Tolerances | None = None, *,

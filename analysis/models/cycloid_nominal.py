@@ -62,6 +62,9 @@ class CycloidNominalModel:
     side_clearance_pitch_um: float
     radial_clearance_um: float
     assumptions: tuple[str, ...] = field(default=())
+    play_phases_arcmin: tuple[float, ...] = field(default=())
+    """The free play at each of the ``MESH_PHASES`` mesh phases over one pitch of gear 2
+    (arcmin); ``play_arcmin`` is their mean."""
 
     @property
     def backlash_arcmin(self) -> float:
@@ -102,6 +105,7 @@ class CycloidNominalModel:
             "flanks_loaded_at_reference": self.flanks_loaded_at_reference,
             "side_clearance_pitch_um": self.side_clearance_pitch_um,
             "radial_clearance_um": self.radial_clearance_um,
+            "play_phases_arcmin": list(self.play_phases_arcmin),
             "assumptions": list(self.assumptions),
         }
 
@@ -144,7 +148,10 @@ def _side_secant(
 @lru_cache(maxsize=32)
 def _model(
     pair: CompoundCycloidPair, mod: Modification, face_width_mm: float | None, torque: float
-) -> tuple[float, ...]:
+) -> tuple[Any, ...]:
+    """Play (arcmin: mean, min, max over the mesh phases), secant stiffness (N*m/arcmin), contact
+    stiffness (N/um), loaded flanks and the per-phase plays of the assembled pair: seed 002
+    eqs. (1)-(14) through :func:`flank_contacts`, seed 004 eq. (8) per flank."""
     k_contact = math.inf
     if face_width_mm is not None:
         k_contact = face_width_mm * single_pair_stiffness_N_per_mm_um(
@@ -161,7 +168,7 @@ def _model(
     stiffness = math.inf if compliance == 0.0 else 1.0 / compliance
     return (
         float(np.mean(plays)), float(np.min(plays)), float(np.max(plays)), stiffness,
-        k_contact, float(np.mean(loaded)),
+        k_contact, float(np.mean(loaded)), tuple(float(p) for p in plays),
     )
 
 
@@ -219,7 +226,8 @@ def cycloid_nominal_model(
     assumptions.append(
         "stiffness is an estimate: seed 004 eq. (8) single-pair stiffness per touching flank"
     )
-    play, play_min, play_max, k, k_contact, loaded = _model(pair, mod, face, float(torque))
+    play, play_min, play_max, k, k_contact, loaded, phases = _model(
+        pair, mod, face, float(torque))
     side = flank_clearance(pair, mod) if mod != Modification() else None
     model = CycloidNominalModel(
         play_arcmin=play,
@@ -232,5 +240,6 @@ def cycloid_nominal_model(
         side_clearance_pitch_um=0.0 if side is None else side.circumferential_um,
         radial_clearance_um=0.0 if side is None else side.tip_reduction_um,
         assumptions=tuple(assumptions),
+        play_phases_arcmin=phases,
     )
     return model, assumptions

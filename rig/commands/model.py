@@ -1,9 +1,11 @@
-"""``rig model UNIT.json``: the seed 000 design chain and the reference nominal model of a unit."""
+"""``rig model UNIT.json``: the seed 000 design chain and the reference nominal model of a unit;
+for a ``cycloid`` or ``beveloid`` unit its kind's nominal model and production batch band, with
+how the two relate (docs/unit-kinds.md)."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.console import Console
@@ -71,18 +73,79 @@ def _table(design: Seed000Design, path: Path) -> Table:
     return table
 
 
+def kind_model(mapping: dict[str, Any], rated_torque_Nm: float, pct: float) -> dict[str, Any]:
+    """The nominal model of a unit of another kind than the seed 000 pair (by_kind) and its
+    batch band (:func:`rig.plans.campaign_file.batch_band`), as ``rig model --json`` writes
+    them."""
+    from analysis.models.by_kind import MODEL_NAMES, nominal_model_for_unit
+    from rig.plans.campaign_file import batch_band
+
+    kind = str(mapping.get("kind"))
+    model, assumptions = nominal_model_for_unit(mapping, rated_torque_Nm)
+    names = MODEL_NAMES.get(kind, (f"nominal model of kind {kind}", "the design's tolerances"))
+    return {"kind": kind, "model_name": names[0], "band_source": names[1],
+            "rated_torque_Nm": rated_torque_Nm, "lost_motion_pct": pct,
+            "nominal": model.to_dict(),
+            "lost_motion_arcmin": model.lost_motion_arcmin(rated_torque_Nm, pct),
+            "batch": batch_band(mapping, rated_torque_Nm, pct), "assumptions": assumptions}
+
+
+def _kind_table(doc: dict[str, Any], path: Path) -> Table:
+    table = Table(title=f"Unit kind {doc['kind']}: {path.name}")
+    table.add_column("quantity")
+    table.add_column("value (arcmin)", justify="right")
+    pct, rated = doc["lost_motion_pct"], doc["rated_torque_Nm"]
+    table.add_row(f"nominal lost motion at +-{pct:g} % of {rated:g} N·m ({doc['model_name']})",
+                  f"{doc['lost_motion_arcmin']:.3f}")
+    nominal = doc["nominal"]
+    if "play_min_arcmin" in nominal:
+        table.add_row("nominal free play over the mesh phases (min .. max)",
+                      f"{nominal['play_min_arcmin']:.3f} .. {nominal['play_max_arcmin']:.3f}")
+    batch = doc["batch"]
+    if batch:
+        low, high = batch["band_95_arcmin"]
+        table.add_row(f"production batch, worst position, 95 % ({doc['band_source']})",
+                      f"{low:.3f} .. {high:.3f}")
+        if batch.get("position_band_95_arcmin"):
+            low, high = batch["position_band_95_arcmin"]
+            table.add_row("production batch, one random position, 95 %",
+                          f"{low:.3f} .. {high:.3f}")
+    else:
+        table.add_row("production batch", "none (the batch model cannot use this unit)")
+    return table
+
+
 def register(app: typer.Typer) -> None:
     @app.command()
     def model(
         unit_file: Annotated[Path, typer.Argument(help="unit JSON (or a whole run.json)")],
         json_out: json_option("Write the model as JSON") = None,
+        rated_torque: Annotated[float, typer.Option(
+            "--rated-torque", help="rated torque (N·m) of a cycloid or beveloid unit's lost "
+            "motion and batch band")] = 10.0,
+        pct: Annotated[float, typer.Option(
+            "--pct", help="lost motion at +-PCT % of the rated torque (cycloid, beveloid)")] = 3.0,
     ) -> None:
-        """Seed 000 design chain (eqs. 1-16) and the reference nominal model of a gear unit."""
+        """Seed 000 design chain (eqs. 1-16) and the reference nominal model of a gear unit;
+        for a cycloid (seed 002) or beveloid (seed 001) unit its kind's nominal model and
+        production batch band."""
         from rig.commands.output import JsonOutput
 
         out = JsonOutput(json_out)
         console = Console(stderr=out.to_stdout)
         mapping = load_unit_mapping(unit_file)
+        if mapping.get("kind", "internal_involute") != "internal_involute":
+            try:
+                doc = kind_model(mapping, rated_torque, pct)
+            except AnalysisError as exc:
+                raise AnalysisError(f"{unit_file}: {exc}") from None
+            console.print(_kind_table(doc, unit_file))
+            if doc["batch"] and doc["batch"].get("nominal_relation"):
+                console.print(f"nominal and band: {doc['batch']['nominal_relation']}")
+            for note in doc["assumptions"]:
+                console.print(f"[yellow]assumed:[/yellow] {note}")
+            out.write(doc, ensure_ascii=True)
+            return
         try:
             design = design_chain(mapping)
         except AnalysisError as exc:

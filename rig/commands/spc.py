@@ -18,7 +18,8 @@ def register(app: typer.Typer) -> None:
         samples: SamplesOption = None,
         design: Annotated[str | None, typer.Option(
             "--design", help="Only units of this design (run.json unit.design, else "
-            "unit.model, else the name made of its gear data that the output shows).")] = None,
+            "unit.model, else the name made of its gear data that the output shows; or the "
+            "label or design key of one build of it).")] = None,
         since: Annotated[str | None, typer.Option(
             "--since", help="Only tests started on or after this UTC date/time "
             "(ISO 8601, e.g. 2026-11-01).")] = None,

@@ -290,10 +290,19 @@ def _kind_batch_band(unit: dict[str, Any], kind: str, rated_torque_Nm: float, pc
     except (AnalysisError, KeyError, TypeError, ValueError):
         return None
     low, high = batch.band_arcmin(0.95)
-    return {"band_95_arcmin": [low, high],
-            "median_arcmin": float(np.median(batch.worst_arcmin)),
-            "samples": samples, "kind": kind, "what": what,
-            "binding_fraction": batch.interference_fraction, "advice": advice}
+    out = {"band_95_arcmin": [low, high],
+           "median_arcmin": float(np.median(batch.worst_arcmin)),
+           "samples": samples, "kind": kind, "what": what,
+           "binding_fraction": batch.interference_fraction, "advice": advice}
+    position = batch.position_band_arcmin(0.95)
+    if position is not None:
+        out["position_band_95_arcmin"] = list(position)
+        out["nominal_relation"] = (
+            "the band is each unit's worst crank position, where runouts, crank-bearing "
+            "clearances and the thinnest tooth pair only add, so a perfect unit (the nominal "
+            "model, mean over the mesh phases) lies below it by their size; at one random "
+            f"position the batch spans {position[0]:.3f} .. {position[1]:.3f} arcmin")
+    return out
 
 
 def summarise(runs: list[dict[str, Any]], limits: Limits) -> dict[str, Any]:

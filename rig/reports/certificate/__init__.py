@@ -404,7 +404,8 @@ def _position_figure(campaign: Campaign, runs: list[Run], limits: dict[str, Any]
     names = MODEL_NAMES.get(kind, (f"nominal model of kind {kind}", "the design's tolerances"))
     out: dict[str, Any] = {"figure": None, "batch": batch, "model": _fmt(model, ".3f"),
                            "n_points": len(points), "kind": kind, "model_name": names[0],
-                           "band_source": names[1], "advice": _advice_text(batch)}
+                           "band_source": names[1], "advice": _advice_text(batch),
+                           "relation": (batch or {}).get("nominal_relation")}
     if points:
         out["figure"] = position_svg(points, model, batch, limits.get("lost_motion_arcmin_max"))
     if batch and batch.get("band_95_arcmin"):
@@ -436,7 +437,8 @@ def _run_design(meta: dict[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {"kind": kind, "model_name": names[0], "band_source": names[1],
                            "model": _fmt((result.get("model") or {}).get("lost_motion_arcmin"),
                                          ".3f"),
-                           "band": None, "advice": _advice_text(batch)}
+                           "band": None, "advice": _advice_text(batch),
+                           "relation": (batch or {}).get("nominal_relation")}
     if batch and batch.get("band_95_arcmin"):
         low, high = batch["band_95_arcmin"]
         out["band"] = f"{low:.3f} .. {high:.3f} arcmin"

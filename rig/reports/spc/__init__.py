@@ -23,6 +23,18 @@ a unit the batch model cannot use). The design is ``unit.design``, else ``unit.m
 named by the unit's gear data (kind, teeth, module: :func:`gear_design`); runs with none of
 them form the design "(not recorded)".
 
+A design is one build (issue 33 item 17): its runs are grouped by that name *and* by the
+build geometry their unit records (:func:`rig.runformat.design.design_key`: teeth, module,
+pressure angle, coefficients, face width, center distance, ...; not the inspection data), so
+seed 000's pair 1 (center distance 2.5 mm) and pair 3 (2.5222 mm, compensated) are two
+designs with their own control limits even where they carry one name or none. Where a name
+covers several builds, each is labelled with what differs (``"... [center_distance_mm
+2.5222]"``); ``design_key`` and ``design_geometry`` say which build a design is. Runs whose
+unit records only part of the geometry (older runs, a unit file without some keys) join the
+one build of their name that agrees with every key they do record; if several builds agree
+(or none is recorded at all beside a name), they stay a design of their own, labelled with
+the keys they lack (``"not recorded"``). ``--design`` takes a name, a label or a key.
+
 Limits: each unit test is charted and judged against its own limits, those of its campaign
 (campaign.json ``limits``), or for a run outside campaigns its run.json's. Every point
 carries its ``usl``/``lsl``; a metric's ``usl``/``lsl`` and ``capability`` are those common
@@ -50,6 +62,7 @@ from rig.results.outcome import (
     outcome_word,
     recorded_campaign_outcome,
 )
+from rig.runformat.design import design_geometry, design_key
 from rig.store import Store
 from rig.store.records import CampaignInfo, RunInfo
 
@@ -133,16 +146,25 @@ class RunRecords:
         camp = self.campaigns.get(info.campaign_id or "")
         return None if camp is None else camp.meta
 
-    def design(self, info: RunInfo) -> tuple[str, str]:
-        """(the design of the run's unit, how it is named: "name", "gear data", "none")."""
-        if info.design is not None:
-            return str(info.design), "name"
+    def unit(self, info: RunInfo) -> dict[str, Any]:
+        """The run's ``unit``: its campaign's (campaign.json), else its run.json's."""
         meta = self._campaign_meta(info)
         unit = meta.get("unit") if meta is not None else None
         if not isinstance(unit, dict):
             unit = self.run_json(info).get("unit")
-        named = gear_design(unit)
+        return unit if isinstance(unit, dict) else {}
+
+    def design(self, info: RunInfo) -> tuple[str, str]:
+        """(the design of the run's unit, how it is named: "name", "gear data", "none")."""
+        if info.design is not None:
+            return str(info.design), "name"
+        named = gear_design(self.unit(info))
         return (named, "gear data") if named else (NO_DESIGN, "none")
+
+    def build(self, info: RunInfo) -> tuple[str | None, dict[str, Any]]:
+        """(the design key of the run's unit, its build geometry): rig/runformat/design.py."""
+        unit = self.unit(info)
+        return design_key(unit), design_geometry(unit)
 
     def limits(self, info: RunInfo) -> dict[str, Any]:
         """The limits in force for the run's unit test: its campaign's (campaign.json, else
@@ -353,31 +375,93 @@ def newest_metrics(store: Store, runs: list[RunInfo]) -> list[RunInfo]:
     return out
 
 
+@dataclass
+class Build:
+    """The runs of one design: its name, how it is named, its design key and geometry."""
+
+    name: str
+    named_by: str
+    key: str | None
+    geometry: dict[str, Any]
+    runs: list[RunInfo] = field(default_factory=list)
+    partial: int = 0
+    """Runs that joined from units recording only part of this geometry."""
+    label: str = ""
+
+    def agrees(self, geometry: dict[str, Any]) -> bool:
+        """Does every key of ``geometry`` (a part of a build's) have this build's value?"""
+        return all(k in self.geometry and _same(self.geometry[k], v) for k, v in geometry.items())
+
+
+def _same(a: Any, b: Any) -> bool:
+    """One value of a build key, as :func:`rig.runformat.design.design_key` compares them."""
+    if isinstance(a, str) or isinstance(b, str):
+        return a == b
+    return f"{float(a):.9g}" == f"{float(b):.9g}"
+
+
+def _geometry_text(key: str, value: Any) -> str:
+    return f"{key} not recorded" if value is None else f"{key} {value:g}" if isinstance(
+        value, float) else f"{key} {value}"
+
+
+def builds(runs: list[RunInfo], records: RunRecords) -> list[Build]:
+    """The runs (oldest first) grouped into designs: by name and design key (module doc),
+    partial geometries joined to the one build of their name that agrees, labelled."""
+    found: dict[tuple[str, str, str | None], Build] = {}
+    for info in runs:
+        name, named_by = records.design(info)
+        key, geometry = records.build(info)
+        build = found.get((name, named_by, key))
+        if build is None:
+            build = found[name, named_by, key] = Build(name, named_by, key, geometry)
+        build.runs.append(info)
+    out = list(found.values())
+    for part in sorted(out, key=lambda b: -len(b.geometry)):  # the fullest parts first
+        hosts = [b for b in out if b is not part and b.name == part.name
+                 and len(b.geometry) > len(part.geometry) and b.agrees(part.geometry)]
+        if len(hosts) == 1:
+            hosts[0].runs = sorted(hosts[0].runs + part.runs, key=lambda r: r.started_at)
+            hosts[0].partial += len(part.runs) + part.partial
+            out.remove(part)
+    for build in out:
+        same = [b for b in out if b.name == build.name]
+        if len(same) == 1:
+            build.label = build.name
+            continue
+        keys = sorted({k for b in same for k in b.geometry} - {"kind"})
+        differ = [k for k in keys if len({b.geometry.get(k) for b in same}) > 1]
+        text = ", ".join(_geometry_text(k, build.geometry.get(k)) for k in differ)
+        if not build.geometry:
+            text = "no geometry recorded"
+        build.label = f"{build.name} [{text or build.key}]"
+    return sorted(out, key=lambda b: (b.name, b.runs[0].started_at))
+
+
 def spc_report(store: Store, *, design: str | None = None, since: str | None = None
                ) -> dict[str, Any]:
-    """The ``rig spc --json`` document (module doc). ``design``: a design name, or the
-    gear-data name of a design without one (:func:`gear_design`)."""
+    """The ``rig spc --json`` document (module doc). ``design``: a design name, the label of
+    one build of it, its design key, or the gear-data name of a design without a name
+    (:func:`gear_design`)."""
     campaigns = {c.campaign_id: c for c in store.list_campaigns()}
     records = RunRecords(campaigns)
-    every = store.list_runs(design=design, since=since)
-    if design is not None:  # a design named by its gear data is not in the index
-        every += [r for r in store.list_runs(since=since)
-                  if r.design is None and records.design(r)[0] == design]
-        every.sort(key=lambda r: r.started_at, reverse=True)
+    every = store.list_runs(since=since)
     measured = [r for r in every if r.status == "completed"]
     members: dict[str, list[RunInfo]] = {}
     for info in every:
         if info.campaign_id:
             members.setdefault(info.campaign_id, []).append(info)
     runs = newest_metrics(store, measured)
-    n_reanalysed = sum(a.metrics != b.metrics for a, b in zip(measured, runs, strict=True))
-    groups: dict[tuple[str, str], list[RunInfo]] = {}
-    for info in runs[::-1]:  # oldest first
-        groups.setdefault(records.design(info), []).append(info)
+    chosen = [b for b in builds(runs[::-1], records)  # oldest first
+              if design is None or design in (b.name, b.label, b.key)]
+    kept = {r.run_id for b in chosen for r in b.runs}
+    n_reanalysed = sum(a.metrics != b.metrics for a, b in zip(measured, runs, strict=True)
+                       if a.run_id in kept)
     designs = []
     excluded_all = []
-    for (name, named_by), all_runs in sorted(groups.items()):
-        group, excluded = excluded_runs(all_runs)
+    for build in chosen:
+        name, named_by = build.label, build.named_by
+        group, excluded = excluded_runs(build.runs)
         excluded_all += [{"design": name, **e} for e in excluded]
         tests = unit_tests(group, records)
         _test_outcomes(tests, group, campaigns, members)
@@ -386,7 +470,9 @@ def spc_report(store: Store, *, design: str | None = None, since: str | None = N
         batch = _batch(context)
         metrics["lost_motion_arcmin"]["batch"] = batch
         designs.append({
-            "design": name, "design_named_by": named_by,
+            "design": name, "design_named_by": named_by, "design_name": build.name,
+            "design_key": build.key, "design_geometry": build.geometry,
+            "n_runs_partial_geometry": build.partial,
             "n_runs": len(group), "n_tests": len(tests), "excluded": excluded,
             "limit_sets": _limit_sets(tests),
             "tests": [t.to_dict() for t in tests], "metrics": metrics,

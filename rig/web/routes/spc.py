@@ -30,7 +30,8 @@ ERRORS: dict[int | str, dict[str, Any]] = {
           "description": "The store cannot give the view (the message says why)."}}
 
 Design = Annotated[str | None, Query(max_length=200, description="Only this design "
-                                     "(the unit's design name); default: every design.")]
+                                     "(the unit's design name, or the label or design "
+                                     "key of one build of it); default: every design.")]
 Since = Annotated[str | None, Query(pattern=r"^\d{4}-\d{2}-\d{2}$", description="Only tests "
                                     "started on or after this UTC date (YYYY-MM-DD).")]
 

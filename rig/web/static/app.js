@@ -306,6 +306,7 @@ function showCampaign(title, summary) {
   $("campaign-note").textContent = summary.unit_kind ? `unit kind ${summary.unit_kind}; ` +
     `nominal model (${summary.model_name}): ${fmt(model)} arcmin; ` +
     (band ? `batch band (${b.what ? b.what.split(" (")[0] : "95 %"}): ${fmt(band[0])} .. ${fmt(band[1])} arcmin` : "no batch band") +
+    (band && b.nominal_relation ? `; nominal and band: ${b.nominal_relation}` : "") +
     (advice ? `; advice: ${advice}` : "") : "";
 }
 
@@ -523,6 +524,8 @@ function renderResult(r) {
   if (band) {
     html += `<br>production batch of this design (${esc(r.band_source || "seed 000 Table 1 tolerances")}, 95 %): ` +
       `${fmt(band[0])} .. ${fmt(band[1])} arcmin`;
+    // how the band and the nominal relate where the kind's batch says (cycloid: issue 33 item 17)
+    if (r.batch.nominal_relation) html += `<br>nominal and band: ${esc(r.batch.nominal_relation)}`;
   }
   el.innerHTML = html;
   const runs = r.runs || [];

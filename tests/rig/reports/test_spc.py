@@ -373,3 +373,93 @@ def test_a_run_outside_campaigns_is_judged_by_its_own_run_json_limits(tmp_path):
     assert [(p["unit_serial"], p["usl"]) for p in lm["points"]] == [
         ("C-0", 3.0), ("C-1", 3.0), ("S-1", 2.5)]
     assert lm["limits_differ"] is True and lm["usl"] is None
+
+
+PAIR3 = json.loads((REPO / "rig/examples/units/seed000-pair3.json").read_text())
+
+
+def _two_builds(st, design: str | None) -> None:
+    """Seed 000 pair 1 (center distance 2.5 mm, lost motion about 4.3') and pair 3 (2.5222 mm,
+    compensated by eq. 9: about 1.8'): three units of each, one position each."""
+    from rig.store.synthetic_runs import write_campaign
+
+    for k, play in enumerate([4.3, 4.5, 4.2]):
+        write_campaign(st, f"A-{k}", play_arcmin=play, positions_deg=(0.0,), design=design,
+                       unit_data=UNIT, n_quarter=40)
+    for k, play in enumerate([1.8, 1.7, 1.9]):
+        write_campaign(st, f"C-{k}", play_arcmin=play, positions_deg=(0.0,), design=design,
+                       unit_data=PAIR3, n_quarter=40)
+
+
+@pytest.mark.parametrize("name", [None, "GB-45/40"])
+def test_pair1_and_pair3_are_two_designs_with_their_own_limits(tmp_path, name):
+    """Issue 33 item 17: seed 000's pair 1 and pair 3 share teeth (45/40) and module (1 mm),
+    and may share a design name, but are two builds (center distance 2.5 vs 2.5222 mm): two
+    groups, each charted against its own control limits."""
+    from rig.reports.spc import spc_report
+    from rig.store import Store
+
+    st = Store(tmp_path / "store")
+    _two_builds(st, name)
+    doc = spc_report(st)
+    base = name or "internal_involute, 45/40 teeth, module 1 mm"
+    assert [(d["design"], d["n_tests"]) for d in doc["designs"]] == [
+        (f"{base} [center_distance_mm 2.5]", 3), (f"{base} [center_distance_mm 2.5222]", 3)]
+    one, three = doc["designs"]
+    from rig.runformat.design import design_key
+
+    assert (one["design_key"], three["design_key"]) == (design_key(UNIT), design_key(PAIR3))
+    assert one["design_geometry"]["center_distance_mm"] == 2.5
+    assert three["design_geometry"]["center_distance_mm"] == 2.5222
+    assert {t["unit_serial"] for t in one["tests"]} == {"A-0", "A-1", "A-2"}
+    assert {t["unit_serial"] for t in three["tests"]} == {"C-0", "C-1", "C-2"}
+    lm1 = one["metrics"]["lost_motion_arcmin"]["chart"]["individuals"]
+    lm3 = three["metrics"]["lost_motion_arcmin"]["chart"]["individuals"]
+    assert lm3["ucl"] < 2.5 < lm1["lcl"]  # each build's own limits, none pooled
+    # either build can be asked for by its label or its key
+    for ask in (three["design"], three["design_key"]):
+        assert [d["design"] for d in spc_report(st, design=ask)["designs"]] == [
+            three["design"]]
+
+
+def test_old_runs_without_the_full_geometry_group_sensibly(tmp_path):
+    """A unit recording only part of the geometry (an older run: no center distance, or only
+    the design name) joins the one build of its name that agrees with what it records; where
+    two builds agree it stays a design of its own, labelled with what it lacks."""
+    from rig.reports.spc import spc_report
+    from rig.store import Store
+    from rig.store.synthetic_runs import write_campaign
+
+    old = {k: v for k, v in UNIT.items() if k != "center_distance_mm"}
+    st = Store(tmp_path / "one")
+    for k, play in enumerate([4.3, 4.5]):
+        write_campaign(st, f"A-{k}", play_arcmin=play, positions_deg=(0.0,), design="GB",
+                       unit_data=UNIT, n_quarter=40)
+    write_campaign(st, "OLD-1", play_arcmin=4.4, positions_deg=(0.0,), design="GB",
+                   unit_data=old, n_quarter=40)
+    write_campaign(st, "OLD-2", play_arcmin=4.1, positions_deg=(0.0,), design="GB",
+                   n_quarter=40)  # a name, no geometry at all
+    (d,) = spc_report(st)["designs"]
+    assert (d["design"], d["n_tests"], d["n_runs_partial_geometry"]) == ("GB", 4, 2)
+
+    st = Store(tmp_path / "two")
+    _two_builds(st, "GB")
+    write_campaign(st, "OLD-1", play_arcmin=4.4, positions_deg=(0.0,), design="GB",
+                   unit_data=old, n_quarter=40)
+    got = [(d["design"], d["n_tests"]) for d in spc_report(st)["designs"]]
+    assert got == [("GB [center_distance_mm 2.5]", 3), ("GB [center_distance_mm 2.5222]", 3),
+                   ("GB [center_distance_mm not recorded]", 1)]
+
+
+def test_the_design_key_is_the_build_geometry_only():
+    from rig.runformat.design import design_key
+
+    key = design_key(UNIT)
+    assert key is not None and key.startswith("g-") and len(key) == 12
+    # the same build: other serial, names, inspection data, key order, number spelling
+    same = {**{k: UNIT[k] for k in reversed(list(UNIT))}, "serial": "X", "design": "D",
+            "module_mm": 1, "runout_internal_mm": 0.03, "m_value_internal_mm": [42.5]}
+    assert design_key(same) == key
+    assert design_key(PAIR3) != key
+    assert design_key({"serial": "X", "design": "D"}) is None
+    assert design_key({**UNIT, "kind": "cycloid"}) != key

@@ -1,7 +1,8 @@
-"""Reading the mapped columns of another lab's file: delimited text (pyarrow) or NI TDMS
-(npTDMS). Values come back as float64 in the file's own units; :mod:`rig.io.importer` converts
-them. Every problem is a one-line :class:`rig.io.map.RunImportError` naming the file and the
-column (channel), and for text files the line.
+"""Reading the mapped columns of another lab's file: delimited text (pyarrow), NI TDMS
+(npTDMS), or the rig's own parquet, xlsx and mat exports (:mod:`rig.io.read_exports`).
+Values come back as float64 in the file's own units; :mod:`rig.io.importer` converts them.
+Every problem is a one-line :class:`rig.io.map.RunImportError` naming the file and the column
+(channel), and for text files the line.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import pyarrow.compute as pc
 import pyarrow.csv as pacsv
 
 from rig.io.map import ImportMap, RunImportError, known_unit
+from rig.io.read_exports import export_format, read_export_columns
 
 __all__ = ["SourceData", "read_source"]
 
@@ -53,28 +55,36 @@ def read_source(path: Path, mapping: ImportMap) -> SourceData:
         raise RunImportError(f"{path}: no such file")
     if mapping.file_format(path) == "tdms":
         return _read_tdms(path, mapping)
-    _refuse_binary(path)
+    fmt = export_format(path)
+    if fmt is not None:
+        return _read_export(path, mapping, fmt)
     return _read_delimited(path, mapping)
 
 
-BINARY_FORMATS = ((b"PAR1", "a Parquet file"), (b"PK\x03\x04", "an Excel (xlsx) workbook"),
-                  (b"MATLAB 5.0 MAT-file", "a MATLAB .mat file"),
-                  (b"\x89HDF\r\n\x1a\n", "a MATLAB v7.3 (HDF5) .mat file"))
-"""Leading bytes of the binary files ``rig export`` writes (and HDF5 .mat): no text encoding
-reads them."""
+def _read_export(path: Path, mapping: ImportMap, fmt: str) -> SourceData:
+    """The mapped columns of a ``rig export`` parquet, xlsx or mat file (the round trip):
+    columns by name, as a delimited file's header names them."""
+    columns = read_export_columns(path, fmt)
+    have = list(columns)
+    wanted = _wanted(mapping)
+    first_row = 2 if fmt == "xlsx" else 1  # an xlsx sheet's row 1 is the header
 
+    def where(run_column: str, index: int | None) -> str:
+        name = wanted.get(run_column) or (run_column if run_column in have
+                                          else wanted["torque_Nm"])
+        row = f" row {first_row + index}" if index is not None else ""
+        return f"{path}: column {name!r} ({run_column}){row}"
 
-def _refuse_binary(path: Path) -> None:
-    """One line for a binary file given where delimited text is read: its format, and the
-    way that works (the run's CSV export), instead of a text decoding error."""
-    with open(path, "rb") as f:
-        head = f.read(32)
-    for magic, name in BINARY_FORMATS:
-        if head.startswith(magic):
-            raise RunImportError(
-                f"{path}: {name}, not delimited text: rig import reads delimited text and NI "
-                "TDMS; for a run this rig exported, import its CSV export instead (rig "
-                "export RUN --format csv)")
+    values: dict[str, np.ndarray] = {}
+    for run_column, name in wanted.items():
+        if name not in columns:
+            raise RunImportError(_missing(path, run_column, name, have, f"{fmt} column"))
+        data = columns[name]
+        if not isinstance(data, np.ndarray):
+            raise RunImportError(f"{where(run_column, None)}: holds text, not numbers")
+        values[run_column] = data
+    extra = {name: data for name, data in columns.items() if name not in wanted.values()}
+    return SourceData(values, where, fmt, {run_column: None for run_column in wanted}, extra)
 
 
 def _wanted(mapping: ImportMap) -> dict[str, str]:

@@ -387,22 +387,3 @@ def test_tdms_time_from_waveform_timing(tmp_path: Path) -> None:
     line = _one_line_error(_rig("import", "wave.tdms", "--map", "wave.toml", "--unit",
                                 "unit.json", "--out", "run2", cwd=tmp_path))
     assert "wave.tdms" in line and "'Angel'" in line and "['Torque', 'Angle']" in line, line
-
-
-@pytest.mark.parametrize(("fmt", "named"), [("parquet", "a Parquet file"),
-                                            ("xlsx", "an Excel (xlsx) workbook"),
-                                            ("mat", "a MATLAB .mat file")])
-def test_import_of_a_binary_export_names_its_format_and_what_to_do(
-        native: dict, tmp_path: Path, fmt: str, named: str) -> None:
-    """Issue 33 item 12: ``rig import`` of the rig's own parquet, xlsx or mat export said
-    "not utf-8 text ... set 'encoding' in the map", which no encoding fixes. One line that
-    names the format and the way that works: the run's CSV export."""
-    out = f"run.{fmt}"
-    res = _rig("export", native["run_id"], "--store", str(native["store"]), "--format", fmt,
-               "--out", out, cwd=tmp_path)
-    assert res.returncode == 0, res.stderr
-    line = _one_line_error(_rig("import", out, "--map", str(CATMAN_MAP), "--unit",
-                                str(native["unit"]), "--out", "back", cwd=tmp_path))
-    assert f"{out}: {named}, not delimited text" in line, line
-    assert "--format csv" in line and "encoding" not in line, line
-    assert not (tmp_path / "back").exists()

@@ -103,6 +103,11 @@ def register(app: typer.Typer) -> None:
             help="transmission-error: signed reduction ratio (output = input / ratio; "
                  "default: the unit's, -z_external / (z_internal - z_external) for an "
                  "internal involute pair).")] = None,
+        coupling_index: Annotated[float | None, typer.Option(
+            "--coupling-index-deg",
+            help="transmission-error: where the coupling between the output and its encoder "
+                 "is indexed, deg (0 as mounted, 180 for the second run of rig "
+                 "te-calibrate); recorded as test.coupling_index_deg.")] = None,
     ) -> None:
         """Measure one hysteresis loop (GB/T order -T -> 0 -> +T -> 0 -> -T), or with --test
         transmission-error the transmission error in both directions, into the store."""
@@ -124,7 +129,7 @@ def register(app: typer.Typer) -> None:
         te = None
         if TESTS[test] == "transmission_error":
             te = _te_params(rated_torque, speed, brake, revolutions, ratio, unit_mapping,
-                            plant)
+                            plant, coupling_index)
         request = _request(loop, te, position, unit_mapping, limits, profile)
         est = estimate(request.plan().steps())
         if preview:
@@ -218,7 +223,8 @@ def _print_result(out: Console, result: dict[str, Any], st: Any) -> int:
 
 
 def _te_params(rated_torque: float, speed: float, brake: float, revolutions: float,
-               ratio: float | None, unit: dict[str, Any], plant: Path | None) -> Any:
+               ratio: float | None, unit: dict[str, Any], plant: Path | None,
+               coupling_index_deg: float | None = None) -> Any:
     """The transmission error test of ``rig measure --test transmission-error``; the ratio
     by default the unit's (else the --plant's, else the default plant's)."""
     from pydantic import ValidationError
@@ -234,10 +240,12 @@ def _te_params(rated_torque: float, speed: float, brake: float, revolutions: flo
             raise RigError("--ratio: the unit data do not give the reduction ratio (an "
                            "internal involute pair's z_internal and z_external); give it")
     names = {"input_speed_rpm": "speed", "brake_torque_fraction": "brake",
-             "output_revolutions": "revolutions", "rated_torque_Nm": "rated-torque"}
+             "output_revolutions": "revolutions", "rated_torque_Nm": "rated-torque",
+             "coupling_index_deg": "coupling-index-deg"}
     try:
         params = TEParams(rated_torque_Nm=rated_torque, ratio=ratio, input_speed_rpm=speed,
-                          brake_torque_fraction=brake, output_revolutions=revolutions)
+                          brake_torque_fraction=brake, output_revolutions=revolutions,
+                          coupling_index_deg=coupling_index_deg)
     except ValidationError as exc:
         raise RigError("; ".join(
             f"--{names.get(str(e['loc'][0]), str(e['loc'][0]))}: {e['msg']} "

@@ -19,6 +19,9 @@ def register(app: typer.Typer) -> None:
         run_a: Annotated[Path, typer.Argument(help="TE run, coupling as mounted.")],
         run_b: Annotated[Path, typer.Argument(help="TE run, coupling indexed by 180 deg.")],
         json_file: json_option("Write the result as JSON") = None,
+        indexed_by: Annotated[float | None, typer.Option(
+            "--indexed-by", help="How far RUN_B's coupling is indexed against RUN_A's (deg; "
+            "must be 180), for runs that do not record test.coupling_index_deg.")] = None,
     ) -> None:
         """Separate the output encoder's once-per-turn eccentricity from the unit's own TE by
         the reversal of two runs; print the rig configuration lines that remove it."""
@@ -28,7 +31,7 @@ def register(app: typer.Typer) -> None:
 
         json_out = JsonOutput(json_file)
         console = Console(stderr=json_out.to_stdout)
-        cal = reversal_calibration(read_run(run_a), read_run(run_b))
+        cal = reversal_calibration(read_run(run_a), read_run(run_b), indexed_by_deg=indexed_by)
         console.print(f"encoder eccentricity {cal['eccentricity_arcsec']:.2f} ± "
                       f"{cal['eccentricity_u_arcsec']:.2f} arcsec at "
                       f"{cal['eccentricity_phase_deg']:.1f} deg (A cos(theta + p)); the unit's "

@@ -351,6 +351,9 @@ class TEParams(BaseModel):
     overspeed_factor: float = Field(1.5, gt=1)
     jump_tolerance_deg: float = Field(0.1, gt=0)
     zero_window_s: float = Field(0.2, gt=0)
+    coupling_index_deg: float | None = Field(None, ge=0, lt=360)
+    """Where the coupling between the output and its encoder is indexed (deg, as the operator
+    set it; None: not stated): ``rig te-calibrate`` needs its two runs 180 deg apart."""
 
     @field_validator("ratio")
     @classmethod
@@ -385,7 +388,8 @@ class TEParams(BaseModel):
             "output_revolutions": self.output_revolutions,
             "rated_torque_Nm": self.rated_torque_Nm,
             "lead_in_output_deg": self.lead_in_output_deg,
-        }
+        } | ({} if self.coupling_index_deg is None
+             else {"coupling_index_deg": self.coupling_index_deg})
 
     def turn(self, direction: str) -> TurnInput:
         """The :class:`TurnInput` step of one direction."""

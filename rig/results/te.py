@@ -237,12 +237,44 @@ def _two_measurements(run_a: Run, run_b: Run) -> None:
                        "180 deg")
 
 
-def reversal_calibration(run_a: Run, run_b: Run) -> dict[str, float]:
+INDEX_TOLERANCE_DEG = 5.0
+"""How far from 180 deg the second run's coupling index may be: an error of ``d`` deg
+leaves ``sin(d)`` of the unit's order 1 in the encoder's term (9 % at 5 deg)."""
+
+
+def _indexed_by_half_turn(run_a: Run, run_b: Run, indexed_by_deg: float | None) -> float:
+    """The index (deg) of run B's coupling against run A's: from their
+    ``test.coupling_index_deg``, else as stated (``indexed_by_deg``, ``rig te-calibrate
+    --indexed-by``). RigError unless it is 180 +- :data:`INDEX_TOLERANCE_DEG` deg."""
+    recorded = [run.test.get("coupling_index_deg") for run in (run_a, run_b)]
+    if all(isinstance(v, (int, float)) and math.isfinite(v) for v in recorded):
+        index = (float(recorded[1]) - float(recorded[0])) % 360.0
+        source = (f"{_where(run_b)} records its coupling at {float(recorded[1]):g} deg, "
+                  f"{_where(run_a)} at {float(recorded[0]):g} deg")
+    elif indexed_by_deg is not None:
+        index = float(indexed_by_deg) % 360.0
+        source = f"--indexed-by {indexed_by_deg:g}"
+    else:
+        missing = _where(run_a if not isinstance(recorded[0], (int, float)) else run_b)
+        raise RigError(f"{missing}: records no coupling index (test.coupling_index_deg); the "
+                       "reversal needs the second run's coupling indexed by 180 deg: measure "
+                       "with --coupling-index-deg, or state it with --indexed-by 180")
+    if abs(index - 180.0) > INDEX_TOLERANCE_DEG:
+        raise RigError(f"{source}: indexed by {index:g} deg; the reversal needs 180 +- "
+                       f"{INDEX_TOLERANCE_DEG:g} deg")
+    return index
+
+
+def reversal_calibration(run_a: Run, run_b: Run, *, indexed_by_deg: float | None = None
+                         ) -> dict[str, float]:
     """The output encoder's mounting eccentricity from two TE runs of one unit, the second
     with the coupling indexed by 180 deg (:func:`analysis.transmission.eccentricity.reversal`):
     the ``[calibration.encoder]`` keys :data:`ECCENTRICITY_KEYS` and ``unit_order1_arcsec``
-    (the unit's own once-per-output-turn TE), from both directions' order-1 fits averaged."""
+    (the unit's own once-per-output-turn TE), from both directions' order-1 fits averaged.
+    Run B's coupling must be indexed by 180 deg against run A's (recorded in both runs'
+    ``test.coupling_index_deg``, or stated as ``indexed_by_deg``)."""
     _two_measurements(run_a, run_b)
+    _indexed_by_half_turn(run_a, run_b, indexed_by_deg)
     phasors = []
     for run in (run_a, run_b):
         if not is_te_run(run):

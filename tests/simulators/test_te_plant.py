@@ -74,7 +74,8 @@ def _measure(config, run_id: str, calibration=None) -> tuple[Run, dict]:
         input_angle_deg=data[:, 1], unit={**config.unit, "kind": "internal_involute"},
         test={"kind": "transmission_error", "ratio": -8.0, "input_speed_rpm": SPEED / 6.0,
               "brake_torque_Nm": BRAKE_NM, "directions": ["forward", "reverse"],
-              "output_revolutions": 1.1, "rated_torque_Nm": 10.0},
+              "output_revolutions": 1.1, "rated_torque_Nm": 10.0,
+              "coupling_index_deg": config.rig.output_offset_deg % 360.0},
         sensors={}, extra_meta=meta, extra_columns={"direction": data[:, 3]})
     return run, truth
 

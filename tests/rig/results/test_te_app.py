@@ -220,6 +220,32 @@ def test_te_calibrate_refuses_one_run_given_twice(tmp_path: Path) -> None:
         assert res.stdout == ""
 
 
+def test_te_calibrate_checks_the_second_run_is_indexed_by_180_deg(tmp_path: Path) -> None:
+    """Issue 33 item 11: the second run has to be indexed by 180 deg, and te-calibrate checks
+    it: runs record where the coupling was (test.coupling_index_deg, ``rig measure
+    --coupling-index-deg``); 90 deg apart is refused, and so are runs that record nothing
+    unless the operator states the index (``--indexed-by 180``)."""
+    ecc = {"ecc_arcsec": 20.0, "ecc_phase_deg": 50.0}
+    write_run(te_run("a", index_deg=0.0, **ecc), tmp_path / "a")
+    write_run(te_run("b90", index_deg=90.0, seed=1, **ecc), tmp_path / "b90")
+    res = _rig("te-calibrate", str(tmp_path / "a"), str(tmp_path / "b90"), "--json", "-")
+    assert res.returncode == 2 and res.stdout == "", res.stdout + res.stderr
+    (line,) = res.stderr.strip().splitlines()
+    assert "indexed by 90 deg; the reversal needs 180 +- 5 deg" in line, line
+    for name, index in (("a0", 0.0), ("b0", 180.0)):  # older runs: no index recorded
+        run = te_run(name, index_deg=index, seed=int(index), **ecc)
+        del run.meta["test"]["coupling_index_deg"]
+        write_run(run, tmp_path / name)
+    res = _rig("te-calibrate", str(tmp_path / "a0"), str(tmp_path / "b0"), "--json", "-")
+    assert res.returncode == 2, res.stdout + res.stderr
+    (line,) = res.stderr.strip().splitlines()
+    assert "records no coupling index" in line and "--indexed-by 180" in line, line
+    res = _rig("te-calibrate", str(tmp_path / "a0"), str(tmp_path / "b0"), "--indexed-by",
+               "180", "--json", "-")
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["eccentricity_arcsec"] == pytest.approx(20.0, abs=0.3)
+
+
 def test_encoder_eccentricity_calibrated_by_reversal_is_removed(tmp_path: Path) -> None:
     """A 20 arcsec encoder-mounting eccentricity: in one run it is the output's order 1; the
     reversal (coupling indexed by 180 deg) finds it, the rig configuration's calibration

@@ -78,7 +78,11 @@ class Range:
     @property
     def type(self) -> Any:
         """A pydantic float type checked against the range (its bounds in the schema)."""
-        return Annotated[float, AfterValidator(self._check),
+        return self.after()
+
+    def after(self, *first: Any) -> Any:
+        """:attr:`type` with the pydantic metadata ``first`` checked before the range."""
+        return Annotated[float, *first, AfterValidator(self._check),
                          Field(json_schema_extra=self.schema())]
 
 

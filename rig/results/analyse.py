@@ -17,7 +17,7 @@ from analysis.loop import PROFILES, LoopResult, analyse_loop, twist_arcmin
 from analysis.models.by_kind import LoopModel
 from analysis.models.by_kind import nominal_model_for_unit as model_by_kind
 from rig.core.errors import RigError
-from rig.core.ranges import ANGLE_READING_DEG, TORQUE_READING_MAX_RATED
+from rig.core.ranges import ANGLE_READING_DEG, RATED_TORQUE_NM, TORQUE_READING_MAX_RATED
 from rig.runformat import Run
 
 ARCMIN_PER_REV = 360.0 * 60.0
@@ -235,6 +235,9 @@ def analyse_run(
     rated = float(rated)
     if not rated > 0:
         raise RigError(f"run {run.run_id!r}: rated torque must be > 0 N·m, got {rated}")
+    problem = RATED_TORQUE_NM.problem("rated torque", rated)
+    if problem is not None:
+        raise RigError(f"run {run.run_id!r}: {problem}")
     check_samples(run, rated)
 
     ratio = test.get("ratio")

@@ -974,7 +974,7 @@ function fieldProblem(d) {
   let name = [...loc].reverse().find((x) => f[x]);
   // the unit as a whole: its kind unknown, or its tooth counts between them
   if (!name && loc.includes("unit")) name = d.type === "unit_kind" ? "unit_kind" : "z_internal";
-  const msg = String(d.msg || "").replace(/^Value error, /, "")
+  const msg = String(d.msg || "").replace(/^Value error, /, "").replace(/^expected /, "must be ")
     .replace(/^Input should be greater than or equal to (.*)$/, "must be at least $1")
     .replace(/^Input should be greater than (.*)$/, "must be above $1")
     .replace(/^Input should be less than or equal to (.*)$/, "must be at most $1")

@@ -39,5 +39,11 @@ def test_absurd_readings_are_refused_in_one_line(column: str, value: float,
     assert "\n" not in message
 
 
+def test_a_rated_torque_of_1e308_is_refused_naming_the_range() -> None:
+    with pytest.raises(RigError, match=r"rated torque: expected greater than 0 and at most "
+                                       r"1e\+07 N·m \(got 1e\+308\)"):
+        analyse_run(read_run(EXAMPLE_RUN), rated_torque_Nm=1e308)
+
+
 def test_the_example_run_itself_is_analysed() -> None:
     assert analyse_run(read_run(EXAMPLE_RUN)).loop.n_cycles >= 1

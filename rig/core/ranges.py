@@ -21,6 +21,8 @@ real unit and narrow enough that no plan or reading built from them overflows:
 - the rig configuration: a SYNC period 1 ms to 60 s (shorter floods the CAN bus), a bus's
   ``sleep_after_open`` 0 to 10 s, the master timeout up to an hour, device timeouts up to
   an hour, the input motor's speed up to 10000 rpm;
+- pass/fail limits: lost motion, backlash and TE hysteresis up to 10000 arcmin, TE
+  peak-to-peak up to 1e6 arcsec, stiffness up to 1e9 N·m/arcmin;
 - a plan's expected duration: beyond :data:`PLAN_CONFIRM_S` (8 h, a shift) it runs only
   when confirmed, beyond :data:`PLAN_MAX_S` (30 days) never.
 """
@@ -124,6 +126,11 @@ MASTER_TIMEOUT_S = Range(0.0, 3600.0, "s", low_open=True)
 DEVICE_TIMEOUT_S = Range(0.0, 3600.0, "s", low_open=True)
 MOTOR_SPEED_RPM = Range(0.0, 10_000.0, "rpm", low_open=True)
 LOCK_TOLERANCE_DEG = Range(0.0, 10.0, "deg", low_open=True)
+
+# -- pass/fail limits ----------------------------------------------------------------------
+LIMIT_ARCMIN = Range(0.0, 10_000.0, "arcmin", low_open=True)
+LIMIT_STIFFNESS_NM_PER_ARCMIN = Range(0.0, 1e9, "N·m/arcmin", low_open=True)
+LIMIT_ARCSEC = Range(0.0, 1e6, "arcsec", low_open=True)
 
 # -- a plan's duration (s) -----------------------------------------------------------------
 PLAN_CONFIRM_S = 8 * 3600.0

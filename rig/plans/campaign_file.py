@@ -18,7 +18,13 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from analysis.loop import PROFILES
 from rig.core.errors import RigError
 from rig.core.json_files import read_json_file
-from rig.core.ranges import INPUT_SPEED_RPM, TORQUE_LIMIT_NM
+from rig.core.ranges import (
+    INPUT_SPEED_RPM,
+    LIMIT_ARCMIN,
+    LIMIT_ARCSEC,
+    LIMIT_STIFFNESS_NM_PER_ARCMIN,
+    TORQUE_LIMIT_NM,
+)
 from rig.core.toml_files import describe_validation_error, read_toml
 from rig.plans import (
     TE_KIND,
@@ -50,11 +56,11 @@ class Limits(BaseModel):
 
     model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 
-    lost_motion_arcmin_max: float | None = Field(None, gt=0)
-    backlash_arcmin_max: float | None = Field(None, gt=0)
-    stiffness_Nm_per_arcmin_min: float | None = Field(None, gt=0)
-    te_pp_max_arcsec: float | None = Field(None, gt=0)
-    te_hysteresis_max_arcmin: float | None = Field(None, gt=0)
+    lost_motion_arcmin_max: LIMIT_ARCMIN.after(Field(gt=0)) | None = None
+    backlash_arcmin_max: LIMIT_ARCMIN.after(Field(gt=0)) | None = None
+    stiffness_Nm_per_arcmin_min: LIMIT_STIFFNESS_NM_PER_ARCMIN.after(Field(gt=0)) | None = None
+    te_pp_max_arcsec: LIMIT_ARCSEC.after(Field(gt=0)) | None = None
+    te_hysteresis_max_arcmin: LIMIT_ARCMIN.after(Field(gt=0)) | None = None
 
     def check(self, run: dict[str, Any]) -> list[str]:
         """The causes of failure of one run's metrics (empty: passed; a metric the run's

@@ -16,6 +16,9 @@ from rig.core import ids
 from rig.core.ranges import (
     DWELL_S,
     INPUT_SPEED_RPM,
+    LIMIT_ARCMIN,
+    LIMIT_ARCSEC,
+    LIMIT_STIFFNESS_NM_PER_ARCMIN,
     POSITION_DEG,
     RATE_NM_PER_S,
     RATED_TORQUE_NM,
@@ -220,11 +223,11 @@ class LimitSettings(BaseModel):
 
     model_config = _strict
 
-    lost_motion_arcmin_max: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
-    backlash_arcmin_max: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
-    stiffness_Nm_per_arcmin_min: float | None = Field(None, gt=0, le=1e9, allow_inf_nan=False)
-    te_pp_max_arcsec: float | None = Field(None, gt=0, le=1e6, allow_inf_nan=False)
-    te_hysteresis_max_arcmin: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
+    lost_motion_arcmin_max: LIMIT_ARCMIN.type | None = None
+    backlash_arcmin_max: LIMIT_ARCMIN.type | None = None
+    stiffness_Nm_per_arcmin_min: LIMIT_STIFFNESS_NM_PER_ARCMIN.type | None = None
+    te_pp_max_arcsec: LIMIT_ARCSEC.type | None = None
+    te_hysteresis_max_arcmin: LIMIT_ARCMIN.type | None = None
 
     def limits(self) -> Limits:
         return Limits(**self.model_dump())

@@ -44,6 +44,8 @@ def _invoke(*args: str) -> tuple[int, str]:
     (["--rate", "1e-300"], "--rate: expected from 0.001 to 100000 N·m/s (got 1e-300)"),
     (["--rated-torque", "1e308"], "--rated-torque: expected greater than 0 and at most 1e+07 "
                                   "N·m (got 1e+308)"),
+    (["--max-lost-motion", "1e300"], "--max-lost-motion: expected greater than 0 and at most "
+                                     "10000 arcmin (got 1e+300)"),
     (["--position", "1e300"], "--position: expected from -3600 to 3600 deg (got 1e+300)"),
     (["--test", "transmission-error", "--speed", "1e-9"],
      "--speed: expected from 1 to 6000 rpm (got 1e-09)"),

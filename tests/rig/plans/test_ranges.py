@@ -44,6 +44,9 @@ CASES = {
                       "te.input_speed_rpm: expected from 1 to 6000 rpm (got 1e-09)"),
     "TE speed 0.01": (TE + "input_speed_rpm = 0.01\n",
                       "te.input_speed_rpm: expected from 1 to 6000 rpm (got 0.01)"),
+    "lost motion limit 1e300": (GOOD + "[limits]\nlost_motion_arcmin_max = 1e300\n",
+                                "limits.lost_motion_arcmin_max: expected greater than 0 and at "
+                                "most 10000 arcmin (got 1e+300)"),
     "torque limit 1e31": ("torque_limit_Nm = 1e31\n" + GOOD,
                           "torque_limit_Nm: expected greater than 0 and at most 1e+07 N·m "
                           "(got 1e+31)"),

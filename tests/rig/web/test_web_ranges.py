@@ -44,6 +44,9 @@ STATED = [
     ("RunRequest", "position_deg", ranges.POSITION_DEG),
     ("RunRequest", "torque_limit_Nm", ranges.TORQUE_LIMIT_NM),
     ("InputLockRequest", "angle_deg", ranges.POSITION_DEG),
+    ("LimitSettings", "lost_motion_arcmin_max", ranges.LIMIT_ARCMIN),
+    ("LimitSettings", "stiffness_Nm_per_arcmin_min", ranges.LIMIT_STIFFNESS_NM_PER_ARCMIN),
+    ("LimitSettings", "te_pp_max_arcsec", ranges.LIMIT_ARCSEC),
 ]
 
 

@@ -369,6 +369,11 @@ def _combine(values: list[tuple[float, float]], unit: str) -> Metric:
 # ----------------------------------------------------------------------------- public
 
 
+MAX_MAGNITUDE = 1e50
+"""The largest magnitude of a time (s), torque (N·m) or twist (arcmin) the metrics take: their
+sums of squares stay finite (no measured value comes near it)."""
+
+
 def _validate(t_s, torque_Nm, twist) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     arrays = {}
     for name, a in (("t_s", t_s), ("torque_Nm", torque_Nm), ("twist_arcmin", twist)):
@@ -378,6 +383,10 @@ def _validate(t_s, torque_Nm, twist) -> tuple[np.ndarray, np.ndarray, np.ndarray
         bad = np.flatnonzero(~np.isfinite(x))
         if bad.size:
             raise AnalysisError(f"{name}[{bad[0]}] is not a finite number ({x[bad[0]]})")
+        bad = np.flatnonzero(np.abs(x) > MAX_MAGNITUDE)
+        if bad.size:
+            raise AnalysisError(f"{name}[{bad[0]}] is {x[bad[0]]:g}, beyond {MAX_MAGNITUDE:g}: "
+                                "no measured value (its square overflows)")
         arrays[name] = x
     n = {k: v.size for k, v in arrays.items()}
     if len(set(n.values())) != 1:

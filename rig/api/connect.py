@@ -19,6 +19,7 @@ from pydantic import ValidationError
 from rig.api.data import Campaign, Run
 from rig.core.errors import RigError, RunFormatError
 from rig.core.json_files import finite_for_json
+from rig.core.ranges import POSITION_DEG
 from rig.engine.events import ProgressEvent
 from rig.measurement.service import RigSession, open_session, plant_config_for, run_campaign
 from rig.measurement.single_run import (
@@ -29,6 +30,7 @@ from rig.measurement.single_run import (
 )
 from rig.plans import LoopParams
 from rig.plans.campaign_file import CampaignFile, Limits, campaign_from_mapping, load_campaign
+from rig.plans.estimate import check_duration, estimate
 from rig.runformat import CAMPAIGN_JSON, read_campaign
 from rig.runformat import Campaign as RawCampaign
 from rig.store import Store, default_store_root
@@ -99,18 +101,22 @@ class Connection:
             yield session
 
     def campaign(self, file_or_dict: str | Path | Mapping[str, Any] | CampaignFile, *,
-                 progress: Progress | None = None) -> Campaign:
+                 progress: Progress | None = None, confirm_long: bool = False) -> Campaign:
         """Run a campaign (a TOML file, its mapping, or a validated CampaignFile; keys in
         docs/campaigns.md) into the store, as ``rig campaign run``. Returns the campaign read
         back from the store, its ``result`` the ``--json`` document (outcome, failures,
         per-run metrics). Bad input raises before anything moves (CampaignError naming the
-        key)."""
+        key), and so does a campaign expected to take longer than 8 h unless
+        ``confirm_long`` (or the file's ``confirm_long = true``)."""
         if isinstance(file_or_dict, CampaignFile):
             camp = file_or_dict
         elif isinstance(file_or_dict, Mapping):
             camp = campaign_from_mapping(dict(file_or_dict))
         else:
             camp = load_campaign(file_or_dict)
+        check_duration(estimate(camp.build_plan().steps()),
+                       confirmed=confirm_long or camp.confirm_long,
+                       how="confirm_long=True (or confirm_long = true in the file)")
         plant = plant_config_for(camp.unit_data(), camp.simulation, camp.source) \
             if self.simulated else None
         with self._open(plant) as session:
@@ -120,7 +126,8 @@ class Connection:
     def measure(self, unit: str | Path | Mapping[str, Any] | None = None, *,
                 position_deg: float | None = None, limits: Mapping[str, Any] | None = None,
                 profile: str = "nabtesco", operator: str | None = None,
-                progress: Progress | None = None, **plan: Any) -> Run:
+                progress: Progress | None = None, confirm_long: bool = False,
+                **plan: Any) -> Run:
         """Measure one hysteresis loop into the store, as ``rig measure``.
 
         ``unit``: the unit data (mapping or JSON file; simulated: also the plant's unit,
@@ -128,16 +135,25 @@ class Connection:
         ``limits``: lost_motion_arcmin_max, backlash_arcmin_max, stiffness_Nm_per_arcmin_min;
         ``plan``: keys of the ``[plan]`` table (rated_torque_Nm, amplitude_pct, mode,
         steps_per_quarter, dwell_s ...; defaults :data:`MEASURE_DEFAULTS`). Returns the run
-        read back from the store, its ``result`` the ``rig measure --json`` document.
+        read back from the store, its ``result`` the ``rig measure --json`` document. A
+        value outside its range (:mod:`rig.core.ranges`), or a plan expected to take longer
+        than 8 h without ``confirm_long``, raises before anything moves.
         """
         try:
             loop = LoopParams(**{**MEASURE_DEFAULTS, **plan})
             lim = Limits(**dict(limits or {}))
         except ValidationError as exc:
-            raise RigError("; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}"
-                                     for e in exc.errors())) from None
+            raise RigError("; ".join(
+                f"{'.'.join(str(p) for p in e['loc'])}: "
+                f"{str(e['msg']).removeprefix('Value error, ')} (got {e.get('input')!r})"
+                for e in exc.errors())) from None
+        if position_deg is not None and (
+                problem := POSITION_DEG.problem("position_deg", position_deg)):
+            raise RigError(problem)
         request = MeasureRequest(loop=loop, position_deg=position_deg, unit=unit_data(unit),
                                  limits=lim, profile=profile, operator=operator)
+        check_duration(estimate(request.plan().steps()), confirmed=confirm_long,
+                       how="confirm_long=True")
         if self.simulated:
             request = with_simulated_plant(request)
         with self._open(request.plant) as session:

@@ -72,18 +72,23 @@ def register(app: typer.Typer) -> None:
         preview: Annotated[bool, typer.Option(
             "--preview", help="List the plan's steps and its duration; measure nothing.")
         ] = False,
+        confirm_long: Annotated[bool, typer.Option(
+            "--confirm-long", help="Run (or preview) a campaign expected to take longer than "
+            "8 h (at most 30 days); or the file's confirm_long = true.")] = False,
     ) -> None:
         """Run a campaign; write its runs and campaign.json under the store's campaigns/."""
         from rig.core.errors import RigError
         from rig.measurement.service import open_session, plant_config_for, run_campaign
         from rig.plans.campaign_file import load_campaign
-        from rig.plans.estimate import estimate
+        from rig.plans.estimate import check_duration, estimate
         from rig.store import Store
 
         out = console()
         camp = load_campaign(file)
         plan = camp.build_plan()
         est = estimate(plan.steps())
+        check_duration(est, confirmed=confirm_long or camp.confirm_long,
+                       how=f"--confirm-long (or confirm_long = true in {camp.source})")
         if preview:
             for line in plan.listing():
                 out.print(line, highlight=False)

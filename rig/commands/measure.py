@@ -88,6 +88,9 @@ def register(app: typer.Typer) -> None:
         preview: Annotated[bool, typer.Option(
             "--preview", help="List the plan's steps and its duration; measure nothing.")
         ] = False,
+        confirm_long: Annotated[bool, typer.Option(
+            "--confirm-long", help="Run (or preview) a plan expected to take longer than "
+            "8 h (at most 30 days).")] = False,
         test: Annotated[str, typer.Option(
             "--test", help="lost-motion (the hysteresis loop) or transmission-error (the "
             "input turned at --speed under a --brake torque, both encoders recorded).")
@@ -112,8 +115,9 @@ def register(app: typer.Typer) -> None:
         """Measure one hysteresis loop (GB/T order -T -> 0 -> +T -> 0 -> -T), or with --test
         transmission-error the transmission error in both directions, into the store."""
         from rig.core.errors import RigError
+        from rig.core.ranges import POSITION_DEG
         from rig.measurement.single_run import measure_run, open_run_session, unit_data
-        from rig.plans.estimate import estimate
+        from rig.plans.estimate import check_duration, estimate
         from rig.store import Store
 
         out = console()
@@ -130,8 +134,11 @@ def register(app: typer.Typer) -> None:
         if TESTS[test] == "transmission_error":
             te = _te_params(rated_torque, speed, brake, revolutions, ratio, unit_mapping,
                             plant, coupling_index)
+        if position is not None and (problem := POSITION_DEG.problem("--position", position)):
+            raise RigError(problem)
         request = _request(loop, te, position, unit_mapping, limits, profile)
         est = estimate(request.plan().steps())
+        check_duration(est, confirmed=confirm_long, how="--confirm-long")
         if preview:
             _print_preview(out, request.plan(), est)
             return
@@ -166,9 +173,22 @@ def _loop_and_limits(*, rated_torque: float, extra_level: list[float] | None,
                         backlash_arcmin_max=max_backlash,
                         stiffness_Nm_per_arcmin_min=min_stiffness)
     except ValidationError as exc:
-        raise RigError("; ".join(f"--{'-'.join(str(p) for p in e['loc'])}: {e['msg']}"
-                                 for e in exc.errors())) from exc
+        raise RigError("; ".join(
+            f"--{OPTION_NAMES.get(str(e['loc'][0]), '-'.join(str(p) for p in e['loc']))}: "
+            f"{str(e['msg']).removeprefix('Value error, ')} (got {e.get('input')!r})"
+            for e in exc.errors())) from exc
     return params, limits
+
+
+OPTION_NAMES = {
+    "rated_torque_Nm": "rated-torque", "amplitude_pct": "amplitude", "rate_Nm_per_s": "rate",
+    "steps_per_quarter": "steps", "dwell_s": "dwell", "pre_cycles": "pre-cycles",
+    "zero_band_Nm": "zero-band", "zero_rate_Nm_per_s": "zero-rate",
+    "extra_levels_pct": "extra-level", "lost_motion_arcmin_max": "max-lost-motion",
+    "backlash_arcmin_max": "max-backlash", "stiffness_Nm_per_arcmin_min": "min-stiffness",
+    "input_speed_rpm": "speed", "brake_torque_fraction": "brake",
+    "output_revolutions": "revolutions", "coupling_index_deg": "coupling-index-deg"}
+"""The ``rig measure`` option of each LoopParams / Limits / TEParams field."""
 
 
 def _request(loop: Any, te: Any, position: float | None, unit: dict[str, Any], limits: Any,
@@ -239,15 +259,13 @@ def _te_params(rated_torque: float, speed: float, brake: float, revolutions: flo
         if ratio is None:
             raise RigError("--ratio: the unit data do not give the reduction ratio (an "
                            "internal involute pair's z_internal and z_external); give it")
-    names = {"input_speed_rpm": "speed", "brake_torque_fraction": "brake",
-             "output_revolutions": "revolutions", "rated_torque_Nm": "rated-torque",
-             "coupling_index_deg": "coupling-index-deg"}
     try:
         params = TEParams(rated_torque_Nm=rated_torque, ratio=ratio, input_speed_rpm=speed,
                           brake_torque_fraction=brake, output_revolutions=revolutions,
                           coupling_index_deg=coupling_index_deg)
     except ValidationError as exc:
         raise RigError("; ".join(
-            f"--{names.get(str(e['loc'][0]), str(e['loc'][0]))}: {e['msg']} "
+            f"--{OPTION_NAMES.get(str(e['loc'][0]), str(e['loc'][0]))}: "
+            f"{str(e['msg']).removeprefix('Value error, ')} "
             f"(got {e.get('input')!r})" for e in exc.errors())) from exc
     return params

@@ -36,6 +36,17 @@ from drivers.modbus.torque_sensor import ModbusTorqueSensorConfig
 from drivers.rig_controls import ClimateConfig, InputMotorConfig
 from drivers.transducer.serial import TransducerConfig
 from rig.core.errors import RigError
+from rig.core.ranges import (
+    DEVICE_TIMEOUT_S,
+    LOCK_TOLERANCE_DEG,
+    MASTER_TIMEOUT_S,
+    MOTOR_SPEED_RPM,
+    SLEEP_AFTER_OPEN_S,
+    SYNC_PERIOD_S,
+    TEMPERATURE_SETPOINT_C,
+    TORQUE_LIMIT_NM,
+    Range,
+)
 from rig.core.toml_files import describe_validation_error, read_toml
 from rig.hardware.calibration import Calibrations
 
@@ -112,10 +123,55 @@ def _prepared(data: dict[str, Any], source: str) -> dict[str, Any]:
     return data
 
 
+CONFIG_RANGES: dict[str, Range] = {
+    "rig.torque_limit_Nm": TORQUE_LIMIT_NM,
+    "rig.master_timeout_s": MASTER_TIMEOUT_S,
+    "can.sync_period_s": SYNC_PERIOD_S,
+    "can.bus_options.sleep_after_open": SLEEP_AFTER_OPEN_S,
+    **{f"{enc}.{key}": DEVICE_TIMEOUT_S for enc in ("encoder", "input_encoder")
+       for key in ("timeout_s", "stuck_after_s")},
+    "transducer.full_scale_Nm": TORQUE_LIMIT_NM,
+    "torque_sensor.stale_after_s": DEVICE_TIMEOUT_S,
+    "drive.torque_limit_Nm": TORQUE_LIMIT_NM,
+    "input_motor.move_timeout_s": DEVICE_TIMEOUT_S,
+    "input_motor.max_speed_rpm": MOTOR_SPEED_RPM,
+    "input_motor.lock_tolerance_deg": LOCK_TOLERANCE_DEG,
+    "climate.min_C": TEMPERATURE_SETPOINT_C,
+    "climate.max_C": TEMPERATURE_SETPOINT_C,
+}
+"""The physical range of each number of the configuration the drivers' models leave open
+(:mod:`rig.core.ranges`); a key of a table that is absent, or a value left out, is not
+checked."""
+
+
+def _value(config: RigConfig, key: str) -> Any:
+    """The value of the dotted ``key`` (None when its table or the key is absent)."""
+    value: Any = config
+    for part in key.split("."):
+        value = value.get(part) if isinstance(value, dict) else getattr(value, part, None)
+        if value is None:
+            return None
+    return value
+
+
+def _range_problems(config: RigConfig) -> list[str]:
+    """One line per value outside its physical range (:data:`CONFIG_RANGES`)."""
+    problems = [p for key, rng in CONFIG_RANGES.items()
+                if (value := _value(config, key)) is not None
+                and (p := rng.problem(key, value)) is not None]
+    climate = config.climate
+    if climate is not None and not climate.min_C < climate.max_C:
+        problems.append(f"climate.min_C: {climate.min_C:g} °C must be below climate.max_C = "
+                        f"{climate.max_C:g} °C")
+    return problems
+
+
 def _cross_check(config: RigConfig, source: str) -> None:
     """Rules between tables; each error names the key to change."""
     rig = config.rig
-    problems = []
+    problems = _range_problems(config)
+    if problems:
+        raise RigConfigError("\n".join(f"{source}: {p}" for p in problems))
     if config.drive.torque_limit_Nm > rig.torque_limit_Nm:
         problems.append(f"drive.torque_limit_Nm: {config.drive.torque_limit_Nm:g} N*m exceeds "
                         f"rig.torque_limit_Nm = {rig.torque_limit_Nm:g} N*m")

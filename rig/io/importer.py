@@ -20,6 +20,11 @@ import numpy as np
 from rig.core.errors import RigError
 from rig.core.ids import id_from_text, id_problem
 from rig.core.json_files import read_json_file
+from rig.core.ranges import (
+    ANGLE_READING_DEG,
+    TEMPERATURE_READING_C,
+    TORQUE_READING_MAX_RATED,
+)
 from rig.io.map import (
     ABSOLUTE_ZERO_C,
     COLUMN_KINDS,
@@ -103,7 +108,7 @@ def import_run(source: str | Path, map_path: str | Path, unit_path: str | Path,
             unit_name = resolve_unit(kind, refs.get(name, {}).get("unit"),
                                      data.units.get(name), data.where(name, None))
             columns[name] = convert_unit(data.values[name], kind, unit_name)
-    _check_samples(columns, data)
+    _check_samples(columns, data, mapping.test.rated_torque_Nm)
     source_meta = {"file": str(src), "map": str(map_file), "format": data.format,
                    "sha256": _sha256(src)}
     try:
@@ -138,11 +143,14 @@ MIN_STEP_S = 1e-9
 """The smallest time step (s) a sampled file can hold: 1 ns, a 1 GHz sample rate."""
 
 
-def _check_samples(columns: dict[str, np.ndarray], data: SourceData) -> None:
+def _check_samples(columns: dict[str, np.ndarray], data: SourceData,
+                   rated_torque_Nm: float) -> None:
     """What rig-run/1 and a measured loop need, each refusal naming the file, the line (or
     sample) and the column: finite time, torque and output angle; time strictly ascending in
     steps of at least :data:`MIN_STEP_S`; temperatures finite and above absolute zero
-    (blank = not measured); at least ``MIN_LOOP_SAMPLES`` samples; a torque that moves."""
+    (blank = not measured); every reading in its physical range (:mod:`rig.core.ranges`:
+    torques within ``TORQUE_READING_MAX_RATED`` x ``rated_torque_Nm`` N·m, angles and
+    temperatures); at least ``MIN_LOOP_SAMPLES`` samples; a torque that moves."""
     from rig.results.analyse import MIN_LOOP_SAMPLES
 
     n = len(columns["t_s"])
@@ -178,6 +186,7 @@ def _check_samples(columns: dict[str, np.ndarray], data: SourceData) -> None:
             raise RunImportError(f"{data.where('temperature_C', i)}: temperature "
                                  f"{float(temp[i])!r} °C is not a temperature (finite, at "
                                  f"least {ABSOLUTE_ZERO_C} °C); is the column's unit right?")
+    _check_ranges(columns, data, rated_torque_Nm)
     if n < MIN_LOOP_SAMPLES:
         raise RunImportError(f"{data.where('torque_Nm', None)}: {n} sample"
                              f"{'' if n == 1 else 's'}; a hysteresis loop needs at least "
@@ -190,6 +199,29 @@ def _check_samples(columns: dict[str, np.ndarray], data: SourceData) -> None:
         raise RunImportError(f"{data.where('torque_Nm', None)}: the torque is "
                              f"{float(torque[0])!r} N·m in all {n} samples: no loop was "
                              "measured")
+
+
+def _check_ranges(columns: dict[str, np.ndarray], data: SourceData,
+                  rated_torque_Nm: float) -> None:
+    """Every reading in its physical range (:mod:`rig.core.ranges`), the first one outside
+    named by file, line (or sample) and column, in the run's unit."""
+    limit = TORQUE_READING_MAX_RATED * rated_torque_Nm
+    ranges = {"torque_Nm": (-limit, limit, f"N·m (at most {TORQUE_READING_MAX_RATED:g} x the "
+                                           f"rated {rated_torque_Nm:g} N·m in magnitude)"),
+              "output_angle_deg": (ANGLE_READING_DEG.low, ANGLE_READING_DEG.high, "deg"),
+              "input_angle_deg": (ANGLE_READING_DEG.low, ANGLE_READING_DEG.high, "deg"),
+              "temperature_C": (TEMPERATURE_READING_C.low, TEMPERATURE_READING_C.high, "°C")}
+    for name, (low, high, unit) in ranges.items():
+        if name not in columns:
+            continue
+        values = columns[name]
+        with np.errstate(invalid="ignore"):
+            bad = np.flatnonzero((values < low) | (values > high))
+        if bad.size:
+            i = int(bad[0])
+            raise RunImportError(f"{data.where(name, i)}: {name} {float(values[i])!r} is no "
+                                 f"reading: expected from {low:g} to {high:g} {unit}; is the "
+                                 "column's unit right?")
 
 
 CSV_CHUNK_ROWS = 200_000

@@ -29,6 +29,12 @@ from pydantic import (
 
 from rig.core.errors import RigError
 from rig.core.ids import id_problem
+from rig.core.ranges import (
+    POSITION_DEG,
+    RATED_TORQUE_NM,
+    TEMPERATURE_READING_C,
+    TORQUE_LIMIT_NM,
+)
 from rig.core.toml_files import describe_validation_error, read_toml
 from rig.runformat.meta_check import meta_problems
 
@@ -183,9 +189,9 @@ class Columns(BaseModel):
         return ref
 
 
-TORQUE_MAX_NM = 1e7
+TORQUE_MAX_NM = RATED_TORQUE_NM.high
 """A rated torque (N·m) above this is no gear reducer's (the largest wind-turbine gearboxes
-carry a few MN·m): a typo or a unit mistake, refused."""
+carry a few MN·m): a typo or a unit mistake, refused (:mod:`rig.core.ranges`)."""
 ABSOLUTE_ZERO_C = -273.15
 """No temperature (°C) is below it."""
 
@@ -200,9 +206,9 @@ class Test(BaseModel):
 
     model_config = ConfigDict(extra="allow", strict=True, allow_inf_nan=False)
     rated_torque_Nm: float = Field(gt=0, le=TORQUE_MAX_NM)
-    input_angle_deg: float | None = None
-    temperature_C: float | None = Field(default=None, ge=ABSOLUTE_ZERO_C)
-    amplitude_Nm: float | None = Field(default=None, gt=0, le=TORQUE_MAX_NM)
+    input_angle_deg: POSITION_DEG.type | None = None
+    temperature_C: TEMPERATURE_READING_C.after(Field(ge=ABSOLUTE_ZERO_C)) | None = None
+    amplitude_Nm: TORQUE_LIMIT_NM.type | None = None
     cycles: int | None = Field(default=None, ge=1)
     start_flank: Literal[-1, 1] | None = None
     amplitude_pct: float | None = Field(default=None, gt=0)

@@ -26,6 +26,23 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from rig.core.ranges import (
+    DWELL_S,
+    INPUT_SPEED_RPM,
+    POSITION_DEG,
+    RATE_NM_PER_S,
+    RATED_TORQUE_NM,
+    SAMPLE_S,
+    SETTLE_HOLD_S,
+    SETTLE_RATE_ARCMIN_PER_S,
+    SETTLE_TIMEOUT_S,
+    TEMPERATURE_SETPOINT_C,
+    TEMPERATURE_TIMEOUT_S,
+    TEMPERATURE_TOLERANCE_C,
+    TWIST_STEP_ARCMIN,
+    WINDOW_S,
+    ZERO_BAND_NM,
+)
 from rig.plans.steps import (
     BeginRun,
     Checkpoint,
@@ -79,23 +96,23 @@ class LoopParams(BaseModel):
 
     model_config = _STRICT
 
-    rated_torque_Nm: float = Field(gt=0)
+    rated_torque_Nm: RATED_TORQUE_NM.type
     amplitude_pct: float = Field(100.0, gt=0, le=100)
     mode: LoadingMode = "equal_torque"
     cycles: int = Field(1, ge=1, le=100)
     pre_cycles: int = Field(1, ge=0, le=100)
-    rate_Nm_per_s: float = Field(20.0, gt=0)
+    rate_Nm_per_s: RATE_NM_PER_S.type = 20.0
     steps_per_quarter: int = Field(10, ge=1, le=1000)
-    twist_step_arcmin: float = Field(0.5, gt=0)
-    dwell_s: float = Field(0.1, ge=0)
-    settle_rate_arcmin_per_s: float = Field(2.0, gt=0)
-    settle_hold_s: float = Field(0.1, gt=0)
-    settle_timeout_s: float = Field(3.0, gt=0)
-    sample_s: float = Field(0.05, ge=0)
+    twist_step_arcmin: TWIST_STEP_ARCMIN.type = 0.5
+    dwell_s: DWELL_S.type = 0.1
+    settle_rate_arcmin_per_s: SETTLE_RATE_ARCMIN_PER_S.type = 2.0
+    settle_hold_s: SETTLE_HOLD_S.type = 0.1
+    settle_timeout_s: SETTLE_TIMEOUT_S.type = 3.0
+    sample_s: SAMPLE_S.type = 0.05
     extra_levels_pct: list[ExtraLevel] = Field(default_factory=list, max_length=20)
-    zero_band_Nm: float = Field(0.0, ge=0)
-    zero_rate_Nm_per_s: float | None = Field(None, gt=0)
-    zero_window_s: float = Field(0.2, gt=0)
+    zero_band_Nm: ZERO_BAND_NM.type = 0.0
+    zero_rate_Nm_per_s: RATE_NM_PER_S.type | None = None
+    zero_window_s: WINDOW_S.type = 0.2
 
     @property
     def amplitude_Nm(self) -> float:
@@ -133,14 +150,15 @@ class CampaignAxes(BaseModel):
 
     model_config = _STRICT
 
-    positions_deg: list[float] = Field(default_factory=lambda: [0.0], min_length=1,
+    positions_deg: list[POSITION_DEG.type] = Field(default_factory=lambda: [0.0], min_length=1,
                                        max_length=10_000)
     amplitudes_pct: list[float] = Field(default_factory=lambda: [100.0], min_length=1,
                                         max_length=100)
-    temperatures_C: list[float] = Field(default_factory=list, max_length=100)
+    temperatures_C: list[TEMPERATURE_SETPOINT_C.type] = Field(default_factory=list,
+                                                            max_length=100)
     repeats: int = Field(1, ge=1, le=1000)
-    temperature_tolerance_C: float = Field(0.5, gt=0)
-    temperature_timeout_s: float = Field(3600.0, gt=0)
+    temperature_tolerance_C: TEMPERATURE_TOLERANCE_C.type = 0.5
+    temperature_timeout_s: TEMPERATURE_TIMEOUT_S.type = 3600.0
 
     @model_validator(mode="after")
     def _amplitudes_in_range(self) -> CampaignAxes:
@@ -338,19 +356,19 @@ class TEParams(BaseModel):
 
     model_config = _STRICT
 
-    rated_torque_Nm: float = Field(gt=0)
+    rated_torque_Nm: RATED_TORQUE_NM.type
     ratio: float
-    input_speed_rpm: float = Field(120.0, gt=0, le=6000)
+    input_speed_rpm: INPUT_SPEED_RPM.type = 120.0
     brake_torque_fraction: float = Field(0.2, gt=0, le=1)
     output_revolutions: float = Field(1.0, ge=1, le=100)
     directions: list[Direction] = Field(default_factory=lambda: ["forward", "reverse"],
                                         min_length=1, max_length=2)
     lead_in_output_deg: float = Field(10.0, ge=0, le=360)
-    brake_rate_Nm_per_s: float = Field(20.0, gt=0)
+    brake_rate_Nm_per_s: RATE_NM_PER_S.type = 20.0
     stall_s: float = Field(0.5, gt=0)
     overspeed_factor: float = Field(1.5, gt=1)
     jump_tolerance_deg: float = Field(0.1, gt=0)
-    zero_window_s: float = Field(0.2, gt=0)
+    zero_window_s: WINDOW_S.type = 0.2
     coupling_index_deg: float | None = Field(None, ge=0, lt=360)
     """Where the coupling between the output and its encoder is indexed (deg, as the operator
     set it; None: not stated): ``rig te-calibrate`` needs its two runs 180 deg apart."""

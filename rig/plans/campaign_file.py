@@ -18,6 +18,13 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from analysis.loop import PROFILES
 from rig.core.errors import RigError
 from rig.core.json_files import read_json_file
+from rig.core.ranges import (
+    INPUT_SPEED_RPM,
+    LIMIT_ARCMIN,
+    LIMIT_ARCSEC,
+    LIMIT_STIFFNESS_NM_PER_ARCMIN,
+    TORQUE_LIMIT_NM,
+)
 from rig.core.toml_files import describe_validation_error, read_toml
 from rig.plans import (
     TE_KIND,
@@ -49,11 +56,11 @@ class Limits(BaseModel):
 
     model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 
-    lost_motion_arcmin_max: float | None = Field(None, gt=0)
-    backlash_arcmin_max: float | None = Field(None, gt=0)
-    stiffness_Nm_per_arcmin_min: float | None = Field(None, gt=0)
-    te_pp_max_arcsec: float | None = Field(None, gt=0)
-    te_hysteresis_max_arcmin: float | None = Field(None, gt=0)
+    lost_motion_arcmin_max: LIMIT_ARCMIN.after(Field(gt=0)) | None = None
+    backlash_arcmin_max: LIMIT_ARCMIN.after(Field(gt=0)) | None = None
+    stiffness_Nm_per_arcmin_min: LIMIT_STIFFNESS_NM_PER_ARCMIN.after(Field(gt=0)) | None = None
+    te_pp_max_arcsec: LIMIT_ARCSEC.after(Field(gt=0)) | None = None
+    te_hysteresis_max_arcmin: LIMIT_ARCMIN.after(Field(gt=0)) | None = None
 
     def check(self, run: dict[str, Any]) -> list[str]:
         """The causes of failure of one run's metrics (empty: passed; a metric the run's
@@ -92,7 +99,7 @@ class TESection(BaseModel):
 
     model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 
-    input_speed_rpm: float = Field(120.0, gt=0, le=6000)
+    input_speed_rpm: INPUT_SPEED_RPM.type = 120.0
     brake_torque_fraction: float = Field(0.2, gt=0, le=1)
     output_revolutions: float = Field(1.0, ge=1, le=100)
     directions: list[Direction] = Field(default_factory=lambda: ["forward", "reverse"],
@@ -111,7 +118,7 @@ class CampaignFile(BaseModel):
     calibration_override: str | None = Field(None, min_length=1, max_length=500)
     """Why the campaign may run with a sensor calibration past due (recorded in each run)."""
     profile: Literal[PROFILE_NAMES] = "nabtesco"  # type: ignore[valid-type]
-    torque_limit_Nm: float | None = Field(None, gt=0, allow_inf_nan=False, strict=True)
+    torque_limit_Nm: TORQUE_LIMIT_NM.type | None = Field(None, allow_inf_nan=False, strict=True)
     unit: UnitSection
     test: Literal["lost_motion", "transmission_error"] = "lost_motion"
     """Which test the campaign's runs are: the hysteresis loop (``plan``) or the
@@ -121,6 +128,8 @@ class CampaignFile(BaseModel):
     axes: CampaignAxes = Field(default_factory=CampaignAxes)
     limits: Limits = Field(default_factory=Limits)
     simulation: SimulationSection = Field(default_factory=SimulationSection)
+    confirm_long: bool = Field(False, strict=True)
+    """The campaign may take longer than :data:`rig.core.ranges.PLAN_CONFIRM_S` (8 h)."""
     source: str = "<memory>"
 
     @model_validator(mode="after")

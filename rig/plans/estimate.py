@@ -12,6 +12,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
+from rig.core.errors import RigError
+from rig.core.ranges import plan_duration_problem
 from rig.plans.steps import (
     BeginRun,
     Dwell,
@@ -91,3 +93,12 @@ def estimate(steps: Iterable[Step], *, input_speed_deg_per_s: float = 360.0,
         out.dwell_s += dwell
         out.n_steps += 1
     return out
+
+
+def check_duration(est: PlanEstimate, *, confirmed: bool, how: str) -> None:
+    """RigError when the plan may not run for its expected duration: longer than
+    :data:`rig.core.ranges.PLAN_MAX_S`, or than :data:`rig.core.ranges.PLAN_CONFIRM_S`
+    unless ``confirmed`` (``how`` names the flag or key that confirms)."""
+    problem = plan_duration_problem(est.total_s, confirmed, how)
+    if problem is not None:
+        raise RigError(problem)

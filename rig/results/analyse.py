@@ -17,6 +17,7 @@ from analysis.loop import PROFILES, LoopResult, analyse_loop, twist_arcmin
 from analysis.models.by_kind import LoopModel
 from analysis.models.by_kind import nominal_model_for_unit as model_by_kind
 from rig.core.errors import RigError
+from rig.core.ranges import ANGLE_READING_DEG, RATED_TORQUE_NM, TORQUE_READING_MAX_RATED
 from rig.runformat import Run
 
 ARCMIN_PER_REV = 360.0 * 60.0
@@ -173,14 +174,15 @@ def resolve_profile(profile: str | None, percent: float | None) -> tuple[str, fl
 
 MIN_LOOP_SAMPLES = 20
 """Fewest samples of a hysteresis loop: four quarters of at least a few readings each."""
-TORQUE_READING_MAX = 1000.0
+TORQUE_READING_MAX = TORQUE_READING_MAX_RATED
 """A torque reading beyond this multiple of the rated torque is no reading (a sensor
 overload or a corrupt cell), whatever its sign: nothing in the run may rest on it."""
 
 
 def check_samples(run: Run, rated_torque_Nm: float) -> None:
     """RigError when the samples cannot be a measured loop: too few rows, a torque beyond
-    :data:`TORQUE_READING_MAX` x rated (naming its row), or an output angle that never moves."""
+    :data:`TORQUE_READING_MAX` x rated or an angle beyond ``ANGLE_READING_DEG``
+    (:mod:`rig.core.ranges`; naming its row), or an output angle that never moves."""
     where = f"{run.path / 'samples.csv' if run.path else run.run_id}"
     if run.n_samples < MIN_LOOP_SAMPLES:
         raise RigError(f"{where}: {run.n_samples} samples; a hysteresis loop needs at least "
@@ -193,6 +195,18 @@ def check_samples(run: Run, rated_torque_Nm: float) -> None:
         raise RigError(f"{where}: torque_Nm of sample {k + 1} (t = {run.t_s[k]:g} s) is "
                        f"{torque[k]:g} N·m, beyond {TORQUE_READING_MAX:g} x the rated "
                        f"{rated_torque_Nm:g} N·m: not a reading ({wild.size} such samples)")
+    for name in ("output_angle_deg", "input_angle_deg"):
+        values = getattr(run, name)
+        if values is None:
+            continue
+        with np.errstate(invalid="ignore"):
+            wild = np.flatnonzero(np.abs(np.asarray(values, dtype=float))
+                                  > ANGLE_READING_DEG.high)
+        if wild.size:
+            k = int(wild[0])
+            raise RigError(f"{where}: {name} of sample {k + 1} (t = {run.t_s[k]:g} s) is "
+                           f"{values[k]:g} deg, beyond +-{ANGLE_READING_DEG.high:g} deg: not "
+                           f"a reading ({wild.size} such samples)")
     angle = np.asarray(run.output_angle_deg, dtype=float)
     finite = angle[np.isfinite(angle)]
     if finite.size < MIN_LOOP_SAMPLES or float(np.ptp(finite)) == 0.0:
@@ -223,6 +237,9 @@ def analyse_run(
     rated = float(rated)
     if not rated > 0:
         raise RigError(f"run {run.run_id!r}: rated torque must be > 0 N·m, got {rated}")
+    problem = RATED_TORQUE_NM.problem("rated torque", rated)
+    if problem is not None:
+        raise RigError(f"run {run.run_id!r}: {problem}")
     check_samples(run, rated)
 
     ratio = test.get("ratio")

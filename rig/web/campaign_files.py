@@ -143,6 +143,7 @@ def setup_of(camp: CampaignFile, unit: dict[str, Any] | None, source: str,
         "calibration_override": camp.calibration_override,
         "unit": unit,
         "test": camp.test,
+        "confirm_long": camp.confirm_long,
     }
     if camp.test == "transmission_error":
         te = camp.te.model_dump()

@@ -28,6 +28,7 @@ from typing import Any
 from drivers.errors import DeviceError
 from rig.core.errors import RigError
 from rig.core.json_files import json_safe
+from rig.core.ranges import plan_duration_problem
 from rig.engine import Engine
 from rig.engine.events import ProgressEvent
 from rig.engine.safety import PlanRejected, preflight
@@ -108,6 +109,9 @@ def compute_preview(req: RunRequest, facts: dict[str, Any]) -> dict[str, Any]:
             problems.append(str(exc))
     else:
         problems.append("no rig connected: the plan cannot be checked against a rig")
+    long = plan_duration_problem(est.total_s, req.confirm_long, "confirm_long")
+    if long is not None:
+        problems.append(long)
     model, assumptions = model_summary(req) if req.test != TE_KIND else (None, [])
     batch = None
     if model is not None:
@@ -611,6 +615,10 @@ class RigController:
                 raise ControlError(str(exc)) from exc
             plan = build_plan(req)
             steps = list(plan.steps())
+            est = estimate(steps)
+            long = plan_duration_problem(est.total_s, req.confirm_long, "confirm_long")
+            if long is not None:
+                raise ControlError(long)
             limit = session.io.torque_limit_Nm
             if req.torque_limit_Nm is not None:
                 limit = min(limit, req.torque_limit_Nm)
@@ -625,7 +633,7 @@ class RigController:
             self._progress = None
             self._current = {"kind": req.kind, "run_id": None, "campaign_id": None,
                              "plan": plan.name, "n_steps": len(steps),
-                             "estimated_s": (est := estimate(steps)).total_s,
+                             "estimated_s": est.total_s,
                              "n_runs": est.n_runs, "measuring": None, "finished": []}
             self._tap = TapStore(self.store, self.hub)
             self._profile = req.profile

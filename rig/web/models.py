@@ -13,6 +13,24 @@ from typing import Annotated, Any, Literal, Union
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
 
 from rig.core import ids
+from rig.core.ranges import (
+    DWELL_S,
+    INPUT_SPEED_RPM,
+    LIMIT_ARCMIN,
+    LIMIT_ARCSEC,
+    LIMIT_STIFFNESS_NM_PER_ARCMIN,
+    POSITION_DEG,
+    RATE_NM_PER_S,
+    RATED_TORQUE_NM,
+    SAMPLE_S,
+    SETTLE_HOLD_S,
+    SETTLE_RATE_ARCMIN_PER_S,
+    SETTLE_TIMEOUT_S,
+    TEMPERATURE_SETPOINT_C,
+    TORQUE_LIMIT_NM,
+    TWIST_STEP_ARCMIN,
+    ZERO_BAND_NM,
+)
 from rig.plans import TE_KIND, CampaignAxes, LoopParams, TEParams, check_plan_size, unit_ratio
 from rig.plans.campaign_file import Limits
 
@@ -25,9 +43,9 @@ _strict = ConfigDict(extra="forbid", strict=True)
 
 
 Positive_mm = Annotated[float, Field(ge=0, le=100_000, allow_inf_nan=False)]
-Angle_deg = Annotated[float, Field(ge=-3600, le=3600, allow_inf_nan=False)]
+Angle_deg = POSITION_DEG.type
 Percent = Annotated[float, Field(gt=0, le=100, allow_inf_nan=False)]
-Celsius = Annotated[float, Field(ge=-60, le=200, allow_inf_nan=False)]
+Celsius = TEMPERATURE_SETPOINT_C.type
 
 
 def _length(min_value: float, max_value: float, **kw: Any) -> Any:
@@ -176,23 +194,23 @@ class PlanSettings(BaseModel):
 
     model_config = _strict
 
-    rated_torque_Nm: float = Field(gt=0, le=100_000, allow_inf_nan=False)
+    rated_torque_Nm: RATED_TORQUE_NM.type
     amplitude_pct: float = Field(100.0, gt=0, le=100, allow_inf_nan=False)
     mode: Literal["equal_torque", "equal_position", "constant_rate"] = "equal_torque"
     cycles: int = Field(1, ge=1, le=20)
     pre_cycles: int = Field(1, ge=0, le=10)
-    rate_Nm_per_s: float = Field(25.0, ge=0.001, le=100_000, allow_inf_nan=False)
+    rate_Nm_per_s: RATE_NM_PER_S.type = 25.0
     steps_per_quarter: int = Field(4, ge=1, le=200)
-    twist_step_arcmin: float = Field(0.5, ge=0.001, le=600, allow_inf_nan=False)
-    dwell_s: float = _length(0.0, 600.0, default=0.05)
-    settle_rate_arcmin_per_s: float = Field(2.0, ge=0.001, le=600, allow_inf_nan=False)
-    settle_hold_s: float = Field(0.1, ge=0.001, le=60, allow_inf_nan=False)
-    settle_timeout_s: float = Field(2.0, ge=0.01, le=600, allow_inf_nan=False)
-    sample_s: float = _length(0.0, 60.0, default=0.05)
+    twist_step_arcmin: TWIST_STEP_ARCMIN.type = 0.5
+    dwell_s: DWELL_S.type = 0.05
+    settle_rate_arcmin_per_s: SETTLE_RATE_ARCMIN_PER_S.type = 2.0
+    settle_hold_s: SETTLE_HOLD_S.type = 0.1
+    settle_timeout_s: SETTLE_TIMEOUT_S.type = 2.0
+    sample_s: SAMPLE_S.type = 0.05
     extra_levels_pct: list[Annotated[float, Field(gt=0, lt=100, allow_inf_nan=False)]] = Field(
         default_factory=lambda: [3.0], max_length=10)
-    zero_band_Nm: float = _length(0.0, 100_000.0, default=0.3)
-    zero_rate_Nm_per_s: float | None = Field(0.3, ge=0.001, le=100_000, allow_inf_nan=False)
+    zero_band_Nm: ZERO_BAND_NM.type = 0.3
+    zero_rate_Nm_per_s: RATE_NM_PER_S.type | None = 0.3
 
     def loop_params(self) -> LoopParams:
         return LoopParams(**self.model_dump())
@@ -205,11 +223,11 @@ class LimitSettings(BaseModel):
 
     model_config = _strict
 
-    lost_motion_arcmin_max: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
-    backlash_arcmin_max: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
-    stiffness_Nm_per_arcmin_min: float | None = Field(None, gt=0, le=1e9, allow_inf_nan=False)
-    te_pp_max_arcsec: float | None = Field(None, gt=0, le=1e6, allow_inf_nan=False)
-    te_hysteresis_max_arcmin: float | None = Field(None, gt=0, le=10_000, allow_inf_nan=False)
+    lost_motion_arcmin_max: LIMIT_ARCMIN.type | None = None
+    backlash_arcmin_max: LIMIT_ARCMIN.type | None = None
+    stiffness_Nm_per_arcmin_min: LIMIT_STIFFNESS_NM_PER_ARCMIN.type | None = None
+    te_pp_max_arcsec: LIMIT_ARCSEC.type | None = None
+    te_hysteresis_max_arcmin: LIMIT_ARCMIN.type | None = None
 
     def limits(self) -> Limits:
         return Limits(**self.model_dump())
@@ -239,7 +257,7 @@ class TESettings(BaseModel):
 
     model_config = _strict
 
-    input_speed_rpm: float = Field(120.0, gt=0, le=6000, allow_inf_nan=False)
+    input_speed_rpm: INPUT_SPEED_RPM.type = 120.0
     brake_torque_fraction: float = Field(0.2, gt=0, le=1, allow_inf_nan=False)
     output_revolutions: float = Field(1.0, ge=1, le=100, allow_inf_nan=False)
     ratio: float | None = Field(None, ge=-10_000, le=10_000, allow_inf_nan=False)
@@ -263,11 +281,14 @@ class RunRequest(BaseModel):
     refused (409) without it while one is expired."""
     unit: AnyUnit
     plan: PlanSettings
-    position_deg: float | None = Field(None, ge=-3600, le=3600, allow_inf_nan=False)
+    position_deg: POSITION_DEG.type | None = None
     axes: AxesSettings = Field(default_factory=AxesSettings)
     limits: LimitSettings = Field(default_factory=LimitSettings)
-    torque_limit_Nm: float | None = Field(None, gt=0, le=100_000, allow_inf_nan=False)
+    torque_limit_Nm: TORQUE_LIMIT_NM.type | None = None
     profile: Literal["nabtesco", "harmonic-drive", "gbt", "spinea"] = "nabtesco"
+    confirm_long: bool = False
+    """The plan may take longer than 8 h (at most 30 days: :mod:`rig.core.ranges`); without
+    it the preview does not fit and the start is refused (409)."""
 
     def te_params(self) -> TEParams:
         """The transmission error run's parameters (ValueError without a ratio)."""
@@ -336,7 +357,7 @@ class InputLockRequest(BaseModel):
 
     model_config = _strict
 
-    angle_deg: float | None = Field(None, ge=-3600, le=3600, allow_inf_nan=False)
+    angle_deg: POSITION_DEG.type | None = None
     confirm: bool = True
 
 

@@ -508,3 +508,17 @@ def test_a_measured_torque_that_turns_before_the_command_column_splits_at_its_ow
         clean.metrics["stiffness_pos_Nm_per_arcmin"].value, rel=1e-6)
     assert r.metrics["backlash_arcmin"].value == pytest.approx(
         clean.metrics["backlash_arcmin"].value, rel=1e-6)
+
+
+@pytest.mark.parametrize("column", ["torque", "twist"])
+def test_an_absurd_value_is_refused_naming_its_sample_not_an_overflow(column):
+    """Issue 33 item 5: an angle of 1e300 deg raised an internal OverflowError in the loop
+    area's uncertainty; every value beyond 1e50 (no measurement) is an AnalysisError."""
+    torque = triangle_profile(RATED, 50)
+    twist = dead_zone_twist(torque, PLAY, K)
+    if column == "torque":
+        torque[7] = 1e300
+    else:
+        twist[7] = twist_arcmin(np.array([1e300]))[0]  # an output angle of 1e300 deg
+    with pytest.raises(AnalysisError, match=r"\[7\] is [16]e\+30[01], beyond 1e\+50"):
+        run(torque, twist)

@@ -685,6 +685,7 @@ function request() {
   }
   if (f.override.checked && f.override_reason.value.trim())
     body.calibration_override = f.override_reason.value.trim();
+  if (f.confirm_long.checked) body.confirm_long = true;
   if (kind === "campaign") {
     body.name = f.name.value || "web";
     body.axes = { positions_deg: list(f.positions_deg.value) || [0], repeats: num(f.repeats.value) || 1,
@@ -798,6 +799,7 @@ function fillFromCampaign(c) {
   f.torque_limit_Nm.value = q.torque_limit_Nm === null ? "" : String(q.torque_limit_Nm);
   if (q.operator) f.operator.value = q.operator;
   if (q.calibration_override) { f.override.checked = true; f.override_reason.value = q.calibration_override; }
+  f.confirm_long.checked = !!q.confirm_long;
   const extra = { plan: {}, axes: {}, limits: {}, profile: q.profile };
   for (const k of ["twist_step_arcmin", "settle_rate_arcmin_per_s", "settle_hold_s", "settle_timeout_s", "sample_s"])
     if (q.plan[k] !== undefined) extra.plan[k] = q.plan[k];
@@ -893,7 +895,7 @@ const RULES = {
   runout_internal_mm: (v) => rule("ge", 0, 10)(v, true), runout_external_mm: (v) => rule("ge", 0, 10)(v, true),
   rated_torque_Nm: rule("gt", 0), amplitude_pct: (v) => rule("gt", 0)(v) || rule("ge", 0, 100)(v),
   rate_Nm_per_s: rule("gt", 0), cycles: rule("int", 1, 20), pre_cycles: rule("int", 0, 10),
-  steps_per_quarter: rule("int", 1, 200), dwell_s: rule("ge", 0, 600),
+  steps_per_quarter: rule("int", 1, 200), dwell_s: rule("ge", 0, 3600),
   extra_levels_pct: listRule(0, 100, true), zero_band_Nm: (v) => rule("ge", 0)(v, true),
   zero_rate_Nm_per_s: (v) => rule("gt", 0)(v, true),
   lost_motion_arcmin_max: (v) => rule("gt", 0)(v, true), torque_limit_Nm: (v) => rule("gt", 0)(v, true),
@@ -975,7 +977,7 @@ function fieldProblem(d) {
   let name = [...loc].reverse().find((x) => f[x]);
   // the unit as a whole: its kind unknown, or its tooth counts between them
   if (!name && loc.includes("unit")) name = d.type === "unit_kind" ? "unit_kind" : "z_internal";
-  const msg = String(d.msg || "").replace(/^Value error, /, "")
+  const msg = String(d.msg || "").replace(/^Value error, /, "").replace(/^expected /, "must be ")
     .replace(/^Input should be greater than or equal to (.*)$/, "must be at least $1")
     .replace(/^Input should be greater than (.*)$/, "must be above $1")
     .replace(/^Input should be less than or equal to (.*)$/, "must be at most $1")

@@ -156,3 +156,53 @@ def test_the_loaded_limits_are_immutable(tmp_path: Path):
         with pytest.raises(ValidationError, match="frozen"):
             assign()
     assert config.torque_limit_Nm == limit
+
+
+# issue 33 item 5: every number of the configuration has a physical range (rig/core/ranges.py)
+@pytest.mark.parametrize(
+    ("table", "key", "value", "expected"),
+    [
+        ("can", "sync_period_s", 1e-9,
+         "can.sync_period_s: expected from 0.001 to 60 s (got 1e-09)"),
+        ("can", "bus_options", {"sleep_after_open": 1e9},
+         "can.bus_options.sleep_after_open: expected from 0 to 10 s (got 1000000000.0)"),
+        ("rig", "master_timeout_s", 1e300,
+         "rig.master_timeout_s: expected greater than 0 and at most 3600 s (got 1e+300)"),
+        ("climate", "min_C", -300.0, "climate.min_C: expected from -40 to 150 °C (got -300.0)"),
+        ("climate", "max_C", 1e6, "climate.max_C: expected from -40 to 150 °C (got 1000000.0)"),
+        ("input_motor", "move_timeout_s", 1e12, "input_motor.move_timeout_s: expected greater "
+                                                "than 0 and at most 3600 s"),
+        ("transducer", "full_scale_Nm", 1e31, "transducer.full_scale_Nm: expected greater "
+                                              "than 0 and at most 1e+07 N·m"),
+    ],
+)
+def test_numbers_outside_their_physical_range_are_refused(tmp_path, table, key, value,
+                                                         expected):
+    tables = _tables()
+    tables[table][key] = value
+    path = _write(tmp_path, tables)
+    with pytest.raises(RigConfigError) as info:
+        load_rig_config(path)
+    assert f"{path}: {expected}" in str(info.value)
+    assert len(str(info.value).splitlines()) == 1, str(info.value)
+
+
+def test_climate_limits_must_be_in_order(tmp_path):
+    tables = _tables()
+    tables["climate"].update(min_C=100.0, max_C=20.0)
+    with pytest.raises(RigConfigError, match=r"climate\.min_C: 100 °C must be below"):
+        load_rig_config(_write(tmp_path, tables))
+
+
+def test_rig_devices_refuses_a_sleep_after_open_of_a_billion_seconds(tmp_path):
+    """``rig devices`` hung on it (the bus slept before its first frame): now exit 2, one
+    line naming the file, the key and the range, before any device is opened."""
+    tables = _tables()
+    tables["can"]["bus_options"] = {"sleep_after_open": 1e9}
+    path = _write(tmp_path, tables)
+    proc = subprocess.run(
+        [sys.executable, "-m", "rig", "devices", "--rig", str(path), "--seconds", "1"],
+        capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.strip() == (f"rig: error: {path}: can.bus_options.sleep_after_open: "
+                                   "expected from 0 to 10 s (got 1000000000.0)"), proc.stderr

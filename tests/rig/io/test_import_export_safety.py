@@ -340,6 +340,27 @@ CASES = {
         lambda t: (_write_csv(t, _rows()), _map(t, lambda s: s.replace(
             "rated_torque_Nm = 10.0", "rated_torque_Nm = 1e308"))),
         ["m.toml", "test.rated_torque_Nm", "1e+308"]),
+    # issue 33 item 5: every reading in its physical range (rig/core/ranges.py)
+    "torque 1e31 N*m (rated 10)": (
+        lambda t: (_write_csv(t, _set_column(_rows(), 1, 5, "1e31")), _map(t)),
+        ["d.csv:7:2", "column 'Torque [N*m]'", "torque_Nm 1e+31 is no reading", "from -10000 "
+         "to 10000 N·m (at most 1000 x the rated 10 N·m in magnitude)"]),
+    "angle 1e300 arcsec": (
+        lambda t: (_write_csv(t, _set_column(_rows(), 2, 3, "1e300")), _map(t)),
+        ["d.csv:5:3", "column 'Angle [arcsec]'", "output_angle_deg 2.77", "e+296 is no reading",
+         "from -1e+09 to 1e+09 deg"]),
+    "temperature -200 C": (
+        lambda t: (_write_csv(t, [r + ["-200" if i == 9 else "20"] for i, r in
+                                  enumerate(_rows())], ["Time [s]", "Torque [N*m]",
+                                                        "Angle [arcsec]", "T"]),
+                   _map(t, lambda s: s.replace("[columns]", '[columns]\ntemperature_C = "T"'))),
+        ["d.csv:11:4", "temperature_C -200.0 is no reading", "from -100 to 300 °C"]),
+    "test input angle 1e300": (
+        lambda t: (_write_csv(t, _rows()), _map(t, lambda s: s + "input_angle_deg = 1e300\n")),
+        ["m.toml", "test.input_angle_deg: expected from -3600 to 3600 deg (got 1e+300)"]),
+    "test temperature 1e6 C": (
+        lambda t: (_write_csv(t, _rows()), _map(t, lambda s: s + "temperature_C = 1e6\n")),
+        ["m.toml", "test.temperature_C: expected from -100 to 300 °C (got 1000000.0)"]),
     "a single sample": (lambda t: (_write_csv(t, _rows(1)), _map(t)),
                         ["d.csv", "1 sample", "at least"]),
     "all-zero torque": (
@@ -404,3 +425,16 @@ def test_import_out_is_all_or_nothing_and_not_over_a_run(tmp_path: Path) -> None
     write_imported(imported, tmp_path / "run", force=True)
     with pytest.raises(WriteTargetError, match="did not write"):
         write_imported(imported, tmp_path / "plain", force=True)
+
+
+def test_a_torque_of_1e31_is_not_stored_as_a_completed_run(tmp_path: Path) -> None:
+    """Issue 33 item 5: ``rig import --into`` stored it as completed / NO LIMITS with no
+    reason (and it got a certificate) while ``rig analyse`` refused the same run: now the
+    import refuses it in one line naming file, line and column, and the store stays empty."""
+    source, mapping = CASES["torque 1e31 N*m (rated 10)"][0](tmp_path)
+    line = _one_line_error(_rig("import", str(source), "--map", str(mapping), "--unit",
+                                str(UNIT), "--into", str(tmp_path / "st"), cwd=tmp_path))
+    assert f"{source}:7:2: column 'Torque [N*m]' (torque_Nm): torque_Nm 1e+31 is no " \
+        "reading" in line, line
+    runs = tmp_path / "st" / "runs"
+    assert not runs.exists() or not any(runs.iterdir())

@@ -305,5 +305,5 @@ def test_campaign_files_by_name_or_upload_never_a_path(client: TestClient):
         "file_name": "c.toml", "text": text.replace("rated_torque_Nm = 10.0",
                                                     "rated_torque_Nm = -1")})
     assert bad.status_code == 400
-    assert bad.json()["detail"] == "c.toml: plan.rated_torque_Nm: Input should be greater " \
-                                   "than 0 (got -1)"
+    assert bad.json()["detail"] == "c.toml: plan.rated_torque_Nm: expected greater than 0 " \
+                                   "and at most 1e+07 N·m (got -1)"  # rig/core/ranges.py

@@ -245,14 +245,15 @@ def run_campaign(camp: CampaignFile, session: RigSession, store: Store, *,
         if key in meta:
             cmeta[key] = meta[key]
     campaign_id = store.create_campaign(camp.name, meta=json_safe(cmeta))
-    options = EngineOptions(torque_limit_Nm=camp.torque_limit_Nm, profile=camp.profile,
-                            stale_timeout_s=session.stale_timeout_s,
-                            limits=camp.limits.model_dump(),
-                            run_meta=simulated_truth(
-                                session, PROFILES.get(camp.profile, 3.0),
-                                camp.plan.rated_torque_Nm, camp.axes.positions_deg or [0.0],
-                                camp.axes.temperatures_C))
-    try:
+    try:  # from here on anything that fails closes the campaign (never left `running`)
+        options = EngineOptions(torque_limit_Nm=camp.torque_limit_Nm, profile=camp.profile,
+                                stale_timeout_s=session.stale_timeout_s,
+                                limits=camp.limits.model_dump(),
+                                run_meta=simulated_truth(
+                                    session, PROFILES.get(camp.profile, 3.0),
+                                    camp.plan.rated_torque_Nm,
+                                    camp.axes.positions_deg or [0.0],
+                                    camp.axes.temperatures_C))
         engine, outcomes = measure_plan(
             session, store, plan, meta,
             campaign_id=campaign_id, options=options, progress=progress, on_engine=on_engine)

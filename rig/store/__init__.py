@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from rig import __version__
+from rig.core.durable import is_disk_full
 from rig.core.errors import RigError
 from rig.runformat import (
     CAMPAIGN_FORMAT,
@@ -57,6 +58,7 @@ from rig.store.files import (
 from rig.store.ids import (
     ID_PATTERN,
     InvalidIdError,
+    StoreDiskFull,
     StoreError,
     StoreUnavailable,
     UnknownIdError,
@@ -85,6 +87,7 @@ __all__ = [
     "RunInfo",
     "RunRecorder",
     "Store",
+    "StoreDiskFull",
     "StoreError",
     "StoreUnavailable",
     "UnknownIdError",
@@ -100,6 +103,11 @@ DEFAULT_STORE_DIR = "rig-store"
 PENDING_DIR = "pending-index"
 """Runs finalised while the database was unreachable: one JSON file per run, removed once
 the run is indexed (docs/store.md, "A database outage")."""
+DISK_RESERVE = ".disk-reserve"
+"""A file of :data:`DISK_RESERVE_BYTES` kept in the store folder while runs begin: when the
+disk fills during a run it is removed, so that the run's abort record (run.json,
+campaign.json, the index) still finds room (docs/store.md, "A full disk")."""
+DISK_RESERVE_BYTES = 1 << 20
 RUN_RETRY_ENV = "RIG_STORE_RUN_RETRY_S"
 DEFAULT_RUN_RETRY_S = 5.0
 """How long a run's start or end waits for a lost database before the run is kept locally
@@ -250,8 +258,43 @@ class Store:
         fields = _index_fields(meta)
         columns = _check_columns(columns)
         self.index_pending()
-        with self._index.retry_window(self.run_retry_s):
-            return self._begin_run(meta, fields, columns, campaign_id, flush_interval_s)
+        self._keep_disk_reserve()
+        try:
+            with self._index.retry_window(self.run_retry_s):
+                return self._begin_run(meta, fields, columns, campaign_id, flush_interval_s)
+        except OSError as e:
+            if is_disk_full(e):
+                raise StoreDiskFull(f"the store's disk is full ({self.location}): the run "
+                                    f"was not begun ({e.strerror or e})") from None
+            raise
+
+    def _keep_disk_reserve(self) -> None:
+        """Make the disk reserve (:data:`DISK_RESERVE`) if it is absent; best effort (a disk
+        too full for it is told when the run's own files are written)."""
+        path = self.root / DISK_RESERVE
+        try:
+            if path.stat().st_size >= DISK_RESERVE_BYTES:
+                return
+        except FileNotFoundError:
+            pass
+        except OSError:
+            return
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
+        except OSError:
+            return
+        try:
+            os.posix_fallocate(fd, 0, DISK_RESERVE_BYTES)
+        except OSError as e:
+            log.info("store: no disk reserve at %s (%s)", path, e.strerror or e)
+            os.close(fd)
+            path.unlink(missing_ok=True)
+            return
+        os.close(fd)
+
+    def release_disk_reserve(self) -> None:
+        """Remove the disk reserve: room for the records of a run stopped by a full disk."""
+        (self.root / DISK_RESERVE).unlink(missing_ok=True)
 
     def _begin_run(self, meta: dict[str, Any], fields: dict[str, Any], columns: list[str],
                    campaign_id: str | None, flush_interval_s: float) -> RunRecorder:

@@ -26,6 +26,11 @@ class StoreUnavailable(StoreError):
     network outage). The message is one line."""
 
 
+class StoreDiskFull(StoreError):
+    """The store's disk (or a file size limit, a quota) refused a write: one line saying
+    what was kept."""
+
+
 class InvalidIdError(StoreError, ValueError):
     """A run or campaign id given by a caller does not match :data:`ID_PATTERN`."""
 

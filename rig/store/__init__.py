@@ -60,6 +60,7 @@ from rig.store.ids import (
     InvalidIdError,
     StoreDiskFull,
     StoreError,
+    StoreReadOnly,
     StoreUnavailable,
     UnknownIdError,
     id_candidates,
@@ -89,6 +90,7 @@ __all__ = [
     "Store",
     "StoreDiskFull",
     "StoreError",
+    "StoreReadOnly",
     "StoreUnavailable",
     "UnknownIdError",
     "default_store_root",
@@ -214,8 +216,22 @@ class Store:
         except OSError as e:
             raise StoreError(f"cannot create the store at {self.root}: {e.strerror or e}") from e
         self._index.ensure_schema()
+        recover = recover and self.read_only is None  # nothing can be closed in a read-only one
         self.indexed_at_open: list[str] = self.index_pending() if recover else []
         self.recovered: list[str] = self.recover() if recover else []
+
+    @property
+    def read_only(self) -> str | None:
+        """Why this process may only read the store (a read-only file system, no write
+        permission); None when it may write. Reading works either way."""
+        return self._index.read_only
+
+    def check_writable(self, what: str) -> None:
+        """:class:`StoreReadOnly` (one line) when the store is read-only; ``what`` says what
+        needed to write ("a measurement", "the import")."""
+        if self.read_only is not None:
+            raise StoreReadOnly(f"the store {self.location} is read-only ({self.read_only}): "
+                                f"{what} cannot be stored there")
 
     @property
     def location(self) -> str:
@@ -257,6 +273,7 @@ class Store:
         """
         fields = _index_fields(meta)
         columns = _check_columns(columns)
+        self.check_writable("a run")
         self.index_pending()
         self._keep_disk_reserve()
         try:
@@ -458,7 +475,9 @@ class Store:
         """Index the runs finalised locally during a database outage (one attempt each, no
         waiting); returns the ids indexed now. Their audit records keep the time the run
         ended. A database still unreachable leaves them queued (no error)."""
-        done = []
+        done: list[str] = []
+        if self.read_only is not None:  # queued runs wait for a process that may write
+            return done
         for run_id in self.pending_runs():
             path = self._pending_path(run_id)
             record = _read_json_or(path, None)
@@ -610,6 +629,7 @@ class Store:
         if not isinstance(name, str) or not name.strip():
             raise ValueError(f"campaign name must be a non-empty string, got {name!r}")
         meta = dict(meta or {})
+        self.check_writable("a campaign")
         _reject_reserved(meta, CAMPAIGN_RESERVED_KEYS, "campaign meta")
         to_json(meta)
         started_at = utc_now_iso()
@@ -691,6 +711,7 @@ class Store:
         run/campaign is stored already (nothing changed)."""
         if (run_id is None) == (campaign_id is None):
             raise ValueError("give exactly one of run_id and campaign_id")
+        self.check_writable("a re-computed result")
         if run_id is not None:
             validate_id(run_id, "run")
         if campaign_id is not None:
@@ -714,6 +735,7 @@ class Store:
         """Add an operator's action to the audit trail (who is in ``detail``: operator), with
         the time, this process and host."""
         to_json(detail)
+        self.check_writable("an audit record")
         self._index.add_audit({"at": utc_now_iso(), "action": action, "target": target or "",
                                "pid": os.getpid(), "host": socket.gethostname(),
                                "detail": detail})

@@ -31,6 +31,11 @@ class StoreDiskFull(StoreError):
     what was kept."""
 
 
+class StoreReadOnly(StoreError):
+    """A write asked of a store this process may only read (a read-only file system, no
+    write permission): one line naming the store."""
+
+
 class InvalidIdError(StoreError, ValueError):
     """A run or campaign id given by a caller does not match :data:`ID_PATTERN`."""
 

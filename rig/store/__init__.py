@@ -110,6 +110,9 @@ DISK_RESERVE = ".disk-reserve"
 disk fills during a run it is removed, so that the run's abort record (run.json,
 campaign.json, the index) still finds room (docs/store.md, "A full disk")."""
 DISK_RESERVE_BYTES = 1 << 20
+RECORD_SLACK_S = 2.0
+"""A run.json modified later than this after its run's end (s) was changed after it was
+indexed: the store reads it again (:meth:`Store._as_recorded`)."""
 RUN_RETRY_ENV = "RIG_STORE_RUN_RETRY_S"
 DEFAULT_RUN_RETRY_S = 5.0
 """How long a run's start or end waits for a lost database before the run is kept locally
@@ -589,7 +592,48 @@ class Store:
             campaign_id=campaign_id, status=status, serial=serial, outcome=outcome,
             design=design, since=_iso_bound(since, "since"), until=_iso_bound(until, "until"),
             limit=limit))
-        return [run_info(r, self.root) for r in rows]
+        infos = [run_info(self._as_recorded(r), self.root) for r in rows]
+        return [i for i in infos if status is None or i.status == status]
+
+    def _as_recorded(self, row: Mapping[str, Any]) -> Mapping[str, Any]:
+        """A finished run's index row as its run.json says it: run.json is the record, the
+        index a copy made when the run ended. A run.json changed after that (modified more
+        than :data:`RECORD_SLACK_S` after the run's end, e.g. by hand) is read again; its
+        status, reason, result, outcome and sample count replace the copy's (NaN and inf as
+        missing values), in the index too when the store may be written."""
+        if row.get("status") == "running" or not row.get("finished_at"):
+            return row
+        path = self.root / row["path"] / RUN_JSON
+        try:
+            changed_at = path.stat().st_mtime
+            ended_at = datetime.fromisoformat(str(row["finished_at"]).replace("Z", "+00:00"))
+        except (OSError, ValueError):
+            return row
+        if changed_at <= ended_at.timestamp() + RECORD_SLACK_S:
+            return row
+        meta = _read_json_or(path, None)  # Python's reader takes a NaN typed by hand
+        if meta is None:
+            return row
+        from rig.core.json_files import json_safe
+
+        meta = json_safe(meta)
+        values: dict[str, Any] = {
+            "reason": meta.get("reason") if isinstance(meta.get("reason"), str) else None,
+            "metrics": meta.get("result") if isinstance(meta.get("result"), dict) else None,
+            "outcome": outcome_word(meta.get("outcome")), "meta": meta,
+            "n_samples": meta.get("n_samples") if isinstance(meta.get("n_samples"), int)
+            else row.get("n_samples")}
+        if meta.get("status") in FINAL_STATUSES:
+            values["status"] = meta["status"]
+        if all(row.get(k) == v for k, v in values.items()):
+            return row
+        if self.read_only is None:
+            try:
+                self._index.refresh_run(str(row["run_id"]), values)
+            except StoreError as e:
+                log.warning("run %s: the index keeps its old copy of run.json: %s",
+                            row["run_id"], e)
+        return {**row, **values}
 
     def runs(self, *, serial: str | None = None, since: str | None = None,
              outcome: str | None = None, **filters: Any) -> Any:
@@ -598,8 +642,10 @@ class Store:
         return runs_frame(self, serial=serial, since=since, outcome=outcome, **filters)
 
     def get_run(self, run_id: str) -> RunInfo:
-        """The index row of one run (InvalidIdError / UnknownIdError)."""
-        return run_info(self._indexed("run", run_id, self._index.get_run), self.root)
+        """The index row of one run, as its run.json says it (:meth:`_as_recorded`)
+        (InvalidIdError / UnknownIdError)."""
+        return run_info(self._as_recorded(self._indexed("run", run_id, self._index.get_run)),
+                        self.root)
 
     def run_path(self, run_id: str) -> Path:
         """The folder of a run (validated id, known to the index)."""

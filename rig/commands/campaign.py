@@ -98,6 +98,7 @@ def register(app: typer.Typer) -> None:
         plant_cfg = plant_config_for(camp.unit_data(), camp.simulation, camp.source) \
             if simulated else None
         st = Store(store, samples=samples)
+        st.check_writable("a campaign")  # said before the rig starts
         out.print(f"campaign {camp.name}: {est.n_runs} runs, about {est.total_s:.0f} s")
         with open_session(rig=rig, simulated=simulated, plant=plant_cfg) as session, \
                 progress_bar(out, est.total_s) as on_event, \

@@ -143,11 +143,12 @@ def register(app: typer.Typer) -> None:
             _print_preview(out, request.plan(), est)
             return
         request = _ready(request, serial, operator, calibration_override, simulated, plant)
-        with open_run_session(request, rig=rig, simulated=simulated) as session:
-            st = Store(store, samples=samples)
-            with progress_bar(out, est.total_s) as on_event, \
-                    exit_2_on_ctrl_c(out, "the run is kept as aborted"):
-                measured = measure_run(request, session, st, progress=on_event)
+        st = Store(store, samples=samples)
+        st.check_writable("a measurement")  # said before the rig starts
+        with open_run_session(request, rig=rig, simulated=simulated) as session, \
+                progress_bar(out, est.total_s) as on_event, \
+                exit_2_on_ctrl_c(out, "the run is kept as aborted"):
+            measured = measure_run(request, session, st, progress=on_event)
         result = measured.result
         write_json(json_file, result)
         raise typer.Exit(_print_result(out, result, st))

@@ -51,6 +51,7 @@ def register(app: typer.Typer) -> None:
         if dask and workers:
             raise RigError("give --dask (a scheduler) or --workers (a local cluster), not both")
         st = Store(store, create=False, samples=samples)
+        st.check_writable("a re-analysis")
         err = Console(stderr=True)
         progress = Progress("re-analysing", BarColumn(), MofNCompleteColumn(),
                             TimeRemainingColumn(), console=err, transient=False)

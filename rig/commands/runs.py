@@ -105,7 +105,9 @@ def register(app: typer.Typer) -> None:
         """List the stored runs with their status, outcome (OK / NOT OK / INCOMPLETE / NO
         LIMITS) and lost motion (newest first).
 
-        Opening the store marks runs left "running" by a process that has ended as aborted.
+        Each run's record is its folder's run.json; the index is a copy, read again where
+        a run.json changed after its run ended. Opening the store marks runs left "running"
+        by a process that has ended as aborted.
         The store is --store, else $RIG_STORE, else ./rig-store: a folder, or a database
         URL postgresql://... whose run files are in --samples (else $RIG_SAMPLES_DIR).
         --json lists every run once, with its run_id.

@@ -49,7 +49,7 @@ def register(app: typer.Typer) -> None:
         from rig.web.app import create_app
         from rig.web.engine_host import EngineHost, EngineSpec
         from rig.web.live import LiveHub
-        from rig.web.server import bind, uvicorn_server
+        from rig.web.server import StoreServedAlready, bind, claim_store, uvicorn_server
         from rig.web.settings import resolve_settings
         from rig.web.simulated import example_unit, simulated_plant
 
@@ -58,6 +58,11 @@ def register(app: typer.Typer) -> None:
                            "(a rig configuration)")
         root = store if store is not None else default_store_root()
         the_store = Store(root, samples=samples)
+        if the_store.backend == "sqlite":  # a database store is shared by every rig's page
+            try:
+                claim_store(the_store.root)  # its descriptor stays open: held until the end
+            except StoreServedAlready as exc:
+                raise RigError(str(exc)) from None
         settings = resolve_settings(host, port, store_root=the_store.root, token=token,
                                     check_host=True)
         hub = LiveHub()

@@ -58,7 +58,7 @@ from rig.plans.steps import (
     describe,
 )
 from rig.results.outcome import LIMIT_KEYS
-from rig.store import Store, StoreUnavailable
+from rig.store import Store, StoreDiskFull, StoreUnavailable
 
 log = logging.getLogger(__name__)
 
@@ -297,7 +297,7 @@ class Engine:
             self.state = "completed"
         except EngineStopped:
             self.state = "aborted"
-        except DeviceError as exc:
+        except (DeviceError, StoreDiskFull) as exc:
             self._trip(str(exc))
             self.state = "aborted"
         except BaseException as exc:  # KeyboardInterrupt, a bug: the rig goes safe first
@@ -390,6 +390,9 @@ class Engine:
         until the stale-sample trip (the traceback goes to the log)."""
         try:
             loop()
+        except StoreDiskFull as exc:  # the samples written so far are kept whole
+            if not self._stop_threads.is_set():
+                self._trip(str(exc))
         except Exception as exc:
             log.exception("unexpected error in the %s thread", name)
             if not self._stop_threads.is_set():

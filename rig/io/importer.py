@@ -262,6 +262,7 @@ def store_imported(run: Run, store_root: str | Path, *,
     from rig.store import Store
 
     st = Store(store_root, samples=samples)
+    st.check_writable("the imported run")
     meta = {k: v for k, v in run.meta.items() if k not in ("format", "run_id", "started_at")}
     meta.setdefault("label", run.run_id)
     result, extra = _result(run)

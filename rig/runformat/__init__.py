@@ -26,6 +26,7 @@ Units follow the column names: ``t_s`` in s, ``torque_Nm`` in N·m, angles in de
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
@@ -426,6 +427,10 @@ def sample_columns(folder: str | Path) -> list[str]:
         return []
 
 
+_WRITE_CHUNK = 8192
+"""Buffered rows are written once they reach this many bytes (and at every flush)."""
+
+
 class SamplesAppender:
     """Append sample rows to a ``samples.csv`` as they are measured.
 
@@ -462,21 +467,37 @@ class SamplesAppender:
         self._closed = False
         header = csv_line(self.columns)
         existing = self.path.exists() and self.path.stat().st_size > 0
+        self._lines = 0
         if existing:
             self._last_t = self._check_existing(header, repair_truncated_tail)
         try:
-            self._file = open(self.path, "a", encoding="utf-8", newline="")  # noqa: SIM115
+            self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
         except OSError as e:
             raise RunFormatError(self.path, f"cannot open to append: {e.strerror or e}") from None
+        self._size = os.fstat(self._fd).st_size
+        self._pending: list[bytes] = []
+        self._pending_bytes = 0
+        self.error: OSError | None = None
+        """The write that failed (a full disk, a file size limit); the file then ends with
+        the last whole line written, and every later append raises it again."""
         if not existing:
-            self._file.write(header)
-            self._sync()
+            self._pending.append(header.encode())
+            try:
+                self._sync()
+            except OSError:
+                os.close(self._fd)
+                raise
         self._interval = float(flush_interval_s)
         self._stop = threading.Event()
         self._thread = threading.Thread(
             target=self._flush_loop, name=f"flush {self.path.name}", daemon=True
         )
         self._thread.start()
+
+    @property
+    def rows_written(self) -> int:
+        """Rows whole on disk (or handed to it, before the next fsync), header not counted."""
+        return max(0, self._lines - 1)
 
     def _check_existing(self, header: str, repair: bool) -> float:
         """Check an existing file's header and tail; return its last t_s (-inf if no rows)."""
@@ -508,6 +529,7 @@ class SamplesAppender:
                 line=1,
                 column=col,
             )
+        self._lines = raw.count(b"\n")
         lines = raw.rstrip(b"\r\n").split(b"\n")
         if len(lines) < 2:
             return -math.inf
@@ -540,29 +562,37 @@ class SamplesAppender:
             raise ValueError(
                 f"{self.path}: t_s must be strictly ascending, got {t!r} after {self._last_t!r}"
             )
-        line = ",".join(map(format_cell, row, self._integers)) + "\n"
+        line = (",".join(map(format_cell, row, self._integers)) + "\n").encode()
         with self._lock:
             if self._closed:
                 raise ValueError(f"{self.path}: appender is closed")
-            self._file.write(line)
+            if self.error is not None:
+                raise self.error
+            self._pending.append(line)
+            self._pending_bytes += len(line)
             self._last_t = t
             self._dirty = True
+            if self._pending_bytes >= _WRITE_CHUNK:
+                self._write_pending()
 
     def flush(self) -> None:
-        """Push buffered rows to the disk (``flush`` + ``os.fsync``)."""
+        """Push buffered rows to the disk (write + ``os.fsync``); a failed write raises
+        its OSError (:attr:`error`)."""
         with self._lock:
             if not self._closed:
                 self._sync()
 
     def close(self) -> None:
-        """Flush and close; idempotent."""
+        """Flush and close; idempotent. A write that fails here is kept in :attr:`error`
+        (not raised): the rows written before it stay whole."""
         if self._closed:
             return
         self._stop.set()
         self._thread.join()
         with self._lock:
-            self._sync()
-            self._file.close()
+            with contextlib.suppress(OSError):
+                self._sync()
+            os.close(self._fd)
             self._closed = True
 
     def __enter__(self) -> SamplesAppender:
@@ -571,16 +601,41 @@ class SamplesAppender:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    def _write_pending(self) -> None:
+        """Write the buffered lines. A write that fails (ENOSPC, EFBIG, ...) cuts the file
+        back to its last whole line, keeps the error in :attr:`error` and raises it."""
+        if self.error is not None:
+            raise self.error
+        data = b"".join(self._pending)
+        self._pending.clear()
+        self._pending_bytes = 0
+        done = 0
+        try:
+            while done < len(data):
+                done += os.write(self._fd, data[done:])
+        except OSError as e:
+            keep = data.rfind(b"\n", 0, done) + 1
+            with contextlib.suppress(OSError):
+                os.ftruncate(self._fd, self._size + keep)
+                os.fsync(self._fd)
+            self._size += keep
+            self._lines += data.count(b"\n", 0, keep)
+            self.error = e
+            raise
+        self._size += len(data)
+        self._lines += data.count(b"\n")
+
     def _sync(self) -> None:
-        self._file.flush()
-        os.fsync(self._file.fileno())
+        self._write_pending()
+        os.fsync(self._fd)
         self._dirty = False
 
     def _flush_loop(self) -> None:
         while not self._stop.wait(self._interval):
             with self._lock:
-                if self._dirty and not self._closed:
-                    self._sync()
+                if self._dirty and not self._closed and self.error is None:
+                    with contextlib.suppress(OSError):  # kept in self.error: append raises it
+                        self._sync()
 
 
 # --------------------------------------------------------------------------- validation
@@ -649,13 +704,19 @@ def _read_text(path: Path) -> str:
 
 
 def atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` (UTF-8) to ``path``: a temp file beside it, fsync, rename."""
+    """Write ``text`` (UTF-8) to ``path``: a temp file beside it, fsync, rename (the temp
+    file removed if that fails)."""
     tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", encoding="utf-8", newline="") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w", encoding="utf-8", newline="") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:  # a full disk, a size limit: no temporary file left behind
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
 
 
 def _subfolders(folder: Path) -> list[Path]:

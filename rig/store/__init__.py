@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from rig import __version__
+from rig.core.durable import is_disk_full
 from rig.core.errors import RigError
 from rig.runformat import (
     CAMPAIGN_FORMAT,
@@ -57,7 +58,9 @@ from rig.store.files import (
 from rig.store.ids import (
     ID_PATTERN,
     InvalidIdError,
+    StoreDiskFull,
     StoreError,
+    StoreReadOnly,
     StoreUnavailable,
     UnknownIdError,
     id_candidates,
@@ -85,7 +88,9 @@ __all__ = [
     "RunInfo",
     "RunRecorder",
     "Store",
+    "StoreDiskFull",
     "StoreError",
+    "StoreReadOnly",
     "StoreUnavailable",
     "UnknownIdError",
     "default_store_root",
@@ -100,6 +105,14 @@ DEFAULT_STORE_DIR = "rig-store"
 PENDING_DIR = "pending-index"
 """Runs finalised while the database was unreachable: one JSON file per run, removed once
 the run is indexed (docs/store.md, "A database outage")."""
+DISK_RESERVE = ".disk-reserve"
+"""A file of :data:`DISK_RESERVE_BYTES` kept in the store folder while runs begin: when the
+disk fills during a run it is removed, so that the run's abort record (run.json,
+campaign.json, the index) still finds room (docs/store.md, "A full disk")."""
+DISK_RESERVE_BYTES = 1 << 20
+RECORD_SLACK_S = 2.0
+"""A run.json modified later than this after its run's end (s) was changed after it was
+indexed: the store reads it again (:meth:`Store._as_recorded`)."""
 RUN_RETRY_ENV = "RIG_STORE_RUN_RETRY_S"
 DEFAULT_RUN_RETRY_S = 5.0
 """How long a run's start or end waits for a lost database before the run is kept locally
@@ -206,8 +219,22 @@ class Store:
         except OSError as e:
             raise StoreError(f"cannot create the store at {self.root}: {e.strerror or e}") from e
         self._index.ensure_schema()
+        recover = recover and self.read_only is None  # nothing can be closed in a read-only one
         self.indexed_at_open: list[str] = self.index_pending() if recover else []
         self.recovered: list[str] = self.recover() if recover else []
+
+    @property
+    def read_only(self) -> str | None:
+        """Why this process may only read the store (a read-only file system, no write
+        permission); None when it may write. Reading works either way."""
+        return self._index.read_only
+
+    def check_writable(self, what: str) -> None:
+        """:class:`StoreReadOnly` (one line) when the store is read-only; ``what`` says what
+        needed to write ("a measurement", "the import")."""
+        if self.read_only is not None:
+            raise StoreReadOnly(f"the store {self.location} is read-only ({self.read_only}): "
+                                f"{what} cannot be stored there")
 
     @property
     def location(self) -> str:
@@ -249,9 +276,45 @@ class Store:
         """
         fields = _index_fields(meta)
         columns = _check_columns(columns)
+        self.check_writable("a run")
         self.index_pending()
-        with self._index.retry_window(self.run_retry_s):
-            return self._begin_run(meta, fields, columns, campaign_id, flush_interval_s)
+        self._keep_disk_reserve()
+        try:
+            with self._index.retry_window(self.run_retry_s):
+                return self._begin_run(meta, fields, columns, campaign_id, flush_interval_s)
+        except OSError as e:
+            if is_disk_full(e):
+                raise StoreDiskFull(f"the store's disk is full ({self.location}): the run "
+                                    f"was not begun ({e.strerror or e})") from None
+            raise
+
+    def _keep_disk_reserve(self) -> None:
+        """Make the disk reserve (:data:`DISK_RESERVE`) if it is absent; best effort (a disk
+        too full for it is told when the run's own files are written)."""
+        path = self.root / DISK_RESERVE
+        try:
+            if path.stat().st_size >= DISK_RESERVE_BYTES:
+                return
+        except FileNotFoundError:
+            pass
+        except OSError:
+            return
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
+        except OSError:
+            return
+        try:
+            os.posix_fallocate(fd, 0, DISK_RESERVE_BYTES)
+        except OSError as e:
+            log.info("store: no disk reserve at %s (%s)", path, e.strerror or e)
+            os.close(fd)
+            path.unlink(missing_ok=True)
+            return
+        os.close(fd)
+
+    def release_disk_reserve(self) -> None:
+        """Remove the disk reserve: room for the records of a run stopped by a full disk."""
+        (self.root / DISK_RESERVE).unlink(missing_ok=True)
 
     def _begin_run(self, meta: dict[str, Any], fields: dict[str, Any], columns: list[str],
                    campaign_id: str | None, flush_interval_s: float) -> RunRecorder:
@@ -415,7 +478,9 @@ class Store:
         """Index the runs finalised locally during a database outage (one attempt each, no
         waiting); returns the ids indexed now. Their audit records keep the time the run
         ended. A database still unreachable leaves them queued (no error)."""
-        done = []
+        done: list[str] = []
+        if self.read_only is not None:  # queued runs wait for a process that may write
+            return done
         for run_id in self.pending_runs():
             path = self._pending_path(run_id)
             record = _read_json_or(path, None)
@@ -527,7 +592,48 @@ class Store:
             campaign_id=campaign_id, status=status, serial=serial, outcome=outcome,
             design=design, since=_iso_bound(since, "since"), until=_iso_bound(until, "until"),
             limit=limit))
-        return [run_info(r, self.root) for r in rows]
+        infos = [run_info(self._as_recorded(r), self.root) for r in rows]
+        return [i for i in infos if status is None or i.status == status]
+
+    def _as_recorded(self, row: Mapping[str, Any]) -> Mapping[str, Any]:
+        """A finished run's index row as its run.json says it: run.json is the record, the
+        index a copy made when the run ended. A run.json changed after that (modified more
+        than :data:`RECORD_SLACK_S` after the run's end, e.g. by hand) is read again; its
+        status, reason, result, outcome and sample count replace the copy's (NaN and inf as
+        missing values), in the index too when the store may be written."""
+        if row.get("status") == "running" or not row.get("finished_at"):
+            return row
+        path = self.root / row["path"] / RUN_JSON
+        try:
+            changed_at = path.stat().st_mtime
+            ended_at = datetime.fromisoformat(str(row["finished_at"]).replace("Z", "+00:00"))
+        except (OSError, ValueError):
+            return row
+        if changed_at <= ended_at.timestamp() + RECORD_SLACK_S:
+            return row
+        meta = _read_json_or(path, None)  # Python's reader takes a NaN typed by hand
+        if meta is None:
+            return row
+        from rig.core.json_files import json_safe
+
+        meta = json_safe(meta)
+        values: dict[str, Any] = {
+            "reason": meta.get("reason") if isinstance(meta.get("reason"), str) else None,
+            "metrics": meta.get("result") if isinstance(meta.get("result"), dict) else None,
+            "outcome": outcome_word(meta.get("outcome")), "meta": meta,
+            "n_samples": meta.get("n_samples") if isinstance(meta.get("n_samples"), int)
+            else row.get("n_samples")}
+        if meta.get("status") in FINAL_STATUSES:
+            values["status"] = meta["status"]
+        if all(row.get(k) == v for k, v in values.items()):
+            return row
+        if self.read_only is None:
+            try:
+                self._index.refresh_run(str(row["run_id"]), values)
+            except StoreError as e:
+                log.warning("run %s: the index keeps its old copy of run.json: %s",
+                            row["run_id"], e)
+        return {**row, **values}
 
     def runs(self, *, serial: str | None = None, since: str | None = None,
              outcome: str | None = None, **filters: Any) -> Any:
@@ -536,8 +642,10 @@ class Store:
         return runs_frame(self, serial=serial, since=since, outcome=outcome, **filters)
 
     def get_run(self, run_id: str) -> RunInfo:
-        """The index row of one run (InvalidIdError / UnknownIdError)."""
-        return run_info(self._indexed("run", run_id, self._index.get_run), self.root)
+        """The index row of one run, as its run.json says it (:meth:`_as_recorded`)
+        (InvalidIdError / UnknownIdError)."""
+        return run_info(self._as_recorded(self._indexed("run", run_id, self._index.get_run)),
+                        self.root)
 
     def run_path(self, run_id: str) -> Path:
         """The folder of a run (validated id, known to the index)."""
@@ -567,6 +675,7 @@ class Store:
         if not isinstance(name, str) or not name.strip():
             raise ValueError(f"campaign name must be a non-empty string, got {name!r}")
         meta = dict(meta or {})
+        self.check_writable("a campaign")
         _reject_reserved(meta, CAMPAIGN_RESERVED_KEYS, "campaign meta")
         to_json(meta)
         started_at = utc_now_iso()
@@ -648,6 +757,7 @@ class Store:
         run/campaign is stored already (nothing changed)."""
         if (run_id is None) == (campaign_id is None):
             raise ValueError("give exactly one of run_id and campaign_id")
+        self.check_writable("a re-computed result")
         if run_id is not None:
             validate_id(run_id, "run")
         if campaign_id is not None:
@@ -671,6 +781,7 @@ class Store:
         """Add an operator's action to the audit trail (who is in ``detail``: operator), with
         the time, this process and host."""
         to_json(detail)
+        self.check_writable("an audit record")
         self._index.add_audit({"at": utc_now_iso(), "action": action, "target": target or "",
                                "pid": os.getpid(), "host": socket.gethostname(),
                                "detail": detail})

@@ -81,6 +81,9 @@ class IndexBackend(ABC):
 
     #: How the store is named in messages (a path, or a URL without its password).
     location: str
+    #: Why this process may only read the store (a read-only file system, no permission);
+    #: None when it may write.
+    read_only: str | None = None
 
     @contextlib.contextmanager
     def retry_window(self, seconds: float) -> Iterator[None]:

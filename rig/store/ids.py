@@ -26,6 +26,16 @@ class StoreUnavailable(StoreError):
     network outage). The message is one line."""
 
 
+class StoreDiskFull(StoreError):
+    """The store's disk (or a file size limit, a quota) refused a write: one line saying
+    what was kept."""
+
+
+class StoreReadOnly(StoreError):
+    """A write asked of a store this process may only read (a read-only file system, no
+    write permission): one line naming the store."""
+
+
 class InvalidIdError(StoreError, ValueError):
     """A run or campaign id given by a caller does not match :data:`ID_PATTERN`."""
 

@@ -15,6 +15,7 @@ the shared ones of :mod:`rig.store.sql`; the PostgreSQL index is
 from __future__ import annotations
 
 import contextlib
+import os
 import sqlite3
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -29,7 +30,7 @@ from rig.store.backend import (
     json_text_params,
     to_json,
 )
-from rig.store.ids import StoreError
+from rig.store.ids import StoreError, StoreReadOnly
 from rig.store.sql import Dialect, SqlIndex, T, first_and_rest, migrate
 
 INDEX_NAME = "index.sqlite"
@@ -42,6 +43,38 @@ def connect(db_path: Path, busy_timeout_s: float) -> sqlite3.Connection:
     conn.execute("PRAGMA synchronous = FULL")
     conn.execute("PRAGMA foreign_keys = ON")
     return conn
+
+
+def connect_read_only(db_path: Path, busy_timeout_s: float) -> sqlite3.Connection:
+    """A read-only connection (``mode=ro``) to an index this process cannot write; when
+    SQLite cannot open its WAL files read-only there (no ``-shm`` and no right to make one),
+    the file is read as it is (``immutable=1``: nobody else is writing it then)."""
+    uri = f"{db_path.absolute().as_uri()}?mode=ro"
+    for suffix in ("", "&immutable=1"):
+        conn = sqlite3.connect(uri + suffix, uri=True, timeout=busy_timeout_s,
+                               isolation_level=None)
+        try:
+            conn.execute("PRAGMA user_version").fetchone()
+        except sqlite3.OperationalError:
+            conn.close()
+            if suffix:
+                raise
+            continue
+        conn.row_factory = sqlite3.Row
+        return conn
+    raise AssertionError("unreachable")
+
+
+def read_only_reason(root: Path, db_path: Path) -> str | None:
+    """Why this process cannot write the store at ``root`` (None: it can)."""
+    if os.access(root, os.W_OK) and os.access(db_path, os.W_OK):
+        return None
+    try:
+        if os.statvfs(root).f_flag & os.ST_RDONLY:
+            return "a read-only file system"
+    except OSError:
+        pass
+    return "no permission to write there"
 
 
 @contextlib.contextmanager
@@ -114,17 +147,38 @@ class SqliteIndex(SqlIndex):
         self.db_path = root / INDEX_NAME
         self.busy_timeout_s = busy_timeout_s
         self.location = str(root)
+        self.read_only: str | None = None
+        """Why this process may only read the index (set by :meth:`ensure_schema`)."""
 
     def _call(self, fn: Callable[[sqlite3.Connection, int], T]) -> T:
         """``fn(connection, 0)`` on a new connection, closed afterwards."""
-        with contextlib.closing(connect(self.db_path, self.busy_timeout_s)) as conn:
+        opener = connect if self.read_only is None else connect_read_only
+        with contextlib.closing(opener(self.db_path, self.busy_timeout_s)) as conn:
             return fn(conn, 0)
+
+    def _write(self, fn: Callable[[sqlite3.Connection, int], T]) -> T:
+        if self.read_only is not None:
+            raise StoreReadOnly(f"the store {self.location} is read-only "
+                                f"({self.read_only}): nothing can be written to it")
+        return super()._write(fn)
 
     def exists(self) -> bool:
         return self.db_path.is_file()
 
     def ensure_schema(self) -> None:
-        create_index(self.db_path, self.busy_timeout_s)
+        """Create or migrate the index; an index this process cannot write is opened
+        read-only instead (its schema must then be the current one)."""
+        if self.exists():
+            self.read_only = read_only_reason(self.db_path.parent, self.db_path)
+        if self.read_only is None:
+            create_index(self.db_path, self.busy_timeout_s)
+            return
+        version = self.schema_version()
+        check_version(version, str(self.db_path))
+        if version != SCHEMA_VERSION:
+            raise StoreError(f"{self.db_path}: schema version {version}, this software reads "
+                             f"{SCHEMA_VERSION}; the store is read-only ({self.read_only}), "
+                             "so it cannot be migrated: open it once with write access")
 
     def schema_version(self) -> int:
         if not self.exists():

@@ -8,11 +8,12 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
+from rig.core.durable import is_disk_full
 from rig.core.errors import RigError
 from rig.runformat import SamplesAppender
 from rig.store.backend import to_json
 from rig.store.files import WriterLock, finalise_samples
-from rig.store.ids import StoreError
+from rig.store.ids import StoreDiskFull, StoreError
 from rig.store.records import FINAL_STATUSES, RunInfo
 
 
@@ -30,6 +31,11 @@ class RunCloser(Protocol):
     def pending_runs(self) -> list[str]: ...
 
     def local_run_info(self, run_id: str) -> RunInfo: ...
+
+    def release_disk_reserve(self) -> None: ...
+
+    @property
+    def location(self) -> str: ...
 
 log = logging.getLogger("rig.store")
 
@@ -92,9 +98,19 @@ class RunRecorder:
                     f"run {self.run_id}: unknown column(s) {unknown}; columns are {self.columns}"
                 )
             row = [row.get(c) for c in self.columns]
-        self.samples.append(row)
+        try:
+            self.samples.append(row)
+        except OSError as e:
+            if is_disk_full(e):
+                raise self.disk_full() from None
+            raise
         with self._count_lock:
             self.n_samples += 1
+
+    def disk_full(self) -> StoreDiskFull:
+        """The one line of a run stopped by a full disk: how many samples it keeps."""
+        return StoreDiskFull(f"the store's disk is full ({self._store.location}): "
+                             f"{self.samples.rows_written} samples kept, run aborted")
 
     def finish(
         self,
@@ -106,7 +122,10 @@ class RunRecorder:
         """Close the samples file, turn it into Parquet, record the end of the run; return
         its index row.
 
-        ``status``: "completed" or "aborted" (an aborted run needs a ``reason``).
+        ``status``: "completed" or "aborted" (an aborted run needs a ``reason``). A run whose
+        samples could not all be written (a full disk) is closed as aborted with that reason,
+        its samples kept whole in samples.csv, and (when it was to be "completed") raises
+        :class:`StoreDiskFull` once recorded.
         ``result``: the run's metrics (a JSON-able dict, e.g. ``{"lost_motion_arcmin": 1.2}``),
         stored in run.json under "result" and in the index as ``metrics``.
         run.json is rewritten atomically with "status", "reason", "result", "finished_at"
@@ -126,14 +145,23 @@ class RunRecorder:
         to_json(result)
         to_json(extra)
         self.samples.close()
-        try:
-            finalise_samples(self.path)
-        except (RigError, OSError, ValueError) as e:  # the samples stay in samples.csv
-            log.warning("run %s: samples kept in CSV, not turned into Parquet: %s",
-                        self.run_id, e)
+        full = self.samples.error is not None and is_disk_full(self.samples.error)
+        n_samples = self.samples.rows_written if self.samples.error else self.n_samples
+        cut_short = full and status == "completed"
+        if full:  # the samples stay whole in samples.csv; the reserve makes room for the record
+            if cut_short:
+                status, reason = "aborted", str(self.disk_full())
+                extra = {**(extra or {}), "outcome": "incomplete"}
+            self._store.release_disk_reserve()
+        else:
+            try:
+                finalise_samples(self.path)
+            except (RigError, OSError, ValueError) as e:  # the samples stay in samples.csv
+                log.warning("run %s: samples kept in CSV, not turned into Parquet: %s",
+                            self.run_id, e)
         try:
             changed = self._store._finalize_run(
-                self.run_id, self.path, status, reason, result, self.n_samples,
+                self.run_id, self.path, status, reason, result, n_samples,
                 dict(extra or {}),
             )
         finally:
@@ -143,6 +171,8 @@ class RunRecorder:
             raise StoreError(
                 f"run {self.run_id} was no longer 'running' in the index when it was finished"
             )
+        if cut_short:  # recorded as aborted; the caller that thought it completed is told
+            raise self.disk_full()
         if self.run_id in self._store.pending_runs():
             self.indexed = False
             return self._store.local_run_info(self.run_id)

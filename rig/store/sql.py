@@ -269,6 +269,16 @@ class SqlIndex(IndexBackend):
             return True
         return self._write(fin)
 
+    def refresh_run(self, run_id: str, values: Mapping[str, Any]) -> None:
+        """Set the columns ``values`` of a finished run as its run.json now says them (the
+        record; the index is its copy)."""
+        p = self.dialect.placeholder
+        cols = list(values)
+        self._write(lambda conn, _: conn.execute(
+            f"UPDATE runs SET {', '.join(f'{c} = {p}' for c in cols)} "
+            f"WHERE run_id = {p} AND status <> 'running'",
+            [*self.dialect.params(values, cols), run_id]))
+
     def running_runs(self) -> list[tuple[str, str]]:
         rows = self._all("SELECT run_id, path FROM runs WHERE status = 'running' "
                          f"ORDER BY {self.dialect.order_column}")

@@ -1,16 +1,57 @@
 """Running the page's app with uvicorn on a socket bound first (so port 0 gives a free port
 whose number is known before the first request): :func:`bind`, :class:`RigServer` (stops
 cleanly: the live streams end first) and :class:`BackgroundServer` (a server on a thread, for
-tests and benchmarks)."""
+tests and benchmarks); :func:`claim_store`, one page per store folder."""
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import os
 import socket
 import threading
 import time
+from pathlib import Path
 
 import uvicorn
 from fastapi import FastAPI
+
+SERVE_LOCK = ".serve.lock"
+"""The file in a store folder that the ``rig serve`` serving it holds an ``flock`` on."""
+
+
+class StoreServedAlready(RuntimeError):
+    """Another live ``rig serve`` holds the store's lock; the message names it (one line)."""
+
+
+def claim_store(root: Path) -> int | None:
+    """Hold an exclusive ``flock`` on ``root/.serve.lock`` for as long as this process lives
+    (the kernel drops it when the process ends, however it ends: no stale lock after a
+    kill -9); the file keeps this process's PID. Returns the file descriptor (keep it open),
+    or None for a store this process cannot write (nothing can be measured into it there).
+    :class:`StoreServedAlready` names the PID of the live holder."""
+    path = root / SERVE_LOCK
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError:
+        try:
+            fd = os.open(path, os.O_RDONLY)
+        except OSError:
+            return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = ""
+        with contextlib.suppress(OSError, ValueError):
+            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+        os.close(fd)
+        raise StoreServedAlready(
+            f"the store {root} is served already by rig serve (PID {holder or 'unknown'}): "
+            "one page per store; use that page, or stop it first") from None
+    with contextlib.suppress(OSError):
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+    return fd
 
 
 def bind(host: str, port: int) -> socket.socket:

@@ -11,7 +11,6 @@ root ignore permissions).
 
 from __future__ import annotations
 
-import ctypes
 import json
 import os
 import resource
@@ -35,6 +34,7 @@ from rig.io.safe_write import WriteTargetError
 from rig.runformat import read_run, runs_equal, write_run
 from rig.store import InvalidIdError, Store
 from tests.support.paths import REPO as ROOT
+from tests.support.readonly import drop_dac_capabilities
 
 EXAMPLE_RUN = ROOT / "rig/examples/runs/pair1-pos000"
 UNIT = ROOT / "rig/examples/units/seed000-pair1.json"
@@ -190,18 +190,6 @@ def test_export_refuses_existing_targets_and_symlinks_without_force(tmp_path: Pa
 
 # ----------------------------------------------------------- item 2: failed writes, for real
 
-def _drop_dac_capabilities() -> None:
-    """In the child: root keeps the folder's permission bits too (no CAP_DAC_OVERRIDE or
-    CAP_DAC_READ_SEARCH in the bounding set, so the exec'd program does not get them)."""
-    if os.geteuid() != 0:
-        return
-    libc = ctypes.CDLL(None, use_errno=True)
-    pr_capbset_drop, cap_dac_override, cap_dac_read_search = 24, 1, 2
-    for cap in (cap_dac_override, cap_dac_read_search):
-        if libc.prctl(pr_capbset_drop, cap, 0, 0, 0) != 0:
-            raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP)")
-
-
 def _file_size_limit(limit: int):
     def apply() -> None:
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
@@ -223,7 +211,7 @@ def test_a_failed_export_leaves_the_old_file_and_no_partial_file(tmp_path: Path,
     inode = written.stat().st_ino
     limit = max(size // 2, 4096)
     for preexec, why in ((_file_size_limit(limit), "File too large"),
-                         (_drop_dac_capabilities, "Permission denied")):
+                         (drop_dac_capabilities, "Permission denied")):
         if why == "Permission denied":
             out.chmod(0o555)
         try:

@@ -149,3 +149,38 @@ def test_missing_store_and_bad_status_exit_2_with_a_message(tmp_path):
     assert out.returncode == 2 and "'done' is not one of" in out.stderr
     out = rig("runs", "--store", str(tmp_path / "s"), cwd=tmp_path)
     assert out.returncode == 0 and "no runs in" in out.stdout
+
+
+def test_a_run_json_edited_after_indexing_is_what_every_command_says(tmp_path: Path) -> None:
+    """run.json is the record, the index a copy made at the run's end (issue 33 item 7b): a
+    lost motion set to NaN by hand a minute after the run (the file's time says so) makes
+    ``rig runs``, ``rig spc`` and ``rig certificate`` agree on INCOMPLETE; none says OK."""
+    from rig.store.synthetic_runs import write_campaign
+
+    root = tmp_path / "store"
+    st = Store(root)
+    write_campaign(st, "ED-1", positions_deg=(0.0,), n_quarter=40,
+                   limits={"lost_motion_arcmin_max": 9.0})
+    (run,) = st.list_runs()
+    assert run.outcome == "ok"
+    record = run.path / "run.json"
+    meta = json.loads(record.read_text())
+    meta["result"]["lost_motion_arcmin"] = float("nan")
+    record.write_text(json.dumps(meta, indent=2))  # NaN, as a hand edit leaves it
+    later = record.stat().st_mtime + 60.0
+    os.utime(record, (later, later))
+
+    listed = rig("runs", "--store", str(root), "--json", "-", cwd=tmp_path)
+    assert listed.returncode == 0, listed.stderr
+    (row,) = json.loads(listed.stdout)["runs"]
+    assert row["outcome"] == "incomplete" and row["lost_motion_arcmin"] is None, row
+    table = rig("runs", "--store", str(root), cwd=tmp_path)
+    assert "INCOMPLETE" in table.stdout and " OK " not in table.stdout, table.stdout
+    spc = rig("spc", "--store", str(root), "--json", "-", cwd=tmp_path)
+    assert spc.returncode == 0, spc.stderr
+    (test,) = json.loads(spc.stdout)["designs"][0]["tests"]
+    assert test["verdict"] == "INCOMPLETE" and test["lost_motion_arcmin"] is None, test
+    cert = rig("certificate", run.run_id, "--store", str(root), "--html",
+               str(tmp_path / "c.html"), cwd=tmp_path)
+    assert cert.returncode == 0, cert.stderr
+    assert "INCOMPLETE" in (tmp_path / "c.html").read_text()

@@ -227,3 +227,34 @@ def test_the_page_workers_end_with_a_killed_server() -> None:
     for pid in alive:  # leave nothing behind either way
         os.kill(pid, signal.SIGKILL)
     assert not alive, f"still running 10 s after the server was killed: {alive} of {started}"
+
+
+def test_a_second_serve_on_one_store_is_refused_and_a_killed_one_leaves_no_lock(
+        tmp_path: Path) -> None:
+    """Issue 33 item 7d: two ``rig serve`` on one store folder both started (two engines, two
+    pages, one index). The second now says in one line that the store is served already and
+    by which PID, before it starts anything; ``kill -9`` of the first leaves no stale lock
+    (an flock: the kernel drops it with the process)."""
+    import fcntl
+
+    from tests.support.serve import TOKEN, page_lines, rig_command, started
+
+    store = tmp_path / "store"
+    serve = rig_command("serve", "--simulated", "--port", "0", "--store", str(store),
+                        "--token", TOKEN)
+    with started(serve, tmp_path) as (first, stderr):
+        page_lines(first, stderr)
+        second = subprocess.run(serve, capture_output=True, text=True, cwd=tmp_path,
+                                timeout=60)  # a second page that starts never ends
+        assert second.returncode == 2, second.stdout + second.stderr
+        assert second.stderr.strip().splitlines() == [
+            f"rig: error: the store {store} is served already by rig serve (PID {first.pid}): "
+            "one page per store; use that page, or stop it first"], second.stderr
+        assert "control page" not in second.stdout
+        first.kill()
+        first.wait(10)
+    fd = os.open(store / ".serve.lock", os.O_RDWR)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # free again: BlockingIOError if not
+    finally:
+        os.close(fd)

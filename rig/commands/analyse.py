@@ -142,7 +142,7 @@ def _te_table(items: list[Any]) -> Table:
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Loop metrics or TE figures of a run, with the model.")
     def analyse(
         path: Annotated[
             Path, typer.Argument(help="A run folder, run.json, bare CSV, or campaign folder.")

@@ -13,7 +13,7 @@ from rig.commands.options import json_option
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Monte Carlo lost motion of a batch of one design.")
     def batch(
         unit_file: Annotated[Path, typer.Argument(help="A unit JSON (or a whole run.json).")],
         samples: Annotated[int, typer.Option("--samples", "-n", help="Units sampled.")] = 20_000,

@@ -37,7 +37,7 @@ def _table(reports: list, title: str) -> Table:
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Connect to a rig's devices and report each one.")
     def devices(
         rig_file: Annotated[Path, typer.Option("--rig", help="Rig configuration (TOML).")],
         seconds: Annotated[float, typer.Option(min=0.1, help="How long to read, s.")] = 5.0,

@@ -65,7 +65,7 @@ def _print_report(console: Console, report: dict[str, Any]) -> None:
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Seed 003: Monte Carlo TE of a planetary train.")
     def montecarlo(
         samples: Annotated[int, typer.Option("--samples", "-n", help="Samples.")] = 50_000,
         seed: Annotated[int, typer.Option("--seed", help="Random seed.")] = 0,

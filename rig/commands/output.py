@@ -22,6 +22,8 @@ from rig.core.errors import RigError
 from rig.core.json_files import finite_for_json
 
 if TYPE_CHECKING:
+    from rich.table import Table
+
     from rig.engine.events import ProgressEvent
 
 STDOUT = "-"
@@ -96,6 +98,27 @@ def make_console(*, stderr: bool = False, width: int | None = None) -> Console:
 def console() -> Console:
     """The console of a measuring command: stderr, :func:`make_console`'s width."""
     return make_console(stderr=True)
+
+
+def natural_width(console: Console, table: Table) -> int:
+    """The columns ``table`` takes on ``console`` with no cell wrapped."""
+    from rich.measure import Measurement
+
+    return Measurement.get(console, console.options.update_width(10_000), table).maximum
+
+
+def fit_table(console: Console, table: Table) -> Table:
+    """``table`` made for ``console``'s width: no cell cut with "…" (what does not fit wraps,
+    a word longer than its column folds), and no rules between the columns when it does not
+    fit boxed (two spaces between columns instead of three and no edges)."""
+    from rich import box
+
+    for column in table.columns:
+        column.overflow = "fold"
+    if natural_width(console, table) > console.width:
+        table.box, table.show_edge, table.pad_edge = box.SIMPLE_HEAD, False, False
+        table.collapse_padding = True
+    return table
 
 
 OUTCOME_STYLE = {"ok": "green", "not_ok": "red", "incomplete": "yellow"}

@@ -11,7 +11,7 @@ from rig.commands.options import DEFAULT_STORE, SamplesOption, StoreOption
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Analyse and diagnose the stored results again.")
     def reanalyse(
         store: StoreOption = DEFAULT_STORE,
         samples: SamplesOption = None,

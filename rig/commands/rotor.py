@@ -13,7 +13,7 @@ from rig.core.errors import RigError
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Seed 004: rotor critical speeds, paper vs ours.")
     def rotor(
         json_file: json_option("Write all critical speeds as JSON") = None,
         disc_at: Annotated[

@@ -76,7 +76,8 @@ COLUMNS: tuple[tuple[str, dict[str, Any]], ...] = (
     ("campaign", {}),
 )
 """The columns of the table, in order (header, rich column options)."""
-CORE = ("run", "status", "outcome", "lost motion arcmin", "started (UTC)")
+STARTED = "started (UTC)"
+CORE = ("run", "status", "outcome", "lost motion arcmin", STARTED)
 """The columns shown at any width."""
 OPTIONAL = ("unit", "reason", "campaign", "plan", "operator", "samples")
 """The other columns, added in this order while the table fits the width whole."""
@@ -112,8 +113,12 @@ def _table(rows: list[dict[str, str]], root: str, shown: tuple[str, ...],
              if compact else Table(title=title))
     for header, options in COLUMNS:
         if header in shown:
+            if compact and header == STARTED:  # the date above the time, each whole
+                options = {**options, "no_wrap": True}
             table.add_column(header, overflow="fold", **options)
     for cells in rows:
+        if compact:
+            cells = {**cells, STARTED: cells[STARTED].replace(" ", "\n", 1)}
         table.add_row(*(cells[h] for h, _ in COLUMNS if h in shown))
     return table
 
@@ -145,7 +150,7 @@ def layout(console: Console, rows: list[dict[str, str]], root: str, wide: bool
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="List the stored runs: status, outcome, lost motion.")
     def runs(
         store: StoreOption = DEFAULT_STORE,
         samples: SamplesOption = None,

@@ -14,7 +14,7 @@ from rig.commands.options import json_option
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("te-calibrate")
+    @app.command("te-calibrate", short_help="Remove the output encoder's eccentricity from TE.")
     def te_calibrate(
         run_a: Annotated[Path, typer.Argument(help="TE run, coupling as mounted.")],
         run_b: Annotated[Path, typer.Argument(help="TE run, coupling indexed by 180 deg.")],

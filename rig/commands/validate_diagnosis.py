@@ -202,7 +202,8 @@ def _over_the_wire(cases: int, seed: int, jobs: int, keep: Path | None, short: b
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("validate-diagnosis")
+    @app.command("validate-diagnosis",
+                 short_help="Diagnose labelled campaigns blind and grade them.")
     def validate_diagnosis(
         cases: Annotated[int | None, typer.Option(
             min=1, help="Number of campaigns from our generator (default 33) or recorded "

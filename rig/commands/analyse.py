@@ -7,11 +7,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
-from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
 from rig.commands.options import json_option
+from rig.commands.output import make_console
 
 if TYPE_CHECKING:
     from rig.results.analyse import RunAnalysis
@@ -177,7 +177,7 @@ def register(app: typer.Typer) -> None:
         from rig.runformat import is_campaign, read_run_or_campaign
 
         json_out = JsonOutput(json_file)
-        console = Console(stderr=json_out.to_stdout)
+        console = make_console(stderr=json_out.to_stdout)
         campaign = read_run_or_campaign(path)
         every: list[Any] = [
             analyse_any_run(run, profile=profile, percent=percent, rated_torque_Nm=rated_torque,

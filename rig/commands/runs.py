@@ -11,11 +11,10 @@ import typer
 from rich import box
 from rich.console import Console
 from rich.markup import escape
-from rich.measure import Measurement
 from rich.table import Table
 
 from rig.commands.options import DEFAULT_STORE, SamplesOption, StoreOption, json_option
-from rig.commands.output import outcome_markup
+from rig.commands.output import natural_width, outcome_markup
 
 if TYPE_CHECKING:
     from rig.store.records import RunInfo
@@ -123,11 +122,6 @@ def _table(rows: list[dict[str, str]], root: str, shown: tuple[str, ...],
     return table
 
 
-def _natural_width(console: Console, table: Table) -> int:
-    """The columns ``table`` takes with no cell wrapped."""
-    return Measurement.get(console, console.options.update_width(10_000), table).maximum
-
-
 def layout(console: Console, rows: list[dict[str, str]], root: str, wide: bool
            ) -> tuple[Table, tuple[str, ...]]:
     """The table to print and the columns left out: every column with ``wide``, else
@@ -139,12 +133,12 @@ def layout(console: Console, rows: list[dict[str, str]], root: str, wide: bool
         return _table(rows, root, every), ()
     filled = tuple(h for h in every if h in CORE or any(cells[h] for cells in rows))
     shown = CORE
-    if _natural_width(console, _table(rows, root, shown)) > console.width:
+    if natural_width(console, _table(rows, root, shown)) > console.width:
         return (_table(rows, root, shown, compact=True),
                 tuple(h for h in filled if h not in shown))
     for header in (h for h in OPTIONAL if h in filled):
         more = shown + (header,)
-        if _natural_width(console, _table(rows, root, more)) <= console.width:
+        if natural_width(console, _table(rows, root, more)) <= console.width:
             shown = more
     return _table(rows, root, shown), tuple(h for h in filled if h not in shown)
 
@@ -201,7 +195,7 @@ def register(app: typer.Typer) -> None:
         rows = [_cells(info) for info in infos]
         table, left_out = layout(console, rows, st.location, wide)
         if wide:
-            console = make_console(width=max(console.width, _natural_width(console, table)))
+            console = make_console(width=max(console.width, natural_width(console, table)))
         console.print(table)
         if "reason" in left_out:
             for info in infos:

@@ -16,14 +16,14 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
 from rig.commands.options import json_option
+from rig.commands.output import make_console
 from rig.core.errors import RigError
 
-console = Console()
+console = make_console()
 
 
 def _print_graded(summary: dict[str, Any], verbose: bool) -> None:

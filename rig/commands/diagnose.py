@@ -12,9 +12,11 @@ from rich.table import Table
 from rig.commands.options import json_option
 
 
-def _candidates(report: dict[str, Any], rms_header: str, alarm_header: str) -> Table:
+def _candidates(report: dict[str, Any], rms_header: str, alarm_header: str,
+                words: bool = True) -> Table:
     """The ranking of the report's candidates: every name and figure whole on one line, the
-    cross-validation in words wrapped (the two headers given as they fit)."""
+    cross-validation in words wrapped (the two headers given as they fit; ``words`` False:
+    without those words, to measure the rest)."""
     table = Table(title="Candidates (held-out gap)")
     for col in ("effect", "shrink", rms_header, alarm_header, "ΔBIC", "cross-validation"):
         table.add_column(col, no_wrap=col != "cross-validation")
@@ -26,7 +28,7 @@ def _candidates(report: dict[str, Any], rms_header: str, alarm_header: str) -> T
         table.add_row(escape(r["effect"]), "" if shrink is None else f"{shrink:.3f}",
                       "" if after is None else f"{after:.3f}",
                       "" if fa is None else f"{fa:.2g}", str(ev.get("delta_bic", "")),
-                      escape(str(ev.get("cv", ev.get("from", "")))))
+                      escape(str(ev.get("cv", ev.get("from", "")))) if words else "")
     return table
 
 
@@ -78,8 +80,9 @@ def register(app: typer.Typer) -> None:
         loc = report["localization"]
         console.print(f"where: {loc['where']} — {loc['detail']}")
         table = _candidates(report, "RMS after, arcsec", "false alarm")
-        if natural_width(console, table) > console.width:  # a narrow terminal
-            table = _candidates(report, "RMS after,\narcsec", "false\nalarm")
+        if natural_width(console, _candidates(report, "RMS after, arcsec", "false alarm",
+                                              words=False)) > console.width:  # narrow
+            table = _candidates(report, "RMS after,\narcsec", "false alarm")
         console.print(fit_table(console, table))
         console.print(f"gap before: {report['gap_before']['rms_arcsec']:.3f} arcsec RMS "
                       f"(noise {report['noise_arcsec']:.3f})")

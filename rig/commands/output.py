@@ -110,14 +110,13 @@ def natural_width(console: Console, table: Table) -> int:
 def fit_table(console: Console, table: Table) -> Table:
     """``table`` made for ``console``'s width: no cell cut with "…" (what does not fit wraps,
     a word longer than its column folds), and no rules between the columns when it does not
-    fit boxed (two spaces between columns instead of three and no edges)."""
+    fit boxed (one space between columns instead of three, no edges)."""
     from rich import box
 
     for column in table.columns:
         column.overflow = "fold"
     if natural_width(console, table) > console.width:
-        table.box, table.show_edge, table.pad_edge = box.SIMPLE_HEAD, False, False
-        table.collapse_padding = True
+        table.box, table.show_edge, table.padding = box.SIMPLE_HEAD, False, (0, 0)
     return table
 
 

@@ -7,11 +7,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
-from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
 from rig.commands.options import json_option
+from rig.commands.output import make_console
 
 if TYPE_CHECKING:
     from rig.results.analyse import RunAnalysis
@@ -50,10 +50,19 @@ the rated ±10 N·m encloses a few tenths of a millijoule, which in J and 4 deci
 "0.0004 ± 0.0000"."""
 
 
-def _cell(value: Any, u: Any, fmt: Any, factor: float) -> str:
+def _cell(value: Any, u: Any, fmt: Any, factor: float, key: str = "") -> str:
+    """``value ± u`` in the row's unit; a metric that cannot be negative measured below zero
+    as rig/results/outcome.py ``below_zero_text`` words it (never as a figure)."""
+    from rig.results.outcome import below_zero_text, finite_number
+
     if value is None:
         return "[red]n/a[/red]"
     u = None if u is None else u * factor
+    if key and finite_number(value):
+        below = below_zero_text(key, value * factor, u, f".{fmt}f" if isinstance(fmt, int)
+                                else ".2g", "")
+        if below is not None:
+            return f"[yellow]{below}[/yellow]"
     if callable(fmt):
         return fmt(value * factor, u)
     return _num(value * factor, fmt) + ("" if u is None else f" ± {_num(u, fmt)}")
@@ -85,7 +94,7 @@ def _table(items: list[RunAnalysis]) -> Table:
             table.add_row(
                 escape(d["run_id"]) if i == 0 else "",
                 label,
-                _cell(d.get(key), u.get(key), fmt, factor),
+                _cell(d.get(key), u.get(key), fmt, factor, key),
                 "" if model is None else _cell(model, None, fmt, factor),
                 unit,
                 end_section=i == len(ROWS) - 1,
@@ -133,7 +142,7 @@ def _te_table(items: list[Any]) -> Table:
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Loop metrics or TE figures of a run, with the model.")
     def analyse(
         path: Annotated[
             Path, typer.Argument(help="A run folder, run.json, bare CSV, or campaign folder.")
@@ -163,11 +172,12 @@ def register(app: typer.Typer) -> None:
         of a transmission error run, its TE figures, orders and the seeds' band."""
         from rig.commands.output import JsonOutput
         from rig.results.any_run import analyse_any_run
+        from rig.results.outcome import below_zero_note
         from rig.results.te import TERunAnalysis
         from rig.runformat import is_campaign, read_run_or_campaign
 
         json_out = JsonOutput(json_file)
-        console = Console(stderr=json_out.to_stdout)
+        console = make_console(stderr=json_out.to_stdout)
         campaign = read_run_or_campaign(path)
         every: list[Any] = [
             analyse_any_run(run, profile=profile, percent=percent, rated_torque_Nm=rated_torque,
@@ -181,6 +191,9 @@ def register(app: typer.Typer) -> None:
         if te_items:
             console.print(_te_table(te_items))
         for item in items:
+            note = below_zero_note(item.to_dict())
+            if note is not None:
+                console.print(f"[yellow]{escape(item.run.run_id)}: {note}[/yellow]")
             for key, why in item.loop.errors.items():
                 console.print(f"[yellow]{item.run.run_id}: {key}: {why}[/yellow]")
             for note in item.assumptions:

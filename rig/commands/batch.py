@@ -6,14 +6,14 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
 from rig.commands.options import json_option
+from rig.commands.output import make_console
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Monte Carlo lost motion of a batch of one design.")
     def batch(
         unit_file: Annotated[Path, typer.Argument(help="A unit JSON (or a whole run.json).")],
         samples: Annotated[int, typer.Option("--samples", "-n", help="Units sampled.")] = 20_000,
@@ -52,7 +52,7 @@ def register(app: typer.Typer) -> None:
                 label,
                 *(f"{row[k]:.3f}'" for k in ("mean", "std", "p2_5", "median", "p97_5", "max")),
             )
-        console = Console(stderr=json_out.to_stdout)
+        console = make_console(stderr=json_out.to_stdout)
         console.print(table)
         console.print(
             f"units that bind somewhere (play < 0): {100 * report['interference_fraction']:.1f} % "

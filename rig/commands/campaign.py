@@ -56,7 +56,7 @@ def register(app: typer.Typer) -> None:
                                no_args_is_help=True, rich_markup_mode=None)
     app.add_typer(campaign_app, name="campaign")
 
-    @campaign_app.command("run")
+    @campaign_app.command("run", short_help="Run a campaign into the store.")
     def run(
         file: Annotated[Path, typer.Argument(help="Campaign file (TOML).")],
         simulated: Annotated[bool, typer.Option(

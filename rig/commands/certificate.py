@@ -11,7 +11,7 @@ from rig.commands.options import DEFAULT_STORE, RunOrCampaignArgument, SamplesOp
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="The test certificate of a run or campaign.")
     def certificate(
         target: RunOrCampaignArgument,
         pdf: Annotated[Path | None, typer.Option(

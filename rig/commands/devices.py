@@ -7,10 +7,10 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
 from rig.commands.options import json_option
+from rig.commands.output import make_console
 
 
 def _fmt(value: float | None, digits: int = 6) -> str:
@@ -37,7 +37,7 @@ def _table(reports: list, title: str) -> Table:
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Connect to a rig's devices and report each one.")
     def devices(
         rig_file: Annotated[Path, typer.Option("--rig", help="Rig configuration (TOML).")],
         seconds: Annotated[float, typer.Option(min=0.1, help="How long to read, s.")] = 5.0,
@@ -52,7 +52,7 @@ def register(app: typer.Typer) -> None:
         from rig.hardware.device_check import check_devices
         from rig.reports.devices import devices_report
 
-        err = Console(stderr=True)
+        err = make_console(stderr=True)
         try:
             config = load_rig_config(rig_file)
         except RigConfigError as exc:
@@ -63,7 +63,7 @@ def register(app: typer.Typer) -> None:
             reports = check_devices(config, seconds)
         doc = devices_report(config, rig_file, seconds, reports)
         json_out = JsonOutput(json_file)
-        console = Console(stderr=json_out.to_stdout, width=160)
+        console = make_console(stderr=json_out.to_stdout)
         console.print(_table(reports, f"Devices of rig {config.rig.rig_id} ({rig_file}), "
                                       f"{seconds:g} s"))
         json_out.write(doc, ensure_ascii=True)

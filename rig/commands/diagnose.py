@@ -3,17 +3,37 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
-from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from rig.commands.options import json_option
 
 
+def _candidates(report: dict[str, Any], rms_header: str, alarm_header: str,
+                words: bool = True) -> Table:
+    """The ranking of the report's candidates: every name and figure whole on one line, the
+    cross-validation in words wrapped (the two headers given as they fit; ``words`` False:
+    without those words, to measure the rest)."""
+    table = Table(title="Candidates (held-out gap)")
+    for col in ("effect", "shrink", rms_header, alarm_header, "ΔBIC", "cross-validation"):
+        table.add_column(col, no_wrap=col != "cross-validation")
+    for r in report["ranking"]:
+        after = (r.get("gap_after") or {}).get("rms_arcsec")
+        ev = r.get("evidence", {})
+        fa = r.get("false_alarm_probability")
+        shrink = r.get("shrink")
+        table.add_row(escape(r["effect"]), "" if shrink is None else f"{shrink:.3f}",
+                      "" if after is None else f"{after:.3f}",
+                      "" if fa is None else f"{fa:.2g}", str(ev.get("delta_bic", "")),
+                      escape(str(ev.get("cv", ev.get("from", "")))) if words else "")
+    return table
+
+
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Where model and measurement disagree, and why.")
     def diagnose(
         campaign: Annotated[Path, typer.Argument(help="A campaign folder (or one run folder).")],
         json_file: json_option("Write the rig-diagnosis/1 report") = None,
@@ -35,11 +55,11 @@ def register(app: typer.Typer) -> None:
                                           help="Worker processes of the self-check.")] = 2,
     ) -> None:
         """Where model and measurement disagree, which unmodelled effect, how far it shrinks."""
-        from rig.commands.output import JsonOutput
+        from rig.commands.output import JsonOutput, fit_table, make_console, natural_width
         from rig.results.diagnose import diagnose_path, report_dict
 
         json_out = JsonOutput(json_file)
-        console = Console(stderr=json_out.to_stdout)
+        console = make_console(stderr=json_out.to_stdout)
         with console.status("diagnosing..."):
             camp, result = diagnose_path(campaign, alpha=alpha)
             report = report_dict(camp, result)
@@ -59,19 +79,11 @@ def register(app: typer.Typer) -> None:
             console.print(f"next experiment: {report['next_experiment']}")
         loc = report["localization"]
         console.print(f"where: {loc['where']} — {loc['detail']}")
-        table = Table(title="Candidates (held-out gap)")
-        for col in ("effect", "shrink", "RMS after, arcsec", "false alarm", "ΔBIC",
-                    "cross-validation"):
-            table.add_column(col)
-        for r in report["ranking"]:
-            after = (r.get("gap_after") or {}).get("rms_arcsec")
-            ev = r.get("evidence", {})
-            fa = r.get("false_alarm_probability")
-            table.add_row(r["effect"], "" if r.get("shrink") is None else f"{r['shrink']:.3f}",
-                          "" if after is None else f"{after:.3f}",
-                          "" if fa is None else f"{fa:.2g}", str(ev.get("delta_bic", "")),
-                          str(ev.get("cv", ev.get("from", ""))))
-        console.print(table)
+        table = _candidates(report, "RMS after, arcsec", "false alarm")
+        if natural_width(console, _candidates(report, "RMS after, arcsec", "false alarm",
+                                              words=False)) > console.width:  # narrow
+            table = _candidates(report, "RMS after,\narcsec", "false alarm")
+        console.print(fit_table(console, table))
         console.print(f"gap before: {report['gap_before']['rms_arcsec']:.3f} arcsec RMS "
                       f"(noise {report['noise_arcsec']:.3f})")
         if json_file is not None:

@@ -12,7 +12,7 @@ from rig.commands.options import DEFAULT_STORE, RunOrCampaignArgument, SamplesOp
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Export a run or a campaign (csv, parquet, mat, xlsx).")
     def export(
         target: RunOrCampaignArgument,
         fmt: Annotated[str, typer.Option(

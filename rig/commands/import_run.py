@@ -14,7 +14,7 @@ from rig.commands.options import SAMPLES_HELP
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("import")
+    @app.command("import", short_help="Import another lab's measurement through a map.")
     def import_(
         file: Annotated[Path, typer.Argument(
             metavar="FILE", help="The file to import: delimited text (CSV, catman ASCII) or "

@@ -35,7 +35,7 @@ TESTS = {"lost-motion": "lost_motion", "transmission-error": "transmission_error
 """``rig measure --test`` values and the run.json ``test.kind`` each measures."""
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Measure a hysteresis loop or a TE run into the store.")
     def measure(
         simulated: Annotated[bool, typer.Option(
             "--simulated", help="Start the simulated rig (its own process) for the run.")

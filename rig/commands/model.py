@@ -116,7 +116,7 @@ def _kind_table(doc: dict[str, Any], path: Path) -> Table:
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Seed 000 design chain and a unit's nominal model.")
     def model(
         unit_file: Annotated[Path, typer.Argument(help="unit JSON (or a whole run.json)")],
         json_out: json_option("Write the model as JSON") = None,

@@ -18,6 +18,7 @@ from rich.table import Table
 from analysis.models.seed003_montecarlo import PAPER_FIGURES_ARCSEC, check_sample_count
 from analysis.models.seed003_planetary import PaperReading
 from rig.commands.options import json_option
+from rig.commands.output import make_console
 from rig.core.errors import RigError
 from rig.reports.montecarlo import montecarlo_report
 
@@ -65,7 +66,7 @@ def _print_report(console: Console, report: dict[str, Any]) -> None:
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Seed 003: Monte Carlo TE of a planetary train.")
     def montecarlo(
         samples: Annotated[int, typer.Option("--samples", "-n", help="Samples.")] = 50_000,
         seed: Annotated[int, typer.Option("--seed", help="Random seed.")] = 0,
@@ -97,7 +98,7 @@ def register(app: typer.Typer) -> None:
                 and not json_path.parent.is_dir()):
             raise RigError(f"{json_path}: cannot write the report: no directory {json_path.parent}")
         json_out = JsonOutput(json_path)
-        console = Console(stderr=True)
+        console = make_console(stderr=True)
         if quiet:
             report = montecarlo_report(samples, seed, reading, window_revs=window_revs)
         else:
@@ -114,5 +115,5 @@ def register(app: typer.Typer) -> None:
                     return lambda done: progress.update(task, completed=done)
 
                 report = montecarlo_report(samples, seed, reading, tracker, window_revs)
-            _print_report(Console(stderr=json_out.to_stdout), report)
+            _print_report(make_console(stderr=json_out.to_stdout), report)
         json_out.write(report)

@@ -9,6 +9,7 @@ stderr, through a console made with ``Console(stderr=out.to_stdout)``.
 from __future__ import annotations
 
 import json
+import os
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -21,6 +22,8 @@ from rig.core.errors import RigError
 from rig.core.json_files import finite_for_json
 
 if TYPE_CHECKING:
+    from rich.table import Table
+
     from rig.engine.events import ProgressEvent
 
 STDOUT = "-"
@@ -73,9 +76,48 @@ def write_json(path: str | Path | None, payload: Any, **dumps: Any) -> None:
     JsonOutput(path).write(payload, **dumps)
 
 
+DEFAULT_WIDTH = 120
+"""Columns of a command's output into a pipe or file when ``COLUMNS`` is not set."""
+
+
+def columns_env() -> int | None:
+    """The width ``COLUMNS`` asks for (columns; None if unset or not a positive integer)."""
+    text = os.environ.get("COLUMNS", "").strip()
+    return int(text) if text.isdigit() and int(text) > 0 else None
+
+
+def make_console(*, stderr: bool = False, width: int | None = None) -> Console:
+    """A command's console: on a terminal its width; into a pipe or file ``COLUMNS``, else
+    :data:`DEFAULT_WIDTH` columns (rich alone would wrap at 80); ``width`` overrides both."""
+    stream = sys.stderr if stderr else sys.stdout
+    if width is None and not stream.isatty():
+        width = columns_env() or DEFAULT_WIDTH
+    return Console(stderr=stderr, width=width)
+
+
 def console() -> Console:
-    """The console of a measuring command: stderr, 120 columns when not a terminal."""
-    return Console(stderr=True, width=None if sys.stderr.isatty() else 120)
+    """The console of a measuring command: stderr, :func:`make_console`'s width."""
+    return make_console(stderr=True)
+
+
+def natural_width(console: Console, table: Table) -> int:
+    """The columns ``table`` takes on ``console`` with no cell wrapped."""
+    from rich.measure import Measurement
+
+    return Measurement.get(console, console.options.update_width(10_000), table).maximum
+
+
+def fit_table(console: Console, table: Table) -> Table:
+    """``table`` made for ``console``'s width: no cell cut with "…" (what does not fit wraps,
+    a word longer than its column folds), and no rules between the columns when it does not
+    fit boxed (one space between columns instead of three, no edges)."""
+    from rich import box
+
+    for column in table.columns:
+        column.overflow = "fold"
+    if natural_width(console, table) > console.width:
+        table.box, table.show_edge, table.padding = box.SIMPLE_HEAD, False, (0, 0)
+    return table
 
 
 OUTCOME_STYLE = {"ok": "green", "not_ok": "red", "incomplete": "yellow"}
@@ -163,20 +205,29 @@ def print_run_figures(out: Console, data: dict[str, Any]) -> None:
         print_te_figures(out, data)
         return
 
-    def f(key: str, digits: int = 3) -> str:
+    from rig.results.outcome import below_zero_note, below_zero_text
+
+    def f(key: str, unit: str, digits: int = 3) -> str:
         value = data.get(key)
         u = (data.get("uncertainty") or {}).get(key)
         if value is None:
             return "n/a"
-        return f"{value:.{digits}f}" + (f" ± {u:.{digits}f}" if u is not None else "")
+        below = below_zero_text(key, value, u, f".{digits}f", f" {unit}")
+        if below is not None:
+            return below
+        return (f"{value:.{digits}f}" + (f" ± {u:.{digits}f}" if u is not None else "")
+                + f" {unit}")
 
     model = data.get("model") or {}
     m = model.get("lost_motion_arcmin")
     verdict = f"{outcome_markup(data['outcome'])}: " if data.get("outcome") else ""
-    out.print(f"  {verdict}lost motion {f('lost_motion_arcmin')} arcmin"
+    out.print(f"  {verdict}lost motion {f('lost_motion_arcmin', 'arcmin')}"
               + (f" (model {m:.3f})" if m is not None else "")
-              + f", backlash {f('backlash_arcmin')} arcmin, stiffness "
-              f"{f('stiffness_Nm_per_arcmin', 2)} N·m/arcmin")
+              + f", backlash {f('backlash_arcmin', 'arcmin')}, stiffness "
+              f"{f('stiffness_Nm_per_arcmin', 'N·m/arcmin', 2)}")
+    note = below_zero_note(data)
+    if note is not None:
+        out.print(f"  [yellow]{note}[/yellow]")
 
 
 def print_te_figures(out: Console, data: dict[str, Any]) -> None:

@@ -8,10 +8,11 @@ from typing import Annotated
 import typer
 
 from rig.commands.options import DEFAULT_STORE, SamplesOption, StoreOption
+from rig.commands.output import make_console
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Analyse and diagnose the stored results again.")
     def reanalyse(
         store: StoreOption = DEFAULT_STORE,
         samples: SamplesOption = None,
@@ -38,7 +39,6 @@ def register(app: typer.Typer) -> None:
         interruption, run the same command again to go on. Exit code 1 if a run's files were
         missing or unreadable (each is named).
         """
-        from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
         from rig.commands.output import JsonOutput
@@ -52,7 +52,7 @@ def register(app: typer.Typer) -> None:
             raise RigError("give --dask (a scheduler) or --workers (a local cluster), not both")
         st = Store(store, create=False, samples=samples)
         st.check_writable("a re-analysis")
-        err = Console(stderr=True)
+        err = make_console(stderr=True)
         progress = Progress("re-analysing", BarColumn(), MofNCompleteColumn(),
                             TimeRemainingColumn(), console=err, transient=False)
         task = progress.add_task("jobs", total=None)

@@ -5,15 +5,15 @@ from __future__ import annotations
 from typing import Annotated
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
 from rig.commands.options import json_option
+from rig.commands.output import make_console
 from rig.core.errors import RigError
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Seed 004: rotor critical speeds, paper vs ours.")
     def rotor(
         json_file: json_option("Write all critical speeds as JSON") = None,
         disc_at: Annotated[
@@ -29,7 +29,7 @@ def register(app: typer.Typer) -> None:
         from rig.commands.output import JsonOutput
 
         json_out = JsonOutput(json_file)
-        console = Console(stderr=json_out.to_stdout)
+        console = make_console(stderr=json_out.to_stdout)
         for name, value in (("--disc-at", disc_at), ("--gear-at", gear_at)):
             if not 0.0 <= value <= 1.0:
                 raise RigError(f"{name} must be between 0 and 1 (a fraction of the shaft), "

@@ -12,7 +12,7 @@ from rig.commands.options import SamplesOption
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Serve the control page.")
     def serve(
         simulated: Annotated[bool, typer.Option(
             "--simulated", help="Start the simulated rig (its own process) and serve it.")] = False,

@@ -23,7 +23,7 @@ class _Modbus(StrEnum):
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Start the simulated rig on 127.0.0.1.")
     def sim(
         config: Annotated[Path | None, typer.Option(
             "--config", help="Plant TOML (default: simulators/default_plant.toml).")] = None,

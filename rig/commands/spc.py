@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import Annotated
 
@@ -12,7 +11,7 @@ from rig.commands.options import DEFAULT_STORE, SamplesOption, StoreOption, json
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
+    @app.command(short_help="Control charts and Cp/Cpk of each design over time.")
     def spc(
         store: StoreOption = DEFAULT_STORE,
         samples: SamplesOption = None,
@@ -31,11 +30,10 @@ def register(app: typer.Typer) -> None:
         charts with control limits (one-sided, LCL 0, where centre - 3 sigma < 0), the
         Western Electric rules, Cp/Cpk against each unit's own campaign limits and the seed
         000 batch band of the design (docs/deployment.md)."""
-        from rich.console import Console
         from rich.markup import escape
         from rich.table import Table
 
-        from rig.commands.output import JsonOutput
+        from rig.commands.output import JsonOutput, fit_table, make_console
         from rig.core.errors import RigError
         from rig.reports.spc import spc_report
         from rig.reports.spc.html import render_html
@@ -53,7 +51,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"charts written to {html}", err=json_out.to_stdout)
         if json_out.to_stdout:
             return
-        out = Console(width=None if sys.stdout.isatty() else 160)
+        out = make_console()
 
         def f(value: float | None) -> str:
             return "" if value is None else f"{value:.4g}"
@@ -69,10 +67,13 @@ def register(app: typer.Typer) -> None:
             table = Table(title=f"design {d['design']}: {d['n_tests']} unit tests, "
                                 f"{d['n_runs']} runs")
             for col in ("metric", "n", "mean", "LCL", "UCL", "MR̄", "Cpk", "signals"):
-                table.add_column(col, justify="left" if col == "metric" else "right")
+                table.add_column(col, justify="left" if col == "metric" else "right",
+                                 no_wrap=col != "LCL")  # names and figures whole
+            no_chart = []
             for name, m in d["metrics"].items():
-                if m["chart"] is None:
-                    table.add_row(name, "", m["error"], "", "", "", "", "")
+                if m["chart"] is None:  # why: under the table, where it has the whole width
+                    table.add_row(escape(name), "", "no chart", "", "", "", "", "")
+                    no_chart.append(f"  {escape(name)}: no chart: {escape(m['error'])}")
                     continue
                 c, cap = m["chart"], m["capability"]
                 lcl = f(c["individuals"]["lcl"]) + (
@@ -81,4 +82,6 @@ def register(app: typer.Typer) -> None:
                               lcl, f(c["individuals"]["ucl"]),
                               f(c["moving_range"]["centre"]), f(cap["cpk"]),
                               str(len(c["violations"])))
-            out.print(table)
+            out.print(fit_table(out, table))
+            for line in no_chart:
+                out.print(line)

@@ -8,13 +8,13 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 
 from rig.commands.options import json_option
+from rig.commands.output import make_console
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("te-calibrate")
+    @app.command("te-calibrate", short_help="Remove the output encoder's eccentricity from TE.")
     def te_calibrate(
         run_a: Annotated[Path, typer.Argument(help="TE run, coupling as mounted.")],
         run_b: Annotated[Path, typer.Argument(help="TE run, coupling indexed by 180 deg.")],
@@ -30,7 +30,7 @@ def register(app: typer.Typer) -> None:
         from rig.runformat import read_run
 
         json_out = JsonOutput(json_file)
-        console = Console(stderr=json_out.to_stdout)
+        console = make_console(stderr=json_out.to_stdout)
         cal = reversal_calibration(read_run(run_a), read_run(run_b), indexed_by_deg=indexed_by)
         console.print(f"encoder eccentricity {cal['eccentricity_arcsec']:.2f} ± "
                       f"{cal['eccentricity_u_arcsec']:.2f} arcsec at "

@@ -16,14 +16,14 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
 from rig.commands.options import json_option
+from rig.commands.output import make_console
 from rig.core.errors import RigError
 
-console = Console()
+console = make_console()
 
 
 def _print_graded(summary: dict[str, Any], verbose: bool) -> None:
@@ -202,7 +202,8 @@ def _over_the_wire(cases: int, seed: int, jobs: int, keep: Path | None, short: b
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("validate-diagnosis")
+    @app.command("validate-diagnosis",
+                 short_help="Diagnose labelled campaigns blind and grade them.")
     def validate_diagnosis(
         cases: Annotated[int | None, typer.Option(
             min=1, help="Number of campaigns from our generator (default 33) or recorded "

@@ -30,7 +30,9 @@ from typing import Any
 __all__ = ["OUTCOMES", "OUTCOME_WORDS", "OUTCOME_MEANINGS", "LIMIT_KEYS", "run_outcome",
            "campaign_outcome", "impossible_metrics", "not_applicable", "outcome_word",
            "parse_outcome", "limits_set", "finite_number", "metric_check", "recorded_outcome",
-           "recorded_campaign_outcome", "is_te_record", "kind_applies"]
+           "recorded_campaign_outcome", "is_te_record", "kind_applies", "NON_NEGATIVE",
+           "BELOW_ZERO", "AGAINST_TORQUE", "BELOW_NOTE", "below_zero_text",
+           "below_zero_keys", "below_zero_note", "twist_against_torque"]
 
 OUTCOMES = ("ok", "not_ok", "incomplete", "no_limits")
 OUTCOME_WORDS = {"ok": "OK", "not_ok": "NOT OK", "incomplete": "INCOMPLETE",
@@ -126,6 +128,72 @@ IMPOSSIBLE_BELOW_ZERO = ("lost_motion_arcmin", "backlash_arcmin", "stiffness_Nm_
                          "stiffness_pos_Nm_per_arcmin", "stiffness_neg_Nm_per_arcmin")
 """Metrics that no gear unit can have below zero: a negative stiffness or play means the
 torque and twist were not of the same instant or one channel's sign is wrong."""
+NON_NEGATIVE = ("lost_motion_arcmin", "backlash_arcmin", "stiffness_Nm_per_arcmin",
+                "loop_area_J")
+"""Metrics that every view prints as :func:`below_zero_text` says when they come out below
+zero (a loop's area is the energy lost per cycle: never below zero either)."""
+COVERAGE_K = 2.0
+"""Coverage factor of the bound printed for a value below zero: U = k·u (GUM, about 95 %)."""
+BELOW_ZERO = "below zero: no measurement"
+"""What every view prints instead of a metric of :data:`NON_NEGATIVE` far below zero."""
+AGAINST_TORQUE = ("the twist runs against the torque: check the output encoder's counting "
+                  "direction")
+"""The likely cause of a loop whose stiffness is below zero (an encoder counting the other
+way round flips every figure of the loop)."""
+BELOW_NOTE = ("a value below zero is no measurement: within three standard uncertainties "
+              "u of zero it is printed as \"below resolution (< U)\", U = 2u, else as "
+              f"\"{BELOW_ZERO}\"")
+"""How the views print a non-negative metric measured below zero (docs/certificate.md)."""
+
+
+def twist_against_torque(run: dict[str, Any]) -> bool:
+    """Does the run's twist fall as its torque rises (its stiffness, N·m/arcmin, below zero),
+    flat or run.json record?"""
+    stiffness = {**run, **(run.get("result") or {})}.get("stiffness_Nm_per_arcmin")
+    return finite_number(stiffness) and stiffness < 0
+
+
+def below_zero_text(key: str, value: Any, uncertainty: Any, spec: str, unit: str, *,
+                    against_torque: bool = False) -> str | None:
+    """How a metric that cannot be negative (:data:`NON_NEGATIVE`) measured below zero is
+    printed instead of its value: ``below resolution (< U unit)`` when it lies within three
+    standard uncertainties of zero (U = 2u, the expanded uncertainty, k = 2, in the metric's
+    unit; never for a stiffness), else :data:`BELOW_ZERO` (as :func:`impossible_metrics`
+    judges it), with ``(`` :data:`AGAINST_TORQUE` ``)`` when ``against_torque``
+    (:func:`twist_against_torque`).
+    None for a value printed as it is (zero or above, another metric, not a finite number)."""
+    if key not in NON_NEGATIVE or not finite_number(value) or value >= 0:
+        return None
+    if (not key.startswith("stiffness") and finite_number(uncertainty) and uncertainty > 0
+            and value + 3.0 * uncertainty >= 0):
+        return f"below resolution (< {format(COVERAGE_K * uncertainty, spec)}{unit})"
+    return f"{BELOW_ZERO} ({AGAINST_TORQUE})" if against_torque else BELOW_ZERO
+
+
+NON_NEGATIVE_LABELS = {"lost_motion_arcmin": "lost motion", "backlash_arcmin": "backlash",
+                       "stiffness_Nm_per_arcmin": "stiffness", "loop_area_J": "loop area"}
+"""The words of :data:`NON_NEGATIVE` in :func:`below_zero_note`."""
+
+
+def below_zero_keys(run: dict[str, Any]) -> list[str]:
+    """The metrics of :data:`NON_NEGATIVE` that are no measurement (:data:`BELOW_ZERO`) in
+    this run (flat or run.json record, uncertainties under ``uncertainty``)."""
+    metrics = {**run, **(run.get("result") or {})}
+    sigma = metrics.get("uncertainty") or {}
+    return [k for k in NON_NEGATIVE
+            if below_zero_text(k, metrics.get(k), sigma.get(k), "g", "") == BELOW_ZERO]
+
+
+def below_zero_note(run: dict[str, Any]) -> str | None:
+    """One line for the views that print a run's figures: which metrics are no measurement
+    and the likely cause, ``lost motion, loop area below zero: no measurement (the twist
+    runs against the torque: ...)``; None when every metric is a measurement."""
+    keys = below_zero_keys(run)
+    if not keys:
+        return None
+    words = ", ".join(NON_NEGATIVE_LABELS[k] for k in keys)
+    cause = f" ({AGAINST_TORQUE})" if twist_against_torque(run) else ""
+    return f"{words} {BELOW_ZERO}{cause}"
 
 
 CHANNEL_LAG_LIMIT_S = 0.01
@@ -137,7 +205,8 @@ def impossible_metrics(run: dict[str, Any]) -> list[str]:
     """Why the run's figures are no measurement, one line each: channels out of step, a twist
     the torque does not explain (``encoder_faults``: a jump or a frozen encoder reading,
     issue 33 item 1), metrics physically impossible (below zero beyond three of their
-    standard uncertainties; a stiffness at or below zero always)."""
+    standard uncertainties; a stiffness at or below zero always), naming the likely cause
+    (:data:`AGAINST_TORQUE` when the stiffness is below zero)."""
     metrics = {**run, **(run.get("result") or {})}
     sigma = metrics.get("uncertainty") or {}
     label = run.get("label") or run.get("run_id") or "run"
@@ -151,15 +220,16 @@ def impossible_metrics(run: dict[str, Any]) -> list[str]:
         out.append(f"run {label}: the torque channel is {'late' if lag > 0 else 'ahead'} by "
                    f"about {abs(lag):.3g} s against the twist (limit {CHANNEL_LAG_LIMIT_S:g} s):"
                    " channels out of step, no verdict")
+    cause = (AGAINST_TORQUE if twist_against_torque(run)
+             else "torque and twist not of the same instant, or a channel's sign reversed")
     for key in IMPOSSIBLE_BELOW_ZERO:
         value = metrics.get(key)
         if not finite_number(value):
             continue
         u = sigma.get(key) if finite_number(sigma.get(key)) else 0.0
         if (key.startswith("stiffness") and value <= 0) or value + 3.0 * u < 0:
-            out.append(f"run {label}: {key} = {value:.4g} is physically impossible (torque and "
-                       "twist not of the same instant, or a channel's sign reversed): "
-                       "no verdict")
+            out.append(f"run {label}: {key} = {value:.4g} is physically impossible ({cause}):"
+                       " no verdict")
     return out
 
 

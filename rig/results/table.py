@@ -6,7 +6,9 @@ uncertainty (``<metric>`` and ``<metric>_u``), the reference nominal model's val
 (``model_<metric>``), the limits in force, the recorded outcome and its displayed word
 (``verdict``: OK / NOT OK / INCOMPLETE / NO LIMITS, rig/results/outcome.py). Metrics are computed
 now from the samples (:func:`rig.results.analyse.analyse_run`, the ``rig analyse`` service), so a
-run read from any rig-run/1 folder gets the same columns.
+run read from any rig-run/1 folder gets the same columns. A metric that cannot be negative and
+came out below zero (no measurement, rig/results/outcome.py ``below_zero_text``) is left empty
+(NaN) and ``error`` says so, with the likely cause.
 """
 
 from __future__ import annotations
@@ -24,7 +26,14 @@ from rig.results.analyse import (
     resolve_profile,
     run_twist_arcmin,
 )
-from rig.results.outcome import LIMIT_KEYS, outcome_word, recorded_outcome, run_outcome
+from rig.results.outcome import (
+    LIMIT_KEYS,
+    below_zero_keys,
+    below_zero_note,
+    outcome_word,
+    recorded_outcome,
+    run_outcome,
+)
 from rig.runformat import Campaign, Run
 
 __all__ = [
@@ -98,6 +107,9 @@ def result_row(run: Run, analysis: RunAnalysis | None, *,
     limits = run_limits(run, campaign_meta)
     row.update(limits)
     row["status"] = run.meta.get("status")
+    below = below_zero_note(d) if analysis is not None else None
+    for key in below_zero_keys(d) if analysis is not None else ():
+        row[key] = row[f"{key}_u"] = None  # no measurement: never shown as a figure
     outcome = run.meta.get("outcome")
     if outcome is None and analysis is not None:  # none recorded: judged on today's analysis
         flat = {**d, "status": run.meta.get("status", "completed"), "label": row["label"],
@@ -105,15 +117,18 @@ def result_row(run: Run, analysis: RunAnalysis | None, *,
         outcome = run_outcome(flat, limits)[0]
     else:  # as recorded, read as every view reads it (rig/results/outcome.py)
         outcome = recorded_outcome(run.meta, limits)
-    return _closed_row(row, run, outcome, d, error)
+    return _closed_row(row, run, outcome, d, error, below)
 
 
 def _closed_row(row: dict[str, Any], run: Run, outcome: Any, d: dict[str, Any],
-                error: str | None) -> dict[str, Any]:
-    """A row's outcome and its word, the analysis's errors (or ``error``) and the run's path."""
+                error: str | None, below: str | None = None) -> dict[str, Any]:
+    """A row's outcome and its word, the analysis's errors (or ``error``; ``below``: which
+    metrics came out below zero, rig/results/outcome.py ``below_zero_note``) and the run's
+    path."""
     row["outcome"] = outcome if isinstance(outcome, str) else None
     row["verdict"] = None if row["outcome"] is None else outcome_word(row["outcome"])
     problems = [f"{k}: {v}" for k, v in (d.get("errors") or {}).items()]
+    problems += [below] if below else []
     row["error"] = error or ("; ".join(problems) or None)
     row["path"] = None if run.path is None else str(run.path)
     return row

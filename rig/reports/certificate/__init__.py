@@ -22,10 +22,12 @@ from typing import Any
 from rig.core.errors import RigError
 from rig.core.redact import redact
 from rig.reports.certificate.header import NOT_RECORDED, header_fields, template_env, utc_text
-from rig.results.outcome import (
+from rig.results.outcome import (  # the below-zero words: one place for every view
+    BELOW_NOTE,
     LIMIT_KEYS,
     OUTCOME_MEANINGS,
     OUTCOME_WORDS,
+    below_zero_text,
     finite_number,
     is_te_record,
     metric_check,
@@ -172,32 +174,6 @@ def _limit_text(bound: Any, side: str | None, unit: str) -> str | None:
     if bound is None:
         return None
     return f"{'≤' if side == 'above' else '≥'} {bound:g} {unit}"
-
-
-NON_NEGATIVE = ("lost_motion_arcmin", "backlash_arcmin", "stiffness_Nm_per_arcmin",
-                "loop_area_J")
-"""Metrics that no gear unit has below zero (a loop's area is the energy lost per cycle)."""
-COVERAGE_K = 2.0
-"""Coverage factor of the bound printed for a value below zero: U = k·u (GUM, about 95 %)."""
-BELOW_NOTE = ("a value below zero is no measurement: within three standard uncertainties "
-              "u of zero it is printed as \"below resolution (< U)\", U = 2u, else as "
-              "\"below zero: no measurement\"")
-"""How the certificate prints a non-negative metric measured below zero (docs/certificate.md)."""
-
-
-def below_zero_text(key: str, value: Any, uncertainty: Any, spec: str, unit: str
-                    ) -> str | None:
-    """How a metric that cannot be negative (:data:`NON_NEGATIVE`) measured below zero is
-    printed instead of its value: ``below resolution (< U unit)`` when it lies within three
-    standard uncertainties of zero (U = 2u, the expanded uncertainty, k = 2, in the metric's
-    unit), else ``below zero: no measurement`` (as rig/results/outcome.py ``impossible_metrics``
-    judges it). None for a value that is printed as it is (zero or above, another metric,
-    not a finite number)."""
-    if key not in NON_NEGATIVE or not finite_number(value) or value >= 0:
-        return None
-    if finite_number(uncertainty) and uncertainty > 0 and value + 3.0 * uncertainty >= 0:
-        return f"below resolution (< {format(COVERAGE_K * uncertainty, spec)}{unit})"
-    return "below zero: no measurement"
 
 
 def _metric_rows(meta: dict[str, Any], metrics: tuple[tuple[str, str, str, str], ...] = METRICS

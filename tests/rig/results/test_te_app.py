@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 import subprocess
 import sys
@@ -27,7 +28,9 @@ TE_METRICS = ("te_pp_arcsec", "te_pp_forward_arcsec", "te_pp_reverse_arcsec",
 
 
 def _rig(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([*RIG, *args], capture_output=True, text=True, timeout=300, cwd=cwd)
+    env = {**os.environ, "COLUMNS": "80"}  # an 80-column terminal (piped: 120 without it)
+    return subprocess.run([*RIG, *args], capture_output=True, text=True, timeout=300, cwd=cwd,
+                          env=env)
 
 
 @pytest.fixture(scope="module")

@@ -30,12 +30,18 @@ def _png(fig: Any) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-def _loops_figure(diagnosis: Diagnosis, effects: tuple[str, ...] | None) -> str:
+PANEL_IN = (3.6, 3.0)
+"""Width and height (inch) of one panel of the page's loops and gap map: at the page's 90 dpi
+about 320 px wide, so that a phone (390 px) shows one panel at its size, labels legible."""
+
+
+def _loops_figures(diagnosis: Diagnosis, effects: tuple[str, ...] | None) -> list[str]:
+    """The first four runs' loops with the model before and after, one PNG each."""
     stack = diagnosis.stack
-    runs = list(range(min(stack.n_runs, 4)))
-    fig, axes = plt.subplots(1, len(runs), figsize=(3.6 * len(runs), 3.2), squeeze=False)
     after = diagnosis.models.get(effects[0]) if effects else None
-    for ax, i in zip(axes[0], runs, strict=False):
+    out = []
+    for i in range(min(stack.n_runs, 4)):
+        fig, ax = plt.subplots(figsize=PANEL_IN)
         run = stack.runs[i]
         y = run.twist_arcmin - run.twist_arcmin.mean()
         r0 = predict_run(stack, diagnosis.base, ("backlash",), i)
@@ -49,25 +55,32 @@ def _loops_figure(diagnosis: Diagnosis, effects: tuple[str, ...] | None) -> str:
         ax.set_title(run.run_id, fontsize=8)
         ax.set_xlabel("torque (N·m)")
         ax.set_ylabel("twist (arcsec)")
-    axes[0][0].legend(fontsize=7)
-    return _png(fig)
+        if i == 0:
+            ax.legend(fontsize=7)
+        out.append(_png(fig))
+    return out
 
 
-def _gap_map_figure(report: dict[str, Any]) -> str:
+def _gap_map_figures(report: dict[str, Any]) -> list[str]:
+    """One PNG per factor of the gap map (bins' flank-signed mean and rms of the
+    standardised residuals); bin labels slanted and anchored at their tick, whole."""
     gm = report.get("gap_map") or {}
-    names = list(gm)
-    fig, axes = plt.subplots(1, len(names), figsize=(2.6 * len(names), 2.8), squeeze=False)
-    for ax, name in zip(axes[0], names, strict=True):
+    out = []
+    for k, name in enumerate(gm):
+        fig, ax = plt.subplots(figsize=PANEL_IN)
         bins = gm[name]["bins"]
         labels = [str(b["bin"]) for b in bins]
         ax.bar(range(len(bins)), [b["flank_signed_mean_z"] for b in bins], color="tab:blue",
                alpha=0.6, label="flank-signed mean z")
         ax.plot(range(len(bins)), [b["rms_z"] for b in bins], "o-", color="tab:red", ms=3,
                 label="rms z")
-        ax.set_xticks(range(len(bins)), labels, rotation=60, fontsize=6)
+        ax.set_xticks(range(len(bins)), labels, rotation=45, ha="right",
+                      rotation_mode="anchor", fontsize=7)
         ax.set_title(f"{name} ({gm[name]['share']:.0%})", fontsize=8)
-    axes[0][0].legend(fontsize=6)
-    return _png(fig)
+        if k == 0:
+            ax.legend(fontsize=7)
+        out.append(_png(fig))
+    return out
 
 
 def _play_figure(report: dict[str, Any]) -> str | None:
@@ -144,7 +157,7 @@ def render_html(report: dict[str, Any], diagnosis: Diagnosis,
     return template_env().get_template("diagnosis.html").render(
         report=report, header=header, campaign=str(report.get("campaign", "")),
         plain_words=Markup(_plain_words(report)),  # its own parts are escaped
-        loops_png=_loops_figure(diagnosis, effects), gap_map_png=_gap_map_figure(report),
+        loops_pngs=_loops_figures(diagnosis, effects), gap_map_pngs=_gap_map_figures(report),
         play_png=_play_figure(report), ranking=ranking,
         measurement=_measurement_rows(report.get("measurement") or {}),
         self_check=self_check_words(report.get("self_check")))

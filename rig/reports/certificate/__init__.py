@@ -52,10 +52,13 @@ METRICS = (
     ("lost_motion_arcmin", "lost motion", "arcmin", ".3f"),
     ("backlash_arcmin", "backlash", "arcmin", ".3f"),
     ("stiffness_Nm_per_arcmin", "torsional stiffness", "N·m/arcmin", ".2f"),
-    ("loop_area_J", "loop area (hysteresis loss)", "J", ".3g"),
+    ("loop_area_J", "loop area (hysteresis loss)", "mJ", ".3f"),
     ("torque_offset_Nm", "torque offset", "N·m", ".4f"),
 )
 """(result key, label, unit, format) of the metrics on the certificate."""
+SHOWN_SCALE = {"loop_area_J": 1e3}
+"""Result key -> the factor from the record's unit to the unit shown: the loop area is
+recorded in J and shown in mJ, as the control page and ``rig analyse`` show it."""
 TE_METRICS = (
     ("te_pp_arcsec", "transmission error, peak-to-peak (GB/T 35089)", "arcsec", ".1f"),
     ("te_pp_forward_arcsec", "  forward", "arcsec", ".1f"),
@@ -176,6 +179,13 @@ def _limit_text(bound: Any, side: str | None, unit: str) -> str | None:
     return f"{'≤' if side == 'above' else '≥'} {bound:g} {unit}"
 
 
+def _scaled(value: Any, factor: float) -> Any:
+    """A recorded number times ``factor`` (to the unit shown); anything else as it is."""
+    if factor == 1.0 or isinstance(value, bool) or not isinstance(value, int | float):
+        return value
+    return value * factor
+
+
 def _metric_rows(meta: dict[str, Any], metrics: tuple[tuple[str, str, str, str], ...] = METRICS
                  ) -> list[dict[str, Any]]:
     """One row per metric of a run.json: value ± uncertainty, nominal model, limit, verdict;
@@ -187,17 +197,20 @@ def _metric_rows(meta: dict[str, Any], metrics: tuple[tuple[str, str, str, str],
     limits = meta.get("limits") or {}
     rows = []
     for key, label, unit, spec in metrics:
-        value = result.get(key)
+        factor = SHOWN_SCALE.get(key, 1.0)
+        value = _scaled(result.get(key), factor)
+        u = _scaled(unc.get(key), factor)
         limit_key, side = LIMIT_OF_METRIC.get(key, (None, None))
         bound = limits.get(limit_key) if limit_key else None
         check, why = ("", None) if bound is None else metric_check(meta, key, bound, side)
         verdict = METRIC_VERDICTS.get(check, "")
         rows.append({
             "key": key, "label": label, "unit": unit, "value": _fmt(value, spec),
-            "uncertainty": _fmt(unc.get(key), spec) if value is not None else None,
-            "below": below_zero_text(key, value, unc.get(key), spec, f" {unit}"),
-            "below_short": below_zero_text(key, value, unc.get(key), spec, ""),
-            "model": _fmt(model.get(key), spec), "limit": _limit_text(bound, side, unit),
+            "uncertainty": _fmt(u, spec) if value is not None else None,
+            "below": below_zero_text(key, value, u, spec, f" {unit}"),
+            "below_short": below_zero_text(key, value, u, spec, ""),
+            "model": _fmt(_scaled(model.get(key), factor), spec),
+            "limit": _limit_text(bound, side, unit),
             "verdict": verdict,
             "why": (why if check in ("not_applicable", "not_finite") else None)
             or (result.get("errors") or {}).get(key),
@@ -289,20 +302,56 @@ def _override(override: Any, warned: bool) -> dict[str, Any] | None:
             "time": utc_text(time) if time else None, "more": more}
 
 
-def _loop_figure(runs: list[Run], title: str | None) -> tuple[str | None, list[str]]:
-    """The loops of the runs that can be analysed (SVG URI) and why the others cannot."""
+VERDICT_WEIGHT = {"not_ok": 0, "incomplete": 1}
+"""Which runs a campaign's verdict rests on: its NOT OK runs, else its INCOMPLETE ones, else all."""
+
+
+def verdict_run(runs: list[Run], outcomes: list[str]) -> int | None:
+    """The index of the run a campaign's verdict rests on: of the runs with the worst outcome
+    (NOT OK, else INCOMPLETE, else any), the one with the largest recorded lost motion
+    (arcmin); None for no runs or none with a recorded lost motion."""
+    if not runs:
+        return None
+    worst = min(VERDICT_WEIGHT.get(o, 2) for o in outcomes)
+
+    def lost_motion(i: int) -> float:
+        value = (runs[i].meta.get("result") or {}).get("lost_motion_arcmin")
+        return float(value) if finite_number(value) else float("-inf")
+
+    best = max((i for i, o in enumerate(outcomes) if VERDICT_WEIGHT.get(o, 2) == worst),
+               key=lost_motion)
+    return best if lost_motion(best) > float("-inf") else None
+
+
+def _loop_figure(runs: list[Run], title: str | None, rests_on: int | None = None
+                 ) -> tuple[str | None, list[str], list[Any]]:
+    """The loops of the runs that can be analysed (SVG URI), why the others cannot, and the
+    analyses. ``rests_on``: the index (in ``runs``) of the run whose figures the box shows,
+    named "worst run" (a campaign's :func:`verdict_run`); else the box's default."""
     from rig.reports.certificate.plots import loop_svg
+    from rig.reports.loop_plots import run_name, worst_run
     from rig.results.analyse import analyse_run
 
-    items, notes = [], []
-    for run in runs:
+    items, notes, box = [], [], None
+    for i, run in enumerate(runs):
         try:
             items.append(analyse_run(run, profile=run.meta.get("profile")))
         except Exception as exc:  # an aborted or short run has no loop to draw
             notes.append(f"run {run.meta.get('label') or run.run_id}: no loop drawn ({exc})")
+            continue
+        if i == rests_on:
+            box = len(items) - 1
     if not items:
-        return None, notes
-    return loop_svg(items, title=title), notes
+        return None, notes, []
+    heading = None
+    if rests_on is not None and len(runs) > 1:
+        if box is not None:
+            heading = f"worst run: {run_name(runs[rests_on].meta, runs[rests_on].run_id)}"
+        else:  # its loop cannot be drawn: the box says whose figures it shows instead
+            box = worst_run(items)
+            heading = ("largest lost motion drawn: "
+                       f"{run_name(items[box].run.meta, items[box].run.run_id)}")
+    return loop_svg(items, title=title, box=box, box_heading=heading), notes, items
 
 
 def _te_section(run: Run) -> dict[str, Any] | None:
@@ -349,11 +398,23 @@ def _te_section(run: Run) -> dict[str, Any] | None:
 # --------------------------------------------------------------------------- campaign
 
 
-def _position_figure(campaign: Campaign, runs: list[Run], limits: dict[str, Any]
-                     ) -> dict[str, Any]:
+def _drawn_model(analyses: list[Any]) -> float | None:
+    """The nominal model's lost motion (arcmin) of the first drawn loop that has one: what the
+    loop figure's model line and box show."""
+    for item in analyses:
+        model = item.to_dict().get("model") or {}
+        if finite_number(model.get("lost_motion_arcmin")):
+            return float(model["lost_motion_arcmin"])
+    return None
+
+
+def _position_figure(campaign: Campaign, runs: list[Run], limits: dict[str, Any],
+                     drawn_model: float | None = None) -> dict[str, Any]:
     """Lost motion against the input position with the nominal model and the batch band of the
     design: the band as the campaign stored it (``summary.batch``), else computed the same way
-    (:func:`rig.plans.campaign_file.batch_band`)."""
+    (:func:`rig.plans.campaign_file.batch_band`). The model as recorded (the summary's, else a
+    run's), else ``drawn_model`` (arcmin: the loop figure's, as for an aborted campaign whose
+    runs were not analysed when it stopped)."""
     from rig.reports.certificate.plots import position_svg
 
     summary = campaign.meta.get("summary") or {}
@@ -370,7 +431,7 @@ def _position_figure(campaign: Campaign, runs: list[Run], limits: dict[str, Any]
     if model is None:
         models = (((r.meta.get("result") or {}).get("model") or {}).get("lost_motion_arcmin")
                   for r in runs)
-        model = next((m for m in models if m is not None), None)
+        model = next((m for m in models if m is not None), drawn_model)
     # the band as the campaign stored it (None: the batch model cannot use this unit)
     batch = summary["batch"] if "batch" in summary else _batch_band(campaign, runs)
     kind = str((campaign.meta.get("unit") or (runs[0].meta.get("unit") if runs else None)
@@ -515,6 +576,7 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
             metas = [s.pop("meta") for s in sections]
             ctx["te"] = sections[0]
         run_outcomes = [_run_outcome(meta, limits) for meta in metas]
+        rests_on = verdict_run(runs, [o for o, _ in run_outcomes])
         outcome = recorded_campaign_outcome(
             cmeta.get("outcome") or summary.get("outcome"), limits,
             [o for o, _ in run_outcomes], str(cmeta.get("status") or "completed"))
@@ -535,8 +597,15 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
         for r in ctx["runs"]:
             r["below_any"] = any(m["below"] for m in r["metrics"].values())
         below = any(r["below_any"] for r in ctx["runs"])
-        ctx["position"] = (_position_figure(campaign, runs, limits) if not te_camp
-                           else {"figure": None, "model": None, "band": None})
+        title = f"campaign {cmeta.get('name') or campaign.name}"
+        drawn: list[Any] = []
+        if not te_camp:
+            ctx["loop"], ctx["loop_notes"], drawn = _loop_figure(runs, title, rests_on)
+        ctx["position"] = (_position_figure(campaign, runs, limits, _drawn_model(drawn))
+                           if not te_camp else {"figure": None, "model": None, "band": None})
+        n_runs = len(runs)
+        ctx["campaign_line"] = f"campaign of {n_runs} run{'' if n_runs == 1 else 's'}" + (
+            f", {cmeta['status']}" if cmeta.get("status") not in (None, "completed") else "")
         lm = summary.get("lost_motion_arcmin") or {}
         ctx["lm_summary"] = {k: below_zero_text("lost_motion_arcmin", lm.get(k), None, "", "")
                              or _fmt(lm.get(k), ".3f") for k in ("mean", "min", "max", "std")}
@@ -548,7 +617,6 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
         ctx["diagnosis"] = _diagnosis_line(subject.path, cmeta.get("campaign_id"),
                                            subject.store)
         unit = cmeta.get("unit") or first.get("unit") or {}
-        title = f"campaign {cmeta.get('name') or campaign.name}"
     else:
         meta = first
         te = _te_section(runs[0]) if runs and is_te_record(meta) else None
@@ -565,7 +633,6 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
                       "position": _fmt((meta.get("test") or {}).get("input_angle_deg"), "g")}
         ctx["diagnosis"] = None
         unit = meta.get("unit") or {}
-        title = None
         ctx["design"] = _run_design(meta) if te is None else None
     ctx.setdefault("te", None)
     ctx.setdefault("design", None)
@@ -589,8 +656,10 @@ def certificate_context(subject: Subject) -> dict[str, Any]:
     ctx["test"] = _test_line(first)
     if ctx["te"]:
         ctx["loop"], ctx["loop_notes"] = ctx["te"]["figure"], ctx["te"]["notes"]
-    else:
-        ctx["loop"], ctx["loop_notes"] = _loop_figure(runs, title)
+    elif not is_camp:
+        ctx["loop"], ctx["loop_notes"], drawn = _loop_figure(runs, None)
+        if ctx["design"] is not None and ctx["design"]["model"] is None:
+            ctx["design"]["model"] = _fmt(_drawn_model(drawn), ".3f")
     ctx["not_recorded"] = NOT_RECORDED
     return ctx
 

@@ -28,12 +28,23 @@ def svg_uri(svg: bytes) -> str:
     return "data:image/svg+xml;base64," + base64.b64encode(svg).decode("ascii")
 
 
-def loop_svg(analyses: Sequence[RunAnalysis], title: str | None = None) -> str:
-    """The loops (torque vs twist, with the model loop and the ±p % band) as an SVG URI."""
+SVG_TEXT = {"svg.fonttype": "none"}
+"""The figures' words as SVG text, not glyph outlines: the PDF's text (``pdftotext``) and
+the HTML hold what the figure says (its legend, its box of figures)."""
+
+
+def loop_svg(analyses: Sequence[RunAnalysis], title: str | None = None, *,
+             box: int | None = None, box_heading: str | None = None) -> str:
+    """The loops (torque vs twist, with the model loop and the ±p % band) as an SVG URI;
+    ``box``, ``box_heading``: whose figures the box shows
+    (:func:`rig.reports.loop_plots.draw_loops`)."""
+    import matplotlib as mpl
+
     from rig.reports.loop_plots import plot_loops
 
-    with tempfile.TemporaryDirectory() as tmp:
-        path = plot_loops(analyses, Path(tmp) / "loop.svg", title=title)
+    with tempfile.TemporaryDirectory() as tmp, mpl.rc_context(SVG_TEXT):
+        path = plot_loops(analyses, Path(tmp) / "loop.svg", title=title, box=box,
+                          box_heading=box_heading)
         return svg_uri(path.read_bytes())
 
 

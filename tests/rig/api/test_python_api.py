@@ -162,7 +162,9 @@ def test_plots_draw_into_the_axes_given_or_a_new_one() -> None:
     _, ys = right.containers[0].lines[0].get_data()  # the errorbar points: one per run
     assert list(ys) == list(campaign.results()["lost_motion_arcmin"])
     new = campaign.plot()
-    assert new is not left and new is not right and len(new.lines) >= 8
+    assert new is not left and new is not right
+    labels = [line.get_label() for line in new.lines]  # the runs by position, the model once
+    assert {"0°", "90°", "180°", "270°"} <= set(labels) and labels.count("model") == 1, labels
     plt.close("all")
 
 

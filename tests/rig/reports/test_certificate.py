@@ -360,14 +360,15 @@ def test_header_box_holds_simulated_and_not_recorded(measured: dict):
 
 def test_a_metric_below_zero_is_never_printed_as_a_measurement(measured: dict):
     """Issue 21 item 15: a loop area of -4.58e-06 ± 1.36e-05 J reads "below resolution
-    (< 2.72e-05 J)" (U = 2u); one far below zero "below zero: no measurement"."""
+    (< 0.027 mJ)" (U = 2u, in mJ as issue 33 item 19 shows it); one far below zero "below
+    zero: no measurement"."""
     run = measured["run"]
     pdf, _ = _probe(measured, "below-zero", result={
         "loop_area_J": -4.58e-06,
         "uncertainty": {**run["uncertainty"], "loop_area_J": 1.36e-05}})
     text = _assert_laid_out(pdf)
-    assert "below resolution (< 2.72e-05 J)" in text
-    assert "-4.58e-06" not in text and "4.58e-06" not in text
+    assert "below resolution (< 0.027 mJ)" in text
+    assert "-4.58e-06" not in text and "4.58e-06" not in text and "-0.005" not in text
     assert "a value below zero is no measurement" in text
     from rig.reports.certificate import below_zero_text
 

@@ -335,6 +335,9 @@ def encoder_faults(run: Run, twist: np.ndarray, loop: LoopResult, model: LoopMod
     def measured(key: str) -> float | None:
         return metrics[key].value if key in metrics else None
 
+    own = measured("stiffness_Nm_per_arcmin")
+    if own is not None and own < 0:  # the twist runs against the torque: that is the fault
+        return []                    # named (an encoder counting the other way), not a jump
     k = model.stiffness_Nm_per_arcmin if model is not None else None
     if not (k is not None and np.isfinite(k) and k > 0):
         k = measured("stiffness_Nm_per_arcmin")

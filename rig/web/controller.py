@@ -17,10 +17,12 @@ being recorded.
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import math
 import threading
 import time
+import unicodedata
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 from typing import Any
@@ -59,6 +61,32 @@ OVERRIDE_HOW = ("Set up: tick 'start with expired calibration' and give the reas
 
 class ControlError(RigError):
     """A command that cannot be done now (HTTP 409): says why and what to do."""
+
+
+def _shown(value: str) -> str:
+    """A client's text echoed in a one-line message: quoted, control characters and quotes
+    escaped (JSON string syntax), at most 40 characters of it."""
+    text = json.dumps(value[:40], ensure_ascii=True)
+    return text if len(value) <= 40 else text[:-1] + '..."'
+
+
+def start_identity_problem(req: RunRequest) -> str | None:
+    """Why a measurement may not start without knowing who measures which unit (one line
+    naming the field, its echoed value escaped), or None: ``operator`` and ``unit.serial``
+    are needed, not blank, the operator without control characters (the serial's pattern is
+    the model's)."""
+    operator = req.operator
+    if operator is None:
+        return "operator: expected the name of who runs the test, got none"
+    if not operator.strip():
+        return f"operator: expected the name of who runs the test, got {_shown(operator)}"
+    if any(unicodedata.category(c) == "Cc" for c in operator):
+        return (f"operator: expected a name without control characters, got "
+                f"{_shown(operator)}")
+    serial = getattr(req.unit, "serial", None)
+    if serial is None or not str(serial).strip():
+        return "unit.serial: expected the serial number of the unit under test, got none"
+    return None
 
 
 def single_run_request(req: RunRequest) -> MeasureRequest:

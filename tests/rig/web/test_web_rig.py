@@ -15,7 +15,7 @@ from rig.web.controller import RigController
 from rig.web.live import LiveHub
 from rig.web.settings import resolve_settings
 from rig.web.simulated import example_unit, simulated_session_factory
-from tests.support.simulated_page import page_on
+from tests.support.simulated_page import identified, page_on
 from tests.support.simulated_page import wait_for as wait_until
 
 pytestmark = [pytest.mark.realtime, pytest.mark.timeout(180)]
@@ -39,8 +39,8 @@ def wait_for(client: TestClient, done, timeout_s: float) -> dict:
 
 def short_run(**plan: object) -> dict:
     """A short constant-rate loop (no pre-cycle), for commands, not for metrics."""
-    return {"unit": UNIT, "plan": {"rated_torque_Nm": 10.0, "mode": "constant_rate",
-                                   "pre_cycles": 0, "rate_Nm_per_s": 5.0, **plan}}
+    return identified({"unit": UNIT, "plan": {"rated_torque_Nm": 10.0, "mode": "constant_rate",
+                                              "pre_cycles": 0, "rate_Nm_per_s": 5.0, **plan}})
 
 
 def test_devices_tare_and_the_input_lock_rule(page):

@@ -19,7 +19,7 @@ from rig.core.errors import RigError
 from rig.core.json_files import json_safe
 from rig.engine.merge import MergedRow
 from rig.results.analyse import METRIC_KEYS, analyse_run
-from rig.results.outcome import run_outcome
+from rig.results.outcome import plant_mismatch, run_outcome
 from rig.runformat import Run
 from rig.store import RunRecorder
 
@@ -59,7 +59,8 @@ class RunOutcome:
         out["input_angle_deg"] = self.test.get("input_angle_deg")
         out["amplitude_pct"] = self.test.get("amplitude_pct")
         out["path"] = str(self.path)
-        for key in ("torque_zero", "crosscheck_max_diff_Nm", "engine_notes", "samples_dropped"):
+        for key in ("torque_zero", "crosscheck_max_diff_Nm", "engine_notes", "samples_dropped",
+                    "plant_mismatch"):
             if key in self.result:
                 out[key] = self.result[key]
         out["outcome"] = self.outcome
@@ -126,6 +127,9 @@ class OpenRun:
         result: dict[str, Any] = {"torque_zero": dict(self.torque_zero),
                                   "crosscheck_max_diff_Nm": self.crosscheck_max_diff_Nm,
                                   "samples_dropped": self.samples_dropped}
+        mismatch = plant_mismatch(self.recorder.meta)
+        if mismatch is not None:  # the simulated rig measured another kind of unit
+            result["plant_mismatch"] = mismatch
         if self.notes:
             result["engine_notes"] = list(self.notes)
         return result

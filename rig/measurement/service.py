@@ -164,8 +164,11 @@ def run_meta(unit: dict[str, Any], session: RigSession, operator: str | None = N
     meta.update(calibration_meta(config.calibration, calibration_override, operator,
                                  how=override_how))
     if session.plant_config is not None:
-        meta["simulation"] = {"plant": json_safe(
-            session.plant_config.model_dump(exclude={"source", "unit"}))}
+        # the kind of unit the simulated devices simulate: a run whose unit is of another
+        # kind measured that plant, not its unit (rig/results/outcome.py plant_mismatch)
+        meta["simulation"] = {
+            "plant_kind": str(session.plant_config.unit.get("kind") or "internal_involute"),
+            "plant": json_safe(session.plant_config.model_dump(exclude={"source", "unit"}))}
     return meta
 
 

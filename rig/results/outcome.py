@@ -8,7 +8,8 @@ not checked) and ``outcome``, one of :data:`OUTCOMES`:
   whatever else happened);
 - ``"incomplete"``: the run was aborted (fault, abort, E-stop, recovered after a crash), or a
   limited metric could not be measured (analysis error) or is not a finite number (NaN,
-  infinity): no verdict on the unit;
+  infinity), or the simulated rig's plant was of another unit kind than the run's unit
+  (:func:`plant_mismatch`): no verdict on the unit;
 - ``"no_limits"``: completed, but no limit was set: the unit was measured, not judged
   (neither OK nor NOT OK).
 
@@ -32,7 +33,7 @@ __all__ = ["OUTCOMES", "OUTCOME_WORDS", "OUTCOME_MEANINGS", "LIMIT_KEYS", "run_o
            "parse_outcome", "limits_set", "finite_number", "metric_check", "recorded_outcome",
            "recorded_campaign_outcome", "is_te_record", "kind_applies", "NON_NEGATIVE",
            "BELOW_ZERO", "AGAINST_TORQUE", "BELOW_NOTE", "below_zero_text",
-           "below_zero_keys", "below_zero_note", "twist_against_torque"]
+           "below_zero_keys", "below_zero_note", "twist_against_torque", "plant_mismatch"]
 
 OUTCOMES = ("ok", "not_ok", "incomplete", "no_limits")
 OUTCOME_WORDS = {"ok": "OK", "not_ok": "NOT OK", "incomplete": "INCOMPLETE",
@@ -233,6 +234,36 @@ def impossible_metrics(run: dict[str, Any]) -> list[str]:
     return out
 
 
+UNIT_KIND_WORDS = {"internal_involute": "internal involute pair", "cycloid": "cycloid",
+                   "beveloid": "beveloid", "planetary": "planetary"}
+"""A unit kind (run.json ``unit.kind``, absent: internal_involute) in words."""
+
+
+def _kind_words(kind: Any) -> str:
+    return UNIT_KIND_WORDS.get(str(kind), str(kind))
+
+
+def plant_mismatch(run: Mapping[str, Any]) -> str | None:
+    """Why a run measured on the simulated rig measured another unit than its own (None: it
+    did not, or the rig was real): the simulated devices had a plant of another kind
+    (run.json ``simulation.plant_kind``) than the run's unit (``unit.kind``). Recorded by the
+    engine as ``result.plant_mismatch``; judged from the record when that is absent (issue 33
+    item 10: such a run is never certified OK)."""
+    result = run.get("result") if isinstance(run.get("result"), Mapping) else {}
+    recorded = result.get("plant_mismatch", run.get("plant_mismatch"))
+    if isinstance(recorded, str) and recorded:
+        return recorded
+    simulation, unit = run.get("simulation"), run.get("unit")
+    if not isinstance(simulation, Mapping) or not isinstance(unit, Mapping):
+        return None
+    plant_kind = simulation.get("plant_kind")
+    kind = unit.get("kind") or "internal_involute"
+    if not isinstance(plant_kind, str) or plant_kind == kind:
+        return None
+    return (f"measured on a simulated {_kind_words(plant_kind)} plant, the unit is a "
+            f"{_kind_words(kind)}")
+
+
 def metric_check(run: dict[str, Any], metric: str, bound: Any, worse: str
                  ) -> tuple[str, str | None]:
     """One metric of ``run`` against one limit ``bound`` (``worse``: "above" or "below", the
@@ -265,6 +296,9 @@ def run_outcome(run: dict[str, Any], limits: dict[str, Any] | None
     label = run.get("label") or run.get("run_id") or "run"
     if run.get("status") != "completed":
         return "incomplete", [f"run {label}: {run.get('status')}: {run.get('reason')}"], []
+    mismatch = plant_mismatch(run)
+    if mismatch is not None:  # another unit was measured: no verdict on this one
+        return "incomplete", [f"run {label}: {mismatch}"], []
     impossible = impossible_metrics(run)
     if impossible:
         return "incomplete", impossible, []

@@ -17,10 +17,12 @@ being recorded.
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import math
 import threading
 import time
+import unicodedata
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 from typing import Any
@@ -51,6 +53,15 @@ MONITOR_PERIOD_S = 0.5
 LIVE_METRICS_PERIOD_S = 2.0
 
 SessionFactory = Callable[[], AbstractContextManager[RigSession]]
+UnitSessionFactory = Callable[[dict[str, Any]], AbstractContextManager[RigSession]]
+"""A new simulated rig whose plant is the given unit's (rig/web/simulated.py)."""
+
+
+def plant_kind(session: RigSession) -> str | None:
+    """The unit kind the simulated rig's plant simulates (None: a real rig)."""
+    if session.plant_config is None:
+        return None
+    return str(session.plant_config.unit.get("kind") or "internal_involute")
 
 
 OVERRIDE_HOW = ("Set up: tick 'start with expired calibration' and give the reason, "
@@ -60,6 +71,32 @@ OVERRIDE_HOW = ("Set up: tick 'start with expired calibration' and give the reas
 
 class ControlError(RigError):
     """A command that cannot be done now (HTTP 409): says why and what to do."""
+
+
+def _shown(value: str) -> str:
+    """A client's text echoed in a one-line message: quoted, control characters and quotes
+    escaped (JSON string syntax), at most 40 characters of it."""
+    text = json.dumps(value[:40], ensure_ascii=True)
+    return text if len(value) <= 40 else text[:-1] + '..."'
+
+
+def start_identity_problem(req: RunRequest) -> str | None:
+    """Why a measurement may not start without knowing who measures which unit (one line
+    naming the field, its echoed value escaped), or None: ``operator`` and ``unit.serial``
+    are needed, not blank, the operator without control characters (the serial's pattern is
+    the model's)."""
+    operator = req.operator
+    if operator is None:
+        return "operator: expected the name of who runs the test, got none"
+    if not operator.strip():
+        return f"operator: expected the name of who runs the test, got {_shown(operator)}"
+    if any(unicodedata.category(c) == "Cc" for c in operator):
+        return (f"operator: expected a name without control characters, got "
+                f"{_shown(operator)}")
+    serial = getattr(req.unit, "serial", None)
+    if serial is None or not str(serial).strip():
+        return "unit.serial: expected the serial number of the unit under test, got none"
+    return None
 
 
 def single_run_request(req: RunRequest) -> MeasureRequest:
@@ -210,13 +247,21 @@ def finished_run(data: dict[str, Any]) -> dict[str, Any]:
 
 
 class RigController:
-    """See the module docstring. ``session_factory`` None: no rig (history only)."""
+    """See the module docstring. ``session_factory`` None: no rig (history only).
+
+    ``unit_session_factory``: on the simulated rig, how to start it again with a unit's plant
+    (:func:`rig.web.simulated.unit_session_factory`): a measurement of a unit of another kind
+    than the plant's restarts it with the unit's plant first (issue 33 item 10). Without it
+    such a run is measured on the plant there is and its verdict is INCOMPLETE
+    (:func:`rig.results.outcome.plant_mismatch`)."""
 
     def __init__(self, store: Store, hub: LiveHub, session_factory: SessionFactory | None,
-                 *, simulated: bool = False, description: str = "") -> None:
+                 *, simulated: bool = False, description: str = "",
+                 unit_session_factory: UnitSessionFactory | None = None) -> None:
         self.store = store
         self.hub = hub
         self.session_factory = session_factory
+        self.unit_session_factory = unit_session_factory
         self.simulated = simulated
         self.description = description
         self.session: RigSession | None = None
@@ -654,6 +699,7 @@ class RigController:
         state = "aborted"
         with self._device_lock:
             try:
+                session = self._plant_of_the_unit(req, session)
                 if req.kind == "run":
                     result, state, reason = self._measure_run(req, session, tap)
                 else:
@@ -678,6 +724,49 @@ class RigController:
             self._estop_pending = None
         self._monitor_once()  # the devices as the end left them (safe state), at once
         self.hub.add_event({"type": "state", "state": state, "result": self._last_result})
+
+    def _plant_of_the_unit(self, req: RunRequest, session: RigSession) -> RigSession:
+        """The session to measure ``req``'s unit on: on the simulated rig whose plant is of
+        another unit kind, a new simulated rig with the unit's plant (the old one closed, the
+        input locked again where it was); else ``session``. Measurement thread, device lock
+        held."""
+        kind = str(req.unit.mapping().get("kind") or "internal_involute")
+        have = plant_kind(session)
+        if have is None or have == kind or self.unit_session_factory is None:
+            return session
+        with self._lock:
+            self.message = f"restarting the simulated rig with the unit's plant ({kind})"
+        self.hub.add_event({"type": "state", "state": "running", "message": self.message})
+        log.info("simulated rig: %s plant, the unit is a %s: restarting it", have, kind)
+        with self._monitor_lock:  # the idle monitor never reads a closing rig
+            with self._lock:
+                self.session = None
+            self._stack.close()
+            self._stack = contextlib.ExitStack()
+            try:
+                session = self._stack.enter_context(
+                    self.unit_session_factory(req.unit.mapping()))
+            except Exception as exc:
+                log.exception("the simulated rig did not start with the unit's plant")
+                if self.session_factory is not None:  # the rig as it was, for the next try
+                    with self._lock:
+                        self.session = self._stack.enter_context(self.session_factory())
+                raise ControlError(f"the simulated rig did not start with the unit's "
+                                   f"{kind} plant: {exc}") from exc
+            with self._lock:
+                self.session = session
+                self._lock_by_motor = session.devices.input_motor is not None
+        motor = session.devices.input_motor
+        if motor is not None:  # the operator's lock, at the same input angle
+            motor.lock_at(self._lock_angle if self._lock_angle is not None else 0.0, 30.0)
+        ref = None
+        with contextlib.suppress(DeviceError):
+            ref = settled_output_arcmin(session.devices.encoder)
+        with self._lock:
+            if ref is not None and math.isfinite(ref):
+                self._twist_ref_arcmin = ref
+            self.message = f"{req.kind} starting on the simulated {kind} plant"
+        return session
 
     def _measure_run(self, req: RunRequest, session: RigSession, tap: TapStore
                      ) -> tuple[dict[str, Any], str, str | None]:

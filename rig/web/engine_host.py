@@ -183,9 +183,13 @@ def _engine_main(spec: EngineSpec, address: Any, authkey: bytes, live: Connectio
 
         store = Store(spec.store, samples=spec.samples)
         hub = _ForwardingHub(live)
+        simulated = spec.simulated_unit is not None or spec.simulated_plant is not None
+        unit_factory = None
+        if simulated:  # a unit of another kind than the plant's: restarted with its plant
+            from rig.web.simulated import unit_session_factory as unit_factory
         controller = RigController(store, hub, _session_factory(spec),  # type: ignore[arg-type]
-                                   simulated=spec.simulated_unit is not None,
-                                   description=spec.description)
+                                   simulated=simulated, description=spec.description,
+                                   unit_session_factory=unit_factory)
         listener = Listener(address, authkey=authkey)
     except Exception as exc:
         ready.send(("err", f"{type(exc).__name__}: {exc}"))

@@ -41,10 +41,16 @@ def example_plant(unit_name: str = DEFAULT_UNIT) -> Any:
     """The simulated plant around the example unit ``unit_name``: the default plant with
     :data:`SIMULATED_EFFECTS`, the runout left off for a unit that gives no runouts (the
     cycloid and beveloid examples)."""
+    return unit_plant(example_unit(unit_name))
+
+
+def unit_plant(unit: dict[str, Any]) -> Any:
+    """The simulated plant around ``unit`` (a run.json ``unit`` of any kind): the default
+    plant with :data:`SIMULATED_EFFECTS`, the runout left off when the unit gives no
+    runouts."""
     from rig.measurement.service import plant_config_for
     from rig.plans.campaign_file import SimulationSection
 
-    unit = example_unit(unit_name)
     effects = dict(SIMULATED_EFFECTS["effects"])
     if not all(isinstance(unit.get(k), int | float) for k in ("runout_internal_mm",
                                                                "runout_external_mm")):
@@ -64,6 +70,15 @@ def simulated_session_factory(unit_name: str = DEFAULT_UNIT
         return open_session(simulated=True, plant=plant)
 
     return factory
+
+
+def unit_session_factory(unit: dict[str, Any]) -> AbstractContextManager[Any]:
+    """A rig session on a new simulated rig whose plant is ``unit``'s (:func:`unit_plant`):
+    how the page's simulated rig is started again for a unit of another kind than its plant
+    (:class:`rig.web.controller.RigController`, issue 33 item 10)."""
+    from rig.measurement.service import open_session
+
+    return open_session(simulated=True, plant=unit_plant(unit))
 
 
 def simulated_plant(path: str) -> Any:

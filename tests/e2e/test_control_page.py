@@ -15,6 +15,7 @@ from tests.support.browser import (
     ARTIFACTS,
     NEEDS_CHROMIUM,
     confirm_lock,
+    fill_identity,
     launch_browser,
     open_page,
     start_run,
@@ -58,6 +59,7 @@ def test_operator_measures_a_run_and_aborts_another(tmp_path: Path):
         # second run: abort it while it runs; the page shows the safe state
         page.fill("#setup input[name=steps_per_quarter]", "4")
         page.fill("#setup input[name=pre_cycles]", "1")
+        fill_identity(page)  # the serial was cleared by the first Start: this is another unit
         confirm_lock(page)
         first_run = runs[0]["run_id"]
         page.click("#start")

@@ -23,6 +23,7 @@ from rig.hardware.config import load_rig_config
 from rig.store import Store
 from tests.support.browser import ARTIFACTS, launch_browser, open_page, start_run
 from tests.support.serve import get_json, post, rig_serve
+from tests.support.simulated_page import identified
 
 # measures on simulated devices in real time; alone: beside the other worker's test the live
 # panel's last event of the second run could land after the history click (the suite's CI on
@@ -95,8 +96,8 @@ def test_fault_reset_estop_ack_and_history_numbers(tmp_path: Path):
         expect(page.locator("#reset-faults")).to_be_visible()
         expect(page.locator("#start")).to_be_disabled()
         page.screenshot(path=str(ARTIFACTS / "operator-fault-latched.png"))
-        body = {"unit": get_json(url + "api/units")[0]["unit"],
-                "plan": {"rated_torque_Nm": 10.0, "steps_per_quarter": 2}}
+        body = identified({"unit": get_json(url + "api/units")[0]["unit"],
+                           "plan": {"rated_torque_Nm": 10.0, "steps_per_quarter": 2}})
         code, answer = post(url + "api/control/start", body)
         assert code == 409 and "fault is latched" in answer["detail"], answer
         assert "loading drive" in answer["detail"]

@@ -36,9 +36,16 @@ from pymodbus.client import ModbusTcpClient
 from drivers.modbus.map import TORQUE_SENSOR_MAP, encode_float32
 from rig.hardware.config import load_rig_config
 from rig.store import Store
-from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser
+from tests.support.browser import (
+    ARTIFACTS,
+    NEEDS_CHROMIUM,
+    confirm_lock,
+    fill_identity,
+    launch_browser,
+)
 from tests.support.paths import REPO
 from tests.support.serve import TOKEN, get_json, post, rig_command, served, started
+from tests.support.simulated_page import identified
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
 
@@ -194,8 +201,8 @@ def test_operator_page(tmp_path: Path):
         shot(page, "web-setup.png")
 
         # 5: refused by the API without the override, naming the sensor and the way out
-        body = {"unit": {"z_internal": 45, "z_external": 40, "module_mm": 1.0},
-                "plan": {"rated_torque_Nm": 10.0, "steps_per_quarter": 2}}
+        body = identified({"unit": {"z_internal": 45, "z_external": 40, "module_mm": 1.0},
+                           "plan": {"rated_torque_Nm": 10.0, "steps_per_quarter": 2}})
         code, answer = post(url + "api/control/start", body)
         assert code == 409 and "transducer" in answer["detail"], answer
         assert "expired" in answer["detail"] and "override" in answer["detail"]
@@ -291,6 +298,9 @@ def test_operator_page(tmp_path: Path):
 
         # 6: abort by key, E-stop by Esc and by Space
         page.select_option(f("kind"), "run")
+        expect(page.locator(f("serial"))).to_have_value("")  # asked again for each unit
+        expect(page.locator(f("operator"))).to_have_value(OPERATOR)  # remembered
+        fill_identity(page, serial=SERIAL + "-2")
         confirm_lock(page)
         expect(page.locator("#start-why")).to_be_empty()
         page.keyboard.press("s")

@@ -25,7 +25,14 @@ from playwright.sync_api import expect, sync_playwright
 
 from rig.store import Store
 from rig.store.synthetic_runs import write_campaign
-from tests.support.browser import ARTIFACTS, NEEDS_CHROMIUM, confirm_lock, launch_browser, start_run
+from tests.support.browser import (
+    ARTIFACTS,
+    NEEDS_CHROMIUM,
+    confirm_lock,
+    fill_identity,
+    launch_browser,
+    start_run,
+)
 from tests.support.serve import get_json, rig_serve
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
@@ -324,6 +331,7 @@ def test_phone_start_fault_links_and_setup(served):
     # 16: Start from the set-up, far below the loop: the progress and the loop come into view
     f = "#setup [name={}]".format
     page.select_option(f("kind"), "run")
+    fill_identity(page)
     confirm_lock(page)
     page.locator("#start").scroll_into_view_if_needed()
     assert not below_header(page, "#progress")

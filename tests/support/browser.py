@@ -3,6 +3,7 @@ downloaded browser), and the folder their screenshots go to."""
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 from typing import Any
 
@@ -45,8 +46,30 @@ def confirm_lock(page: Any) -> None:
     expect(page.locator("#lock-state")).to_contain_text("confirmed", timeout=30_000)
 
 
-def start_run(page: Any) -> None:
-    """Confirm the input lock, wait until Start is enabled and press it."""
+OPERATOR = "E2E Operator"
+"""The operator the page tests type when a test gives none."""
+_serials = itertools.count(1)
+
+
+def fill_identity(page: Any, operator: str | None = None, serial: str | None = None) -> None:
+    """Type the operator and the unit's serial on the set-up form (Start needs both, issue 33
+    item 9): the given ones, else :data:`OPERATOR` and a new serial ``E2E-<n>`` where the
+    field is empty (a serial typed by the test, or an operator the page remembered, is
+    kept)."""
+    form = page.locator("#setup")
+    for name, value, default in (("operator", operator, OPERATOR),
+                                 ("serial", serial, None)):
+        field = form.locator(f"input[name={name}]")
+        if value is not None:
+            field.fill(value)
+        elif not field.input_value().strip():
+            field.fill(default if default is not None else f"E2E-{next(_serials)}")
+
+
+def start_run(page: Any, operator: str | None = None, serial: str | None = None) -> None:
+    """Type the operator and serial where empty (:func:`fill_identity`), confirm the input
+    lock, wait until Start is enabled and press it."""
+    fill_identity(page, operator, serial)
     confirm_lock(page)
     expect(page.locator("#start")).to_be_enabled()
     page.click("#start")

@@ -56,6 +56,19 @@ class SharedRig:
 
 SHARED = SharedRig()
 
+OPERATOR = "Test Operator"
+"""The operator of the page tests' start requests."""
+
+
+def identified(body: dict[str, Any], operator: str = OPERATOR, serial: str | None = None
+               ) -> dict[str, Any]:
+    """A start request ``body`` with who measures which unit, as ``POST /api/control/start``
+    needs them (issue 33 item 9): ``operator`` unless the body has one, and the unit's
+    ``serial`` (given, else the body's, else ``test-<kind>``)."""
+    unit = dict(body.get("unit") or {})
+    unit["serial"] = serial or unit.get("serial") or f"test-{unit.get('kind', 'pair')}"
+    return {**body, "operator": body.get("operator") or operator, "unit": unit}
+
 
 def wait_for(client: TestClient, done: Any, timeout_s: float, poll_s: float = 0.05) -> dict:
     """Poll /api/status until ``done(status)``; AssertionError with the last status."""

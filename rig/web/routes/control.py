@@ -20,7 +20,7 @@ from rig.core.errors import RigError
 from rig.plans.campaign_file import CampaignError
 from rig.web import campaign_files
 from rig.web.auth import Operator, is_operator
-from rig.web.controller import ControlError, RigController, compute_preview
+from rig.web.controller import ControlError, RigController, compute_preview, start_identity_problem
 from rig.web.models import (
     NAME_PATTERN,
     UNIT_MODELS,
@@ -93,11 +93,23 @@ def preview(request: Request, body: RunRequest) -> dict[str, Any]:
         raise HTTPException(409, str(exc)) from exc
 
 
+NO_IDENTITY = {400: {"model": ErrorBody, "description": "The body could not be parsed (not "
+                                                     "UTF-8 JSON), or it names no operator or "
+                                                     "no unit serial (one line naming the "
+                                                     "field)."}}
+
+
 @router.post("/control/start", response_model=Message,
-             responses={**AUTH, **CONFLICT, **BAD_BODY},
-             summary="Start a run or a campaign (needs the input lock confirmed)")
+             responses={**AUTH, **CONFLICT, **NO_IDENTITY},
+             summary="Start a run or a campaign (needs the input lock confirmed, the operator "
+                     "and the unit's serial)")
 def start(request: Request, body: RunRequest,
           _token: Operator) -> dict[str, Any]:
+    """A result without who measured it or which unit it was is no result (a test station
+    asks for both before a part is tested): 400 naming the missing field."""
+    problem = start_identity_problem(body)
+    if problem is not None:
+        raise HTTPException(400, problem)
     return _do(lambda: _controller(request).start_measurement(body))
 
 

@@ -419,6 +419,10 @@ function startBlockers(s, st) {
     why.push("calibration expired (" + expired.map((c) => c.sensor).join(", ") +
       "): tick 'start with expired calibration' and give the reason");
   if (formProblems > 0) why.push("fix the set-up fields marked in red");
+  // no part result without who measured it and which part it is (a test station asks both)
+  const f = $("setup").elements;
+  if (!f.operator.value.trim()) why.push("enter the operator (Set up: operator)");
+  if (!f.serial.value.trim()) why.push("enter this unit's serial (Set up: serial)");
   return why;
 }
 
@@ -1151,6 +1155,9 @@ function wire() {
   $("start").addEventListener("click", () => run("start", async () => {
     await previewPlan();
     const answer = await api("POST", "/api/control/start", request());
+    // the next unit is another unit: its serial is asked again (the operator is kept)
+    $("setup").elements.serial.value = "";
+    validateForm(); saveSetup();
     live.T = []; live.W = []; live.stored = null; live.finished = null;
     resetTE(request().test === "transmission_error");
     clearResult("starting", "measurement starting");

@@ -31,7 +31,7 @@ from rig.store import Store
 from rig.web.simulated import example_unit
 from simulators.plant.config import load_plant_config
 from tests.support.serve import page_lines, started
-from tests.support.simulated_page import page_on, wait_for
+from tests.support.simulated_page import identified, page_on, wait_for
 
 pytestmark = [pytest.mark.realtime, pytest.mark.timeout(240)]
 
@@ -118,8 +118,8 @@ def test_sigterm_to_rig_serve_in_the_first_ramp_leaves_an_aborted_run(tmp_path: 
             assert time.monotonic() < deadline, "the simulated rig did not open"
             time.sleep(0.3)
         call("/api/devices/input-lock", {"angle_deg": 0.0})
-        call("/api/control/start", {"unit": example_unit("seed000-pair1"),
-                                    "plan": PRE_CYCLE_PLAN})
+        call("/api/control/start", identified({"unit": example_unit("seed000-pair1"),
+                                               "plan": PRE_CYCLE_PLAN}))
         deadline = time.monotonic() + 60
         seen = []
         while True:  # the first ramp (0 -> -10 N*m at 5 N*m/s), before the recording
@@ -148,7 +148,7 @@ def test_estop_in_the_pre_cycle_through_the_web_api_leaves_an_aborted_run(page):
     unit = example_unit("seed000-pair1")
     lock = client.post("/api/devices/input-lock", json={"angle_deg": 0.0}, headers=AUTH)
     assert lock.status_code == 200, lock.text
-    r = client.post("/api/control/start", json={"unit": unit, "plan": PRE_CYCLE_PLAN},
+    r = client.post("/api/control/start", json=identified({"unit": unit, "plan": PRE_CYCLE_PLAN}),
                     headers=AUTH)
     assert r.status_code == 200, r.text
     # in the first pre-cycle, on its way up from the preload's -10 N*m: torque applied

@@ -275,3 +275,28 @@ def test_a_run_without_limits_is_no_limits_everywhere(tmp_path: Path):
     res = _rig("runs", "--store", str(tmp_path / "store"), cwd=tmp_path)
     row = next(line for line in res.stdout.splitlines() if doc["run_id"] in line)
     assert "NO LIMITS" in row and f"{doc['lost_motion_arcmin']:.3f}" in row, row
+
+
+@pytest.mark.parametrize(("plant_kind", "unit_kind", "expected"), [
+    ("internal_involute", "beveloid", "incomplete"),
+    ("beveloid", None, "incomplete"),
+    ("cycloid", "cycloid", "ok"),
+    (None, "beveloid", "ok"),  # a real rig: no simulated plant
+])
+def test_a_run_measured_on_another_kind_of_plant_is_never_ok(plant_kind, unit_kind, expected):
+    """Issue 33 item 10: the simulated devices' plant of another unit kind than the run's
+    unit: INCOMPLETE in one line, even where a record says "ok"."""
+    from rig.results.outcome import recorded_outcome
+
+    unit = {"serial": "B-1"} | ({"kind": unit_kind} if unit_kind else {})
+    meta = {"status": "completed", "label": "r1", "unit": unit, "outcome": "ok",
+            "limits": {"lost_motion_arcmin_max": 3.0}, "result": {"lost_motion_arcmin": 2.0}}
+    if plant_kind is not None:
+        meta["simulation"] = {"plant_kind": plant_kind, "plant": {}}
+    outcome, causes, _ = run_outcome(meta, meta["limits"])
+    assert outcome == expected and recorded_outcome(meta) == expected
+    if expected == "incomplete":
+        words = {"internal_involute": "internal involute pair"}
+        line = (f"run r1: measured on a simulated {words.get(plant_kind, plant_kind)} plant, "
+                f"the unit is a {words.get(unit_kind or 'internal_involute', unit_kind)}")
+        assert causes == [line]

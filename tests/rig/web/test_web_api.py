@@ -18,6 +18,7 @@ from rig.store import Store
 from rig.web import create_app
 from rig.web.settings import TOKEN_ENV, WebSettingsError, resolve_settings
 from tests.support.paths import REPO
+from tests.support.simulated_page import identified
 
 EXAMPLE_RUN = REPO / "rig" / "examples" / "runs" / "pair1-pos000"
 EXAMPLE_CAMPAIGN = REPO / "rig" / "examples" / "runs" / "campaign-pair1-positions"
@@ -56,7 +57,7 @@ AUTH = {"Authorization": f"Bearer {TOKEN}"}
 
 
 def run_request(**plan: object) -> dict:
-    return {"unit": UNIT, "plan": {"rated_torque_Nm": 10.0, **plan}}
+    return identified({"unit": UNIT, "plan": {"rated_torque_Nm": 10.0, **plan}})
 
 
 # --------------------------------------------------------------------------- auth rules
@@ -307,3 +308,25 @@ def test_campaign_files_by_name_or_upload_never_a_path(client: TestClient):
     assert bad.status_code == 400
     assert bad.json()["detail"] == "c.toml: plan.rated_torque_Nm: expected greater than 0 " \
                                    "and at most 1e+07 N·m (got -1)"  # rig/core/ranges.py
+
+
+@pytest.mark.parametrize("change,field,echo", [
+    ({"operator": None}, "operator", "got none"),
+    ({"operator": "   "}, "operator", 'got "   "'),
+    ({"operator": "Ann\n<b>x</b>\u0007"}, "operator", r'got "Ann\n<b>x</b>\u0007"'),
+    ({"unit": {k: v for k, v in UNIT.items() if k != "serial"}}, "unit.serial", "got none"),
+])
+def test_start_needs_the_operator_and_the_units_serial(client: TestClient, change: dict,
+                                                       field: str, echo: str):
+    """Issue 33 item 9: no part result without who measured which part; the API (not only
+    the page) refuses a start without either, in one line naming the field, what it echoes
+    escaped (a newline or a bell never breaks the line)."""
+    r = client.post("/api/control/start", json={**run_request(), **change}, headers=AUTH)
+    assert r.status_code == 400, r.text
+    detail = r.json()["detail"]
+    assert isinstance(detail, str) and "\n" not in detail and "\u0007" not in detail, detail
+    assert detail.startswith(field + ": expected "), detail
+    assert detail.endswith(echo), detail
+    # with both given, the start gets past them (refused only because no rig is connected)
+    r = client.post("/api/control/start", json=run_request(), headers=AUTH)
+    assert r.status_code == 409 and "no rig" in r.json()["detail"], r.text

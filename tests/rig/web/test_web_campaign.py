@@ -10,7 +10,7 @@ import pytest
 
 from rig.web.live import LiveHub
 from rig.web.simulated import example_unit
-from tests.support.simulated_page import page_on
+from tests.support.simulated_page import identified, page_on
 from tests.support.simulated_page import wait_for as page_wait_for
 
 pytestmark = [pytest.mark.realtime, pytest.mark.timeout(240)]
@@ -38,7 +38,7 @@ def test_campaign_from_the_page(simulated_rig, tmp_path):
         assert preview["n_runs"] == 2 and preview["fits"] is True
         assert client.post("/api/devices/input-lock", json={"confirm": True},
                            headers=AUTH).status_code == 200
-        r = client.post("/api/control/start", json=body, headers=AUTH)
+        r = client.post("/api/control/start", json=identified(body), headers=AUTH)
         assert r.status_code == 200, r.text
         done = wait_for(client, lambda s: s["state"] in ("completed", "aborted"), 150.0)
         assert done["state"] == "completed", done["fault"]

@@ -15,7 +15,7 @@ from rig.web.controller import RigController
 from rig.web.live import LiveHub
 from rig.web.settings import resolve_settings
 from rig.web.simulated import example_unit, simulated_session_factory
-from tests.support.simulated_page import page_on
+from tests.support.simulated_page import identified, page_on
 from tests.support.simulated_page import wait_for as wait_until
 
 pytestmark = [pytest.mark.realtime, pytest.mark.timeout(180)]
@@ -39,8 +39,8 @@ def wait_for(client: TestClient, done, timeout_s: float) -> dict:
 
 def short_run(**plan: object) -> dict:
     """A short constant-rate loop (no pre-cycle), for commands, not for metrics."""
-    return {"unit": UNIT, "plan": {"rated_torque_Nm": 10.0, "mode": "constant_rate",
-                                   "pre_cycles": 0, "rate_Nm_per_s": 5.0, **plan}}
+    return identified({"unit": UNIT, "plan": {"rated_torque_Nm": 10.0, "mode": "constant_rate",
+                                              "pre_cycles": 0, "rate_Nm_per_s": 5.0, **plan}})
 
 
 def test_devices_tare_and_the_input_lock_rule(page):
@@ -134,6 +134,33 @@ def test_estop_pressed_as_a_run_starts_stops_it(page):
     assert client.post("/api/devices/reset-faults", headers=AUTH).json()["ok"]
 
 
+def test_a_unit_of_another_kind_than_the_plant_is_never_ok(page):
+    """Issue 33 item 10: a beveloid started on the shared seed 000 pair's simulated rig
+    (these tests' controller cannot start the rig again with the unit's plant): the run
+    records the plant's kind and its verdict is INCOMPLETE in one line, however it came
+    out; the lost-motion limit it meets changes nothing."""
+    client, store = page
+    beveloid = example_unit("beveloid-seed001")
+    assert client.post("/api/devices/input-lock", json={"confirm": True},
+                       headers=AUTH).status_code == 200
+    body = identified({**short_run(), "unit": beveloid,
+                       "limits": {"lost_motion_arcmin_max": 1000.0}})
+    assert client.post("/api/control/start", json=body, headers=AUTH).status_code == 200
+    done = wait_for(client, lambda s: s["state"] in ("completed", "aborted", "fault"), 90.0)
+    assert done["state"] == "completed", done
+    line = "measured on a simulated internal involute pair plant, the unit is a beveloid"
+    result = done["last_result"]
+    assert result["outcome"] == "incomplete", result
+    assert result["runs"][0]["failures"] == [f"run {result['runs'][0]['label']}: {line}"]
+    run = store.load_run(result["runs"][0]["run_id"])
+    assert run.meta["simulation"]["plant_kind"] == "internal_involute"
+    assert run.meta["unit"]["kind"] == "beveloid"
+    assert run.meta["outcome"] == "incomplete"
+    assert run.meta["result"]["plant_mismatch"] == line
+    cert = client.get(f"/api/runs/{run.meta['run_id']}/certificate.html").text
+    assert "INCOMPLETE" in cert and line in cert
+
+
 def test_a_drive_enabled_behind_the_idle_page_is_made_safe(tmp_path):
     """Fault-matrix row 12: another Modbus master enables the loading drive at 3 N*m while
     the page idles. The page's idle polling feeds the drive's watchdog, so the watchdog would
@@ -171,3 +198,4 @@ def test_a_drive_enabled_behind_the_idle_page_is_made_safe(tmp_path):
         assert status["live"]["drive_enabled"] is False and made_safe_s < 5.0
         drive_status = controller.session.devices.drive.status()
         assert not drive_status.enabled and drive_status.setpoint_Nm == 0.0
+

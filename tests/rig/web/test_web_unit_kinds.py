@@ -13,6 +13,7 @@ from fastapi.testclient import TestClient
 from rig.plans.campaign_file import batch_band
 from rig.web.simulated import example_plant
 from tests.rig.web.test_web_api import AUTH, REPO, client, store  # noqa: F401 (the API's fixtures)
+from tests.support.simulated_page import identified
 
 pytestmark = pytest.mark.realtime  # measures on simulated devices in real time (tests/conftest.py)
 
@@ -23,7 +24,7 @@ BEVELOID = json.loads((UNITS / "beveloid-seed001.json").read_text())
 
 
 def body(unit: dict) -> dict:
-    return {"unit": unit, "plan": {"rated_torque_Nm": 10.0}}
+    return identified({"unit": unit, "plan": {"rated_torque_Nm": 10.0}})
 
 
 @pytest.mark.parametrize("unit,seed,tolerances", [

@@ -219,7 +219,8 @@ def _campaign_body(name: str, positions: list[float], steps_per_quarter: int,
                    plan: dict[str, Any] | None = None) -> dict[str, Any]:
     unit = json.loads((ROOT / "rig" / "examples" / "units" / "seed000-pair1.json")
                       .read_text(encoding="utf-8"))
-    return {"kind": "campaign", "name": name, "unit": {**unit, "serial": f"load-{name}"},
+    return {"kind": "campaign", "name": name, "operator": "load bench",
+            "unit": {**unit, "serial": f"load-{name}"},
             "plan": {"rated_torque_Nm": 10.0, "steps_per_quarter": steps_per_quarter,
                      "pre_cycles": 1, **(plan or {})},
             "axes": {"positions_deg": positions}}

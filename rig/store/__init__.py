@@ -620,13 +620,14 @@ class Store:
         values: dict[str, Any] = {
             "reason": meta.get("reason") if isinstance(meta.get("reason"), str) else None,
             "metrics": meta.get("result") if isinstance(meta.get("result"), dict) else None,
-            "outcome": outcome_word(meta.get("outcome")), "meta": meta,
+            "outcome": outcome_word(meta.get("outcome")),
             "n_samples": meta.get("n_samples") if isinstance(meta.get("n_samples"), int)
             else row.get("n_samples")}
         if meta.get("status") in FINAL_STATUSES:
             values["status"] = meta["status"]
-        if all(row.get(k) == v for k, v in values.items()):
+        if all(row.get(k) == v for k, v in values.items()):  # the copy holds: as it is
             return row
+        values["meta"] = meta
         if self.read_only is None:
             try:
                 self._index.refresh_run(str(row["run_id"]), values)

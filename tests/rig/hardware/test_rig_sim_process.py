@@ -8,6 +8,7 @@ GearPlant drives them all; SIGTERM stops it cleanly with exit 0.
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -60,7 +61,8 @@ def test_rig_devices_reports_every_device_healthy(sim, tmp_path):
     _, info = sim
     report = tmp_path / "devices.json"
     proc = subprocess.run([*RIG, "devices", "--rig", info["rig_config"], "--seconds", "2",
-                           "--json", str(report)], capture_output=True, text=True, timeout=90)
+                           "--json", str(report)], capture_output=True, text=True, timeout=90,
+                          env={**os.environ, "COLUMNS": "200"})  # the table whole
     doc = json.loads(report.read_text(encoding="utf-8"))
     assert proc.returncode == 0, (proc.stdout, proc.stderr)
     assert doc["healthy"] is True

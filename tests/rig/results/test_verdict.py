@@ -26,6 +26,7 @@ UNIT = json.loads((ROOT / "rig/examples/units/seed000-pair1.json").read_text())
 
 def _rig(*args: str, cwd: Path) -> subprocess.CompletedProcess:
     env = {k: v for k, v in os.environ.items() if k not in ("RIG_STORE", "RIG_SAMPLES_DIR")}
+    env["COLUMNS"] = "200"  # the tables whole (test_narrow_cli.py checks 80 columns)
     return subprocess.run([sys.executable, "-c", "from rig.cli import main; main()", *args],
                           cwd=cwd, env=env, capture_output=True, text=True, timeout=120)
 

@@ -34,6 +34,8 @@ os.kill(os.getpid(), signal.SIGKILL)
 def rig(*args: str, cwd: Path, env_store: str | None = None,
         extra_env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     env = {k: v for k, v in os.environ.items() if k not in ("RIG_STORE", "RIG_SAMPLES_DIR")}
+    env["COLUMNS"] = "200"  # the tables whole (a CI shell may say 80: tests/rig/commands/
+    #                         test_narrow_cli.py checks the narrow layout)
     if env_store is not None:
         env["RIG_STORE"] = env_store
     env.update(extra_env or {})

@@ -70,8 +70,7 @@ def _read_export(path: Path, mapping: ImportMap, fmt: str) -> SourceData:
     first_row = 2 if fmt == "xlsx" else 1  # an xlsx sheet's row 1 is the header
 
     def where(run_column: str, index: int | None) -> str:
-        name = wanted.get(run_column) or (run_column if run_column in have
-                                          else wanted["torque_Nm"])
+        name = _source_name(wanted, have, run_column)
         row = f" row {first_row + index}" if index is not None else ""
         return f"{path}: column {name!r} ({run_column}){row}"
 
@@ -91,6 +90,13 @@ def _wanted(mapping: ImportMap) -> dict[str, str]:
     """Run column -> file column (channel) for every column the map names."""
     refs = mapping.columns.model_dump(exclude_none=True)
     return {name: ref["column"] for name, ref in refs.items()}
+
+
+def _source_name(wanted: dict[str, str], have: list[str], run_column: str) -> str:
+    """The file's column (channel) an error about ``run_column`` names: the mapped one, an
+    extra column of that name, else the torque's."""
+    return wanted.get(run_column) or (run_column if run_column in have
+                                      else wanted["torque_Nm"])
 
 
 def _missing(path: Path, run_column: str, name: str, have: list[str], what: str) -> str:
@@ -150,8 +156,7 @@ def _read_delimited(path: Path, mapping: ImportMap) -> SourceData:
     header_line = mapping.skip_rows + 1
 
     def where(run_column: str, index: int | None) -> str:
-        name = wanted.get(run_column) or (run_column if run_column in header
-                                          else wanted["torque_Nm"])
+        name = _source_name(wanted, header, run_column)
         col = header.index(name) + 1
         line = f"{header_line + 1 + index}:" if index is not None else f"{header_line}:"
         return f"{path}:{line}{col}: column {name!r} ({run_column})"
@@ -280,8 +285,7 @@ def _tdms_columns(path: Path, mapping: ImportMap, tdms: Any) -> SourceData:
                                           f"channel of group {group_name!r}"))
 
     def where(run_column: str, index: int | None) -> str:
-        name = wanted.get(run_column) or (run_column if run_column in have
-                                          else wanted["torque_Nm"])
+        name = _source_name(wanted, have, run_column)
         sample = f" sample {index + 1}" if index is not None else ""
         return f"{path}: group {group_name!r} channel {name!r} ({run_column}){sample}"
 

@@ -39,6 +39,7 @@ from drivers.modbus.map import (
     Register,
     decode_flags,
     encode_float32,
+    register_block,
     table_span,
     values_of,
 )
@@ -71,11 +72,7 @@ class InputMotorCommand(enum.IntEnum):
     STOP = 3  # stop where it is and hold
 
 
-def _block(*registers: Register) -> dict[str, Register]:
-    return {r.name: r for r in registers}
-
-
-INPUT_MOTOR_MAP: dict[str, Register] = _block(
+INPUT_MOTOR_MAP: dict[str, Register] = register_block(
     Register("angle", "input", 0, "float32", "r", "deg", "actual input (eccentric) angle"),
     Register("target_actual", "input", 2, "float32", "r", "deg", "target in force"),
     Register("status", "input", 4, "uint16", "r", "-", "status word, see InputMotorStatus"),
@@ -88,7 +85,7 @@ INPUT_MOTOR_MAP: dict[str, Register] = _block(
              "measured input speed, signed"),
 )
 
-CLIMATE_MAP: dict[str, Register] = _block(
+CLIMATE_MAP: dict[str, Register] = register_block(
     Register("housing_temperature", "input", 0, "float32", "r", "degC",
              "temperature measured at the unit's housing"),
     Register("setpoint_actual", "input", 2, "float32", "r", "degC", "setpoint in force"),

@@ -269,8 +269,7 @@ def monte_carlo(
     window_revs: float = 1.0,
 ) -> MaxErrorStats:
     """Random values (eqs. 15-17) and phases (eq. 12): the paper's Fig. 10 statistics."""
-    model = TransmissionErrorModel(error_sources(train or paper_train()), window_revs)
-    return stats_of(_sampled_maxima(model, n_samples, seed, False, progress))
+    return _sampled_stats(train, n_samples, seed, False, progress, window_revs)
 
 
 def max_deviation_random_phase(
@@ -281,8 +280,14 @@ def max_deviation_random_phase(
     window_revs: float = 1.0,
 ) -> MaxErrorStats:
     """Every error at its bound, random phases: the paper's Fig. 12 statistics."""
+    return _sampled_stats(train, n_samples, seed, True, progress, window_revs)
+
+
+def _sampled_stats(train: PlanetaryTrain | None, n_samples: int, seed: int, at_bound: bool,
+                   progress: Progress | None, window_revs: float) -> MaxErrorStats:
+    """Statistics of the sampled maxima of ``train`` (default: the paper's), arcsec."""
     model = TransmissionErrorModel(error_sources(train or paper_train()), window_revs)
-    return stats_of(_sampled_maxima(model, n_samples, seed, True, progress))
+    return stats_of(_sampled_maxima(model, n_samples, seed, at_bound, progress))
 
 
 def max_deviation(

@@ -109,11 +109,12 @@ class DriveFaultCode(enum.IntEnum):
     SETPOINT_NOT_FINITE = 3  # NaN or infinity written as setpoint (refused)
 
 
-def _block(*registers: Register) -> dict[str, Register]:
+def register_block(*registers: Register) -> dict[str, Register]:
+    """A device's register table keyed by register name."""
     return {r.name: r for r in registers}
 
 
-TORQUE_SENSOR_MAP: dict[str, Register] = _block(
+TORQUE_SENSOR_MAP: dict[str, Register] = register_block(
     Register("torque", "input", 0, "float32", "r", "N*m",
              "measured torque, tare offset subtracted, signed"),
     Register("status", "input", 2, "uint16", "r", "-", "status word, see SensorStatus"),
@@ -126,7 +127,7 @@ TORQUE_SENSOR_MAP: dict[str, Register] = _block(
              "offset subtracted from the raw torque"),
 )
 
-LOADING_DRIVE_MAP: dict[str, Register] = _block(
+LOADING_DRIVE_MAP: dict[str, Register] = register_block(
     Register("status", "input", 0, "uint16", "r", "-", "status word, see DriveStatusBits"),
     Register("fault_code", "input", 1, "uint16", "r", "-", "latched fault, see DriveFaultCode"),
     Register("actual_torque", "input", 2, "float32", "r", "N*m", "torque the drive delivers"),

@@ -16,6 +16,16 @@ viscous_Nms_per_arcmin = 0.002
 """
 
 
+MINIMAL = """
+name = "t1"
+[unit]
+z_internal = 45
+[plan]
+rated_torque_Nm = 10.0
+"""
+"""The smallest campaign file the loader takes (no axes: one run at 0 deg)."""
+
+
 def campaign_toml(name: str, axes: str, *, serial: str | None = None,
                   limits: str | None = None, drag: bool = True) -> str:
     """A campaign file's text: ``axes`` and ``limits`` are the lines of those tables,

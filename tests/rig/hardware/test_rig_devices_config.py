@@ -83,12 +83,18 @@ def test_dump_round_trips(tmp_path):
     ],
 )
 def test_errors_name_the_file_and_the_key(tmp_path, table, key, value, expected):
+    path, message = _refused(tmp_path, table, key, value)
+    assert f"{path}: {expected}" in message
+
+
+def _refused(tmp_path, table: str, key: str, value) -> tuple:
+    """The rig file with ``table.key = value`` and the one error loading it gives."""
     tables = _tables()
     tables[table][key] = value
     path = _write(tmp_path, tables)
     with pytest.raises(RigConfigError) as info:
         load_rig_config(path)
-    assert f"{path}: {expected}" in str(info.value)
+    return path, str(info.value)
 
 
 def test_rig_limit_above_the_transducer_range_is_refused(tmp_path):
@@ -178,13 +184,9 @@ def test_the_loaded_limits_are_immutable(tmp_path: Path):
 )
 def test_numbers_outside_their_physical_range_are_refused(tmp_path, table, key, value,
                                                          expected):
-    tables = _tables()
-    tables[table][key] = value
-    path = _write(tmp_path, tables)
-    with pytest.raises(RigConfigError) as info:
-        load_rig_config(path)
-    assert f"{path}: {expected}" in str(info.value)
-    assert len(str(info.value).splitlines()) == 1, str(info.value)
+    path, message = _refused(tmp_path, table, key, value)
+    assert f"{path}: {expected}" in message
+    assert len(message.splitlines()) == 1, message
 
 
 def test_climate_limits_must_be_in_order(tmp_path):

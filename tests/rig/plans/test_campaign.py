@@ -16,6 +16,7 @@ from rig.plans.campaign_file import (
     runout_signature,
     summarise,
 )
+from tests.support.campaigns import MINIMAL
 from tests.support.paths import REPO as ROOT
 
 SHIPPED = sorted(p for p in (ROOT / "examples" / "campaigns").glob("seed000-pair*.toml")
@@ -45,13 +46,7 @@ def _write(tmp_path: Path, text: str) -> Path:
     return path
 
 
-GOOD = """
-name = "t1"
-[unit]
-z_internal = 45
-[plan]
-rated_torque_Nm = 10.0
-"""
+GOOD = MINIMAL
 
 
 def test_errors_name_the_file_and_the_key(tmp_path: Path) -> None:

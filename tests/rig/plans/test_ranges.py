@@ -14,17 +14,10 @@ from rig.core.ranges import PLAN_CONFIRM_S, PLAN_MAX_S
 from rig.plans import CampaignAxes, LoopParams, TEParams
 from rig.plans.campaign_file import CampaignError, load_campaign
 from rig.plans.estimate import check_duration, estimate
+from tests.support.campaigns import MINIMAL
 from tests.support.paths import REPO
 
-GOOD = """
-name = "t1"
-[unit]
-z_internal = 45
-[plan]
-rated_torque_Nm = 10.0
-[axes]
-positions_deg = [0.0]
-"""
+GOOD = MINIMAL + "[axes]\npositions_deg = [0.0]\n"
 TE = GOOD.replace('name = "t1"', 'name = "t1"\ntest = "transmission_error"') + \
     "[te]\nratio = -8.0\n"
 

@@ -8,22 +8,26 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from rig.commands.options import json_option
+from rig.commands.options import in_range, json_option
 from rig.commands.output import make_console
+from rig.core.ranges import BAND_PCT, BATCH_UNITS, RATED_TORQUE_NM, SEED
 
 
 def register(app: typer.Typer) -> None:
     @app.command(short_help="Monte Carlo lost motion of a batch of one design.")
     def batch(
         unit_file: Annotated[Path, typer.Argument(help="A unit JSON (or a whole run.json).")],
-        samples: Annotated[int, typer.Option("--samples", "-n", help="Units sampled.")] = 20_000,
-        seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+        samples: Annotated[int, typer.Option(
+            "--samples", "-n", callback=in_range(BATCH_UNITS), help="Units sampled.")] = 20_000,
+        seed: Annotated[int, typer.Option(callback=in_range(SEED), help="Random seed.")] = 0,
         compensate: Annotated[
             bool,
             typer.Option(help="Set each unit's eccentric distance by seed 000 eq. (9)."),
         ] = False,
-        rated_torque: Annotated[float, typer.Option(help="Rated torque, N·m.")] = 10.0,
-        percent: Annotated[float, typer.Option(help="Lost-motion band, % of rated.")] = 3.0,
+        rated_torque: Annotated[float, typer.Option(
+            callback=in_range(RATED_TORQUE_NM), help="Rated torque, N·m.")] = 10.0,
+        percent: Annotated[float, typer.Option(
+            callback=in_range(BAND_PCT), help="Lost-motion band, % of rated.")] = 3.0,
         json_file: json_option("Write the report as JSON") = None,
     ) -> None:
         """Monte Carlo lost motion of a batch built to this design within seed 000 Table 1.

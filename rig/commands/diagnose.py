@@ -9,7 +9,8 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from rig.commands.options import json_option
+from rig.commands.options import in_range, json_option
+from rig.core.ranges import ALPHA
 
 
 def _candidates(report: dict[str, Any], rms_header: str, alarm_header: str,
@@ -41,7 +42,7 @@ def register(app: typer.Typer) -> None:
             Path | None, typer.Option("--html", help="Write the HTML report (self-contained).")
         ] = None,
         alpha: Annotated[
-            float, typer.Option("--alpha", min=1e-6, max=0.5,
+            float, typer.Option("--alpha", callback=in_range(ALPHA),
                                 help="Level of every calibrated decision: an effect is called "
                                      "when its false-alarm probability is at most this.")
         ] = 0.01,

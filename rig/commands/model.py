@@ -13,7 +13,8 @@ from rich.table import Table
 
 from analysis.errors import AnalysisError
 from analysis.models.seed000 import Seed000Design, design_chain, format_arcmin
-from rig.commands.options import json_option
+from rig.commands.options import in_range, json_option
+from rig.core.ranges import BAND_PCT, RATED_TORQUE_NM
 from rig.runformat.unit_file import load_unit_mapping
 
 
@@ -121,10 +122,12 @@ def register(app: typer.Typer) -> None:
         unit_file: Annotated[Path, typer.Argument(help="unit JSON (or a whole run.json)")],
         json_out: json_option("Write the model as JSON") = None,
         rated_torque: Annotated[float, typer.Option(
-            "--rated-torque", help="rated torque (N·m) of a cycloid or beveloid unit's lost "
+            "--rated-torque", callback=in_range(RATED_TORQUE_NM),
+            help="rated torque (N·m) of a cycloid or beveloid unit's lost "
             "motion and batch band")] = 10.0,
         pct: Annotated[float, typer.Option(
-            "--pct", help="lost motion at +-PCT % of the rated torque (cycloid, beveloid)")] = 3.0,
+            "--pct", callback=in_range(BAND_PCT),
+            help="lost motion at +-PCT % of the rated torque (cycloid, beveloid)")] = 3.0,
     ) -> None:
         """Seed 000 design chain (eqs. 1-16) and the reference nominal model of a gear unit;
         for a cycloid (seed 002) or beveloid (seed 001) unit its kind's nominal model and

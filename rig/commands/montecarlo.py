@@ -17,9 +17,10 @@ from rich.table import Table
 
 from analysis.models.seed003_montecarlo import PAPER_FIGURES_ARCSEC, check_sample_count
 from analysis.models.seed003_planetary import PaperReading
-from rig.commands.options import json_option
+from rig.commands.options import in_range, json_option
 from rig.commands.output import make_console
 from rig.core.errors import RigError
+from rig.core.ranges import MONTE_CARLO_SAMPLES, SEED, WINDOW_REVS
 from rig.reports.montecarlo import montecarlo_report
 
 SIGNS = ("printed", "consistent")
@@ -68,8 +69,10 @@ def _print_report(console: Console, report: dict[str, Any]) -> None:
 def register(app: typer.Typer) -> None:
     @app.command(short_help="Seed 003: Monte Carlo TE of a planetary train.")
     def montecarlo(
-        samples: Annotated[int, typer.Option("--samples", "-n", help="Samples.")] = 50_000,
-        seed: Annotated[int, typer.Option("--seed", help="Random seed.")] = 0,
+        samples: Annotated[int, typer.Option(
+            "--samples", "-n", callback=in_range(MONTE_CARLO_SAMPLES), help="Samples.")] = 50_000,
+        seed: Annotated[int, typer.Option(
+            "--seed", callback=in_range(SEED), help="Random seed.")] = 0,
         json_path: json_option("Write the report as JSON") = None,
         signs: Annotated[
             str, typer.Option("--signs", help="Table 1 signs: " + "|".join(SIGNS))
@@ -81,7 +84,8 @@ def register(app: typer.Typer) -> None:
             str, typer.Option("--planet-speed", help="Planet speed: " + "|".join(SPEEDS))
         ] = "kinematic",
         window_revs: Annotated[
-            float, typer.Option("--window-revs", help="Output revolutions searched for the max.")
+            float, typer.Option("--window-revs", callback=in_range(WINDOW_REVS),
+                                help="Output revolutions searched for the max.")
         ] = 1.0,
         quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress/tables.")] = False,
     ) -> None:

@@ -3,10 +3,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+
+from rig.core.ranges import Range
 
 
 def json_option(what: str) -> Any:
@@ -29,3 +32,15 @@ DEFAULT_STORE = "rig-store"
 RunOrCampaignArgument = Annotated[str, typer.Argument(
     metavar="RUN_OR_CAMPAIGN",
     help="A run or campaign folder, or a run or campaign id of the --store.")]
+
+
+def in_range(rng: Range) -> Callable[[Any], Any]:
+    """A typer ``callback`` that refuses a number outside ``rng`` (rig/core/ranges.py), NaN
+    and infinities included, in one line naming the option and the range (exit 2)."""
+
+    def check(value: Any) -> Any:
+        if value is not None and not rng.contains(value):
+            raise typer.BadParameter(f"expected {rng.text()} (got {value!r})")
+        return value
+
+    return check

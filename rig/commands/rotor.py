@@ -7,9 +7,10 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from rig.commands.options import json_option
+from rig.commands.options import in_range, json_option
 from rig.commands.output import make_console
 from rig.core.errors import RigError
+from rig.core.ranges import SHAFT_ELEMENTS, SHAFT_FRACTION
 
 
 def register(app: typer.Typer) -> None:
@@ -17,12 +18,15 @@ def register(app: typer.Typer) -> None:
     def rotor(
         json_file: json_option("Write all critical speeds as JSON") = None,
         disc_at: Annotated[
-            float, typer.Option(help="Disc position, fraction of each shaft's length.")
+            float, typer.Option(callback=in_range(SHAFT_FRACTION),
+                                help="Disc position, fraction of each shaft's length.")
         ] = 1.0 / 3.0,
         gear_at: Annotated[
-            float, typer.Option(help="Gear position, fraction of each shaft's length.")
+            float, typer.Option(callback=in_range(SHAFT_FRACTION),
+                                help="Gear position, fraction of each shaft's length.")
         ] = 2.0 / 3.0,
-        elements: Annotated[int, typer.Option(help="Shaft elements per rotor.")] = 24,
+        elements: Annotated[int, typer.Option(
+            callback=in_range(SHAFT_ELEMENTS), help="Shaft elements per rotor.")] = 24,
     ) -> None:
         """Seed 004 Table 3: single-rotor and coupled critical speeds (r/min), paper vs ours."""
         from analysis.models.seed004_paper import Assumptions, table3

@@ -11,6 +11,9 @@ from typing import Annotated
 
 import typer
 
+from rig.commands.options import in_range
+from rig.core.ranges import SEED, SIM_SYNC_PERIOD_S, STREAM_RATE_HZ
+
 
 class _Transducer(StrEnum):
     pty = "pty"
@@ -34,15 +37,18 @@ def register(app: typer.Typer) -> None:
             help="Transducer face: a pseudo-terminal or a TCP port.")] = _Transducer.pty,
         modbus: Annotated[_Modbus, typer.Option(
             help="Modbus face: Modbus TCP or RTU frames over TCP.")] = _Modbus.tcp,
-        seed: Annotated[int | None, typer.Option(help="Plant noise seed.")] = None,
+        seed: Annotated[int | None, typer.Option(
+            callback=in_range(SEED), help="Plant noise seed.")] = None,
         input_encoder: Annotated[bool, typer.Option(
             help="Serve the input-shaft encoder (CANopen node 2).")] = True,
         rig_config: Annotated[Path | None, typer.Option(
             help="Write the rig configuration here (default: a temporary folder).")] = None,
         sync_period: Annotated[float, typer.Option(
-            min=0.0005, max=1.0, help="SYNC period written in the rig config, s.")] = 0.002,
+            callback=in_range(SIM_SYNC_PERIOD_S),
+            help="SYNC period written in the rig config, s.")] = 0.002,
         stream_rate: Annotated[float, typer.Option(
-            min=1.0, help="Transducer stream rate written in the rig config, Hz.")] = 500.0,
+            callback=in_range(STREAM_RATE_HZ),
+            help="Transducer stream rate written in the rig config, Hz.")] = 500.0,
         realtime_priority: Annotated[int | None, typer.Option(
             min=1, max=99, help="SCHED_FIFO priority of the simulated devices (they stand in "
             "for hardware a busy PC cannot starve), also written as [rig] realtime_priority "

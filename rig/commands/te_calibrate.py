@@ -9,8 +9,9 @@ from typing import Annotated
 
 import typer
 
-from rig.commands.options import json_option
+from rig.commands.options import in_range, json_option
 from rig.commands.output import make_console
+from rig.core.ranges import INDEX_DEG
 
 
 def register(app: typer.Typer) -> None:
@@ -20,7 +21,8 @@ def register(app: typer.Typer) -> None:
         run_b: Annotated[Path, typer.Argument(help="TE run, coupling indexed by 180 deg.")],
         json_file: json_option("Write the result as JSON") = None,
         indexed_by: Annotated[float | None, typer.Option(
-            "--indexed-by", help="How far RUN_B's coupling is indexed against RUN_A's (deg; "
+            "--indexed-by", callback=in_range(INDEX_DEG),
+            help="How far RUN_B's coupling is indexed against RUN_A's (deg; "
             "must be 180), for runs that do not record test.coupling_index_deg.")] = None,
     ) -> None:
         """Separate the output encoder's once-per-turn eccentricity from the unit's own TE by

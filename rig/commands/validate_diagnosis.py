@@ -19,9 +19,10 @@ import typer
 from rich.progress import Progress
 from rich.table import Table
 
-from rig.commands.options import json_option
+from rig.commands.options import in_range, json_option
 from rig.commands.output import make_console
 from rig.core.errors import RigError
+from rig.core.ranges import SEED
 
 console = make_console()
 
@@ -208,7 +209,8 @@ def register(app: typer.Typer) -> None:
         cases: Annotated[int | None, typer.Option(
             min=1, help="Number of campaigns from our generator (default 33) or recorded "
             "over the wire (default 12).")] = None,
-        seed: Annotated[int, typer.Option(help="Seed of our generator's case draws.")] = 0,
+        seed: Annotated[int, typer.Option(
+            callback=in_range(SEED), help="Seed of our generator's case draws.")] = 0,
         cases_dir: Annotated[list[Path] | None, typer.Option(
             "--cases-dir", help="A folder of labelled campaigns (one folder per case); "
             "repeatable, each with its --labels.")] = None,

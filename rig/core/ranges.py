@@ -33,8 +33,6 @@ import math
 from dataclasses import dataclass
 from typing import Annotated, Any
 
-from pydantic import AfterValidator, Field
-
 
 @dataclass(frozen=True)
 class Range:
@@ -84,6 +82,8 @@ class Range:
 
     def after(self, *first: Any) -> Any:
         """:attr:`type` with the pydantic metadata ``first`` checked before the range."""
+        from pydantic import AfterValidator, Field  # here: the CLI's options import no pydantic
+
         return Annotated[float, *first, AfterValidator(self._check),
                          Field(json_schema_extra=self.schema())]
 
@@ -131,6 +131,24 @@ LOCK_TOLERANCE_DEG = Range(0.0, 10.0, "deg", low_open=True)
 LIMIT_ARCMIN = Range(0.0, 10_000.0, "arcmin", low_open=True)
 LIMIT_STIFFNESS_NM_PER_ARCMIN = Range(0.0, 1e9, "N·m/arcmin", low_open=True)
 LIMIT_ARCSEC = Range(0.0, 1e6, "arcsec", low_open=True)
+
+# -- model and statistics commands (rig batch, rig model, rig montecarlo, rig rotor, ...) ----
+BAND_PCT = Range(0.0, 100.0, "% of rated", low_open=True)
+BATCH_UNITS = Range(1, 1_000_000, "units")
+"""rig batch: a million units take about 90 s and 300 MB on a 2-core PC; memory grows
+linearly."""
+MONTE_CARLO_SAMPLES = Range(2, 10_000_000, "samples")
+"""rig montecarlo draws in chunks: ten million samples take about 80 MB and 13 min."""
+WINDOW_REVS = Range(0.0, 100.0, "output revolutions", low_open=True)
+SHAFT_FRACTION = Range(0.0, 1.0, "of the shaft's length")
+SHAFT_ELEMENTS = Range(2, 96, "elements")
+"""rig rotor: 24 elements converge; 96 take about 3 min on a 2-core PC (the eigen solves)."""
+SEED = Range(0, 2**63 - 1, "")
+PORT = Range(0, 65_535, "")
+SIM_SYNC_PERIOD_S = Range(5e-4, 1.0, "s")
+STREAM_RATE_HZ = Range(1.0, 100_000.0, "Hz")
+ALPHA = Range(1e-6, 0.5, "")
+INDEX_DEG = Range(-360.0, 360.0, "deg")
 
 # -- a plan's duration (s) -----------------------------------------------------------------
 PLAN_CONFIRM_S = 8 * 3600.0

@@ -5,6 +5,7 @@ a campaign file's ``confirm_long = true``). Only previews: nothing moves."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -107,3 +108,55 @@ def test_measure_te_speed_of_a_hundredth_rpm_is_refused_before_the_rig_starts(tm
     assert res.returncode == 2, res.stderr
     assert res.stderr.strip() == ("rig: error: --speed: expected from 1 to 6000 rpm "
                                   "(got 0.01)")
+
+
+UNIT = "rig/examples/units/seed000-pair1.json"
+
+
+@pytest.mark.parametrize(("args", "expected"), [
+    # rig batch: 1e11 units ended in "internal error: MemoryError ... 745 GiB"
+    (["batch", UNIT, "-n", "100000000000"],
+     "Invalid value for '--samples' / '-n': expected from 1 to 1e+06 units (got 100000000000)"),
+    # ... 1e308 N·m printed a table of 2.15e+304 arcmin, and -5 % a band below zero
+    (["batch", UNIT, "--rated-torque", "1e308"],
+     "Invalid value for '--rated-torque': expected greater than 0 and at most 1e+07 N·m "
+     "(got 1e+308)"),
+    (["batch", UNIT, "--percent", "-5"],
+     "Invalid value for '--percent': expected greater than 0 and at most 100 % of rated "
+     "(got -5.0)"),
+    (["batch", UNIT, "--seed", "-1"],
+     "Invalid value for '--seed': expected from 0 to 9.22337e+18 (got -1)"),
+    (["model", UNIT, "--rated-torque", "nan"],
+     "Invalid value for '--rated-torque': expected greater than 0 and at most 1e+07 N·m "
+     "(got nan)"),
+    (["model", UNIT, "--pct", "inf"],
+     "Invalid value for '--pct': expected greater than 0 and at most 100 % of rated (got inf)"),
+    (["montecarlo", "-n", "0"],
+     "Invalid value for '--samples' / '-n': expected from 2 to 1e+07 samples (got 0)"),
+    (["montecarlo", "--window-revs", "inf"],
+     "Invalid value for '--window-revs': expected greater than 0 and at most 100 output "
+     "revolutions (got inf)"),
+    (["rotor", "--elements", "100000"],
+     "Invalid value for '--elements': expected from 2 to 96 elements (got 100000)"),
+    (["rotor", "--disc-at", "2"],
+     "Invalid value for '--disc-at': expected from 0 to 1 of the shaft's length (got 2.0)"),
+    # click's own min/max let NaN through (every comparison with NaN is false)
+    (["diagnose", "rig/examples", "--alpha", "nan"],
+     "Invalid value for '--alpha': expected from 1e-06 to 0.5 (got nan)"),
+    (["sim", "--sync-period", "nan"],
+     "Invalid value for '--sync-period': expected from 0.0005 to 1 s (got nan)"),
+    (["te-calibrate", "a", "b", "--indexed-by", "1e9"],
+     "Invalid value for '--indexed-by': expected from -360 to 360 deg (got 1000000000.0)"),
+])
+def test_model_and_statistics_commands_refuse_absurd_options(args: list[str],
+                                                             expected: str) -> None:
+    """Issue 33 item 5, the commands that were left: one line naming the option and its
+    range (rig/core/ranges.py), exit 2, before any work starts."""
+    from tests.support.paths import REPO
+
+    res = subprocess.run([sys.executable, "-m", "rig", *args], capture_output=True, text=True,
+                         timeout=60, cwd=REPO, env={**os.environ, "COLUMNS": "200"})
+    assert res.returncode == 2, res.stdout[-500:] + res.stderr[-500:]
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and expected in lines[0], res.stderr
+    assert "Traceback" not in res.stderr and res.stdout == ""

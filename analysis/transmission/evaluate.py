@@ -223,7 +223,7 @@ def evaluate(theta: np.ndarray, inp: np.ndarray, te: np.ndarray, model: OrderMod
         if filled.sum() < 2:
             raise AnalysisError("too few samples for the residual bins")
         resid_grid = np.interp(grid[sub], mean_t[filled], mean_r[filled])
-        out.append((fitted[sub] + resid_grid))
+        out.append(fitted[sub] + resid_grid)
         noise.append((mean_t[filled], std / np.sqrt(counts[filled]), grid[sub]))
         if info is None:
             empty = ~filled

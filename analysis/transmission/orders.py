@@ -227,11 +227,12 @@ def fit_orders(output_deg: np.ndarray, input_deg: np.ndarray, te_arcsec: np.ndar
 
 def nuisance_orders(named: list[Order], span_revolutions: float) -> list[Order]:
     """Whole orders of the output revolution next to each named order that is not whole
-    (``floor(f) - 2 .. ceil(f) + 2``: a tapered fit's main lobe), fitted with the named ones but not reported: over whole
-    output revolutions they take the content of the output's whole orders (e.g. a gear's
+    (``floor(f) - 2 .. ceil(f) + 2``: a tapered fit's main lobe), fitted with the named ones
+    but not reported: they take the content of the output's whole orders (e.g. a gear's
     pitch errors) that would otherwise leak into the non-whole order beside them (issue 32
     item 4). A whole order closer than :data:`NUISANCE_MIN_SEPARATION` cycles over the
-    record to the non-whole one is left out (the two could not be told apart)."""
+    record (``span_revolutions``) to the non-whole one is left out (the two could not be
+    told apart)."""
     taken = {round(abs(o.frequency), 9) for o in named}
     out: list[Order] = []
     for o in named:

@@ -2,24 +2,32 @@
 
 The metric names are those of docs/run-format.md ("A transmission error run"): ``te_pp_arcsec``
 (GB/T 35089 transmission accuracy, the larger direction), ``te_pp_forward_arcsec``,
-``te_pp_reverse_arcsec``, ``te_total_Fi_arcsec`` (ISO 1328-1 F'_i), ``te_tooth_fi_arcsec``
-(ISO 1328-1 f'_i over one output tooth pitch), ``te_hysteresis_arcmin`` and ``te_orders``.
+``te_pp_reverse_arcsec``, ``te_total_Fi_arcsec`` (ISO 1328-1:2013 F_is, the larger flank's
+worst single revolution), ``te_total_Fi_forward_arcsec`` / ``_reverse`` (per flank),
+``te_tooth_fi_arcsec`` (the project's f'_i over exactly one output tooth pitch),
+``te_tooth_fi_short_wave_arcsec`` (ISO 1328-1:2013 f_is: the same after the orders below
+``z / 2`` are removed), ``te_hysteresis_arcmin`` and ``te_orders``.
+
+The curve (issue 32, :mod:`analysis.transmission.evaluate`): every named order fitted jointly
+on the samples and evaluated exactly, plus the residual averaged in bins of a few samples; no
+1-degree bins. Holes left by rows without a finite angle are never bridged.
 
 Standard uncertainties (arcsec unless named):
 
 - encoder resolution: a reading of a ``N``-count encoder is within half a count, uniform:
   ``q / sqrt(12)`` with ``q = 1296000 / N`` arcsec; the input's divided by ``|i|``. Quantisation
-  of a slowly turning shaft is systematic, so it is not divided by the samples averaged;
-- sampling: the spread ``s`` of the samples about their bin means, divided by the root of the
-  samples averaged in the bin;
-- a TE value ``u_p = sqrt(s^2 / n + u_q^2)``; a peak-to-peak, a difference of two values:
-  ``sqrt(2) u_p``;
+  of a slowly turning shaft is systematic, so it is not divided by the samples averaged; a
+  peak-to-peak (a difference of two values) carries it twice;
+- noise: the spread of the figure under the residual bins' own noise (a parametric bootstrap,
+  :func:`analysis.transmission.evaluate.noise_bias`), whose mean shift, the bias an extreme
+  value takes from the noise, is taken away (a quarter of it stays in the budget);
+- the method: the figure again on a grid of half the points with residual bins twice as wide;
+  the difference is carried as the method's remaining bias (``te_evaluation``);
 - encoder mounting eccentricity (:mod:`analysis.transmission.eccentricity`): the uncertainty
   ``u_e`` of the removed term (or, when none was removed, a declared bound ``b`` as ``b/sqrt(3)``)
   adds ``sqrt(2) u_e`` to the peak-to-peak figures and ``u_e`` to the output order 1;
-- orders: the least-squares covariance scaled by the residual variance; fitted on the
-  complete output revolutions of each direction (the span of the grid), so that the orders of
-  the output revolution are orthogonal and content the fit does not name does not leak in.
+- orders: the least-squares covariance scaled by the residual variance (a tapered fit's
+  sandwich for the orders that are not whole).
 """
 
 from __future__ import annotations
@@ -224,6 +232,8 @@ def analyse_te(
     if not mesh_per_input and teeth:
         # the output gear's teeth pass the mesh once each per output revolution
         mesh_per_input = float(teeth) / abs(ratio)
+        notes.append(f"tooth mesh: the output's {teeth} teeth, {teeth} per output revolution "
+                     "(orders per mesh)")
     orders = standard_orders(ratio, crank_per_input=kinematics.crank_per_input,
                              mesh_per_input=mesh_per_input, harmonics=harmonics,
                              extra=kinematics.extra_orders)

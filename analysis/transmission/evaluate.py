@@ -114,8 +114,10 @@ def revolutions_between_holes(theta: np.ndarray, holes: list[Hole], step_deg: fl
     stretches.append((at, hi_all))
     best: tuple[int, float, float] | None = None
     for lo, hi in stretches:
-        first = math.ceil(lo / step_deg - 1e-9)
-        steps = math.floor(hi / step_deg + 1e-9) - first
+        # grid cells touched by the stretch (a record of 360 deg less one sample spacing is
+        # one revolution, as the bins of before counted it)
+        first = math.floor(lo / step_deg)
+        steps = math.floor(hi / step_deg) - first + 1
         revs = steps // n_eval
         if revs >= 1 and (best is None or (revs, hi - lo) > (best[0], best[2] - best[1])):
             best = (revs, lo, hi)
@@ -123,8 +125,8 @@ def revolutions_between_holes(theta: np.ndarray, holes: list[Hole], step_deg: fl
     if best is None:
         return 0.0, 0, notes
     revs, lo, hi = best
-    first = math.ceil(lo / step_deg - 1e-9)
-    steps = math.floor(hi / step_deg + 1e-9) - first
+    first = math.floor(lo / step_deg)
+    steps = math.floor(hi / step_deg) - first + 1
     start = (first + (steps - revs * n_eval) // 2) * step_deg
     if holes:
         notes.append(f"revolutions used: output {start:.2f} .. {start + revs * 360.0:.2f} deg "

@@ -313,7 +313,8 @@ def kinematics_for_unit(unit: Mapping[str, Any], ratio: float) -> Kinematics:
     if kin is None:
         teeth = unit.get("output_teeth")
         return Kinematics(ratio=ratio, output_teeth=int(teeth) if teeth else None,
-                          notes=("unit geometry unknown: orders per output and input only",))
+                          notes=("unit geometry unknown: orders per output and input, and the "
+                                 "tooth mesh when output_teeth is given",))
     return Kinematics(ratio=ratio, output_teeth=kin.output_teeth,
                       crank_per_input=kin.crank_per_input, mesh_per_input=kin.mesh_per_input,
                       extra_orders=kin.extra_orders, notes=kin.notes)

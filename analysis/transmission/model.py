@@ -102,25 +102,48 @@ def _summarise(name: str, kin: Kinematics, grid_out_deg: np.ndarray, grid_in_deg
     orders = standard_orders(kin.ratio, crank_per_input=kin.crank_per_input,
                              mesh_per_input=kin.mesh_per_input, harmonics=harmonics,
                              extra=kin.extra_orders)
-    width = (max(2, int(round(grid_out_deg.size / kin.output_teeth)) + 1)
-             if kin.output_teeth else None)
+    teeth = kin.output_teeth
+
+    def on_pitch_grid(c: np.ndarray) -> np.ndarray:
+        # one revolution resampled (periodic) to a whole number of points per output pitch,
+        # so that f'_i's window is exactly one pitch (issue 32 item 2)
+        c = np.atleast_2d(c)
+        n = c.shape[1]
+        if not teeth or n % teeth == 0:
+            return c
+        m = int(teeth * math.ceil(n / teeth))
+        x = np.arange(n) / n
+        xs = np.arange(m) / m
+        return np.vstack([np.interp(xs, x, row, period=1.0) for row in c])
+
+    def short_wave(c: np.ndarray) -> np.ndarray:
+        # ISO 1328-1:2013 f_is: orders below z / 2 removed (one periodic revolution)
+        spec = np.fft.rfft(c, axis=1)
+        spec[:, np.arange(spec.shape[1]) < (teeth or 0) / 2.0] = 0.0
+        return np.fft.irfft(spec, c.shape[1], axis=1)
 
     def figures(curves: dict[int, np.ndarray]) -> dict[str, np.ndarray]:
         pp = {s: np.ptp(np.atleast_2d(c), axis=1) for s, c in curves.items()}
         same = curves[1] is curves[-1]
         fig = {"te_pp_forward_arcsec": pp[1], "te_pp_reverse_arcsec": pp[-1],
                "te_pp_arcsec": np.maximum(pp[1], pp[-1]),
+               "te_total_Fi_forward_arcsec": pp[1], "te_total_Fi_reverse_arcsec": pp[-1],
                "te_total_Fi_arcsec": np.maximum(pp[1], pp[-1])}
-        if width:
-            fwd = _sliding_range(np.atleast_2d(curves[1]), width)
-            fig["te_tooth_fi_arcsec"] = fwd if same else np.maximum(
-                fwd, _sliding_range(np.atleast_2d(curves[-1]), width))
+        if teeth:
+            for key, transform in (("te_tooth_fi_arcsec", lambda c: c),
+                                   ("te_tooth_fi_short_wave_arcsec", short_wave)):
+                vals = []
+                for s in ((1,) if same else (1, -1)):
+                    c = transform(on_pitch_grid(curves[s]))
+                    vals.append(_sliding_range(c, c.shape[1] // teeth + 1))
+                fig[key] = vals[0] if same else np.maximum(vals[0], vals[1])
         return fig
 
     solver = np.linalg.pinv(_order_basis(orders, grid_out_deg, grid_in_deg, kin))
     nom = figures(nominal)
     metrics: dict[str, float | None] = {k: float(v[0]) for k, v in nom.items()}
     metrics.setdefault("te_tooth_fi_arcsec", None)
+    metrics.setdefault("te_tooth_fi_short_wave_arcsec", None)
     metrics["te_hysteresis_arcmin"] = hysteresis_arcmin
     order_list = []
     for s in (1, -1):
@@ -290,7 +313,8 @@ def kinematics_for_unit(unit: Mapping[str, Any], ratio: float) -> Kinematics:
     if kin is None:
         teeth = unit.get("output_teeth")
         return Kinematics(ratio=ratio, output_teeth=int(teeth) if teeth else None,
-                          notes=("unit geometry unknown: orders per output and input only",))
+                          notes=("unit geometry unknown: orders per output and input, and the "
+                                 "tooth mesh when output_teeth is given",))
     return Kinematics(ratio=ratio, output_teeth=kin.output_teeth,
                       crank_per_input=kin.crank_per_input, mesh_per_input=kin.mesh_per_input,
                       extra_orders=kin.extra_orders, notes=kin.notes)

@@ -107,7 +107,10 @@ TE_ROWS: tuple[tuple[str, str, str], ...] = (
     ("te_pp_forward_arcsec", "  forward", "arcsec"),
     ("te_pp_reverse_arcsec", "  reverse", "arcsec"),
     ("te_total_Fi_arcsec", "F'i (ISO 1328)", "arcsec"),
+    ("te_total_Fi_forward_arcsec", "  forward", "arcsec"),
+    ("te_total_Fi_reverse_arcsec", "  reverse", "arcsec"),
     ("te_tooth_fi_arcsec", "f'i (ISO 1328)", "arcsec"),
+    ("te_tooth_fi_short_wave_arcsec", "f_is (short-wave)", "arcsec"),
     ("te_hysteresis_arcmin", "hysteresis", "arcmin"),
 )
 """The table's rows of a transmission error run."""

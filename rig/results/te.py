@@ -109,11 +109,14 @@ class TERunAnalysis:
             "input_speed_rpm": test.get("input_speed_rpm"),
             "output_teeth": self.result.output_teeth,
             "grid_points_per_rev": self.result.grid_points,
+            "te_evaluation": dict(self.result.evaluation),
             "revolutions": {c.name: c.revolutions for c in self.result.curves.values()},
             "n_samples": self.run.n_samples,
             "errors": dict(self.result.errors),
             "assumptions": list(self.assumptions) + list(self.result.notes),
-            "notes": list(self.run.notes),
+            "notes": list(self.run.notes) + [n for n in self.result.notes
+                                             if "dropped" in n or "hole" in n
+                                             or "left out" in n or "stalled" in n],
         })
 
     def result_record(self) -> dict[str, Any]:
@@ -126,6 +129,8 @@ class TERunAnalysis:
         record["model"] = None if self.prediction is None else self.prediction.to_dict()
         record["encoder_eccentricity"] = self.result.encoder_eccentricity
         record["errors"] = dict(self.result.errors)
+        record["te_evaluation"] = dict(self.result.evaluation)
+        record["notes"] = list(self.result.notes)
         return finite_for_json(record)
 
     def te_frame(self) -> pd.DataFrame:

@@ -76,8 +76,12 @@ def test_run_te_is_a_dataframe_and_rig_analyse_the_cli_json(te_folder: Path) -> 
     assert frame["output_angle_deg"].is_monotonic_increasing
     assert frame["output_angle_deg"].iloc[-1] < 360.0
     d = rig.analyse(run).to_dict()
-    assert d["metrics"]["te_total_Fi_arcsec"] == pytest.approx(
-        max(np.ptp(frame["te_forward_arcsec"]), np.ptp(frame["te_reverse_arcsec"])))
+    # one revolution each way: F_is is that revolution's max - min, less the noise's bias on
+    # an extreme (issue 32: te_evaluation says how much was taken away)
+    removed = d["te_evaluation"]["noise_bias_removed_arcsec"]
+    assert d["metrics"]["te_total_Fi_arcsec"] == pytest.approx(max(
+        np.ptp(frame[f"te_{name}_arcsec"]) - removed[f"te_total_Fi_{name}_arcsec"]
+        for name in ("forward", "reverse")))
     assert rig.analyse(te_folder).to_dict()["metrics"] == d["metrics"]
     row = run.results().iloc[0]
     assert row["test_kind"] == "transmission_error"

@@ -343,6 +343,16 @@ class Message(BaseModel):
     message: str
 
 
+class InputLockAnswer(Message):
+    """The answer to an input lock: at once, whatever the move's length. ``moving`` True
+    (HTTP 202): the motor is turning to ``target_deg`` (deg); its progress comes on the live
+    stream (``input_lock`` events) and in ``/api/status`` (``input_lock.moving``), and the lock
+    is confirmed when it ends. False: done (locked, or confirmed by the operator)."""
+
+    moving: bool = False
+    target_deg: float | None = None
+
+
 class TareResult(BaseModel):
     """The torque transducer's stored tare offset (N*m) after taring."""
 
@@ -407,12 +417,23 @@ class FaultOut(BaseModel):
     detail: str
 
 
+class InputLockMove(BaseModel):
+    """The input motor turning to the lock angle: target and angle now (deg)."""
+
+    target_deg: float
+    angle_deg: float | None = None
+
+
 class InputLock(BaseModel):
     """Whether the operator confirmed the input lock (a run may start only then)."""
 
     confirmed: bool
     angle_deg: float | None
     by_motor: bool
+    moving: InputLockMove | None = None
+    """The motor turning to the lock angle now (None: not moving)."""
+    failed: str | None = None
+    """Why the last lock move failed (None: it did not, or a later one succeeded)."""
 
 
 class LatchedFault(BaseModel):

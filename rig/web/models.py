@@ -542,6 +542,24 @@ class LoopData(BaseModel):
     status: str | None = None
 
 
+class TEData(BaseModel):
+    """A stored transmission error run for drawing, as the page draws it live: the raw TE
+    (arcsec, docs/run-format.md, before each direction's mean) against the output angle (deg)
+    and the direction (+1 forward, -1 reverse) of each row of the turns, decimated; and the
+    run's recorded ``result`` (``te_pp_arcsec`` ...), verdict and limits."""
+
+    run_id: str
+    n_samples: int
+    output_deg: list[float | None]
+    te_arcsec: list[float | None]
+    direction: list[float | None]
+    result: dict[str, Any]
+    outcome: str | None = None
+    verdict: str | None = None
+    limits: dict[str, Any] | None = None
+    status: str | None = None
+
+
 class CampaignSummary(BaseModel):
     """One campaign of the store: status, its meta and results summary."""
 

@@ -10,7 +10,8 @@ TE panel (TE against the output angle, the whole turn 0-360 deg) in the loop pan
 live and after a reload, never a loop; at 390 px nothing scrolls sideways and the plot fits
 the width; a later lost-motion run hides the TE panel again. Item 7: the input lock to
 -1080 deg (3 s of turning) answers at once, the page shows the input moving, then the lock
-confirmed."""
+confirmed. History: the TE run clicked shows its stored TE (``GET /api/runs/ID/te``), the
+loop run its loop."""
 
 from __future__ import annotations
 
@@ -50,11 +51,13 @@ def serve_rig(rig_toml: Path, store: Path):
 PHONE = (390, 844)
 
 
-def te_shown_not_loop(page) -> None:
-    """The TE panel shown, the loop panel not (nor its 'not measured' texts), no loop drawn."""
+def te_shown_not_loop(page, no_loop_yet: bool = True) -> None:
+    """The TE panel shown, the loop panel not (nor its 'not measured' texts); ``no_loop_yet``:
+    no loop drawn either (before any loop run)."""
     expect(page.locator("#te-panel")).to_be_visible(timeout=30_000)
     expect(page.locator("#loop-panel")).to_be_hidden()
-    assert page.evaluate("window.rigStats.points || 0") == 0  # no TE row went into a loop
+    if no_loop_yet:
+        assert page.evaluate("window.rigStats.points || 0") == 0  # no TE row in a loop
 
 
 def fits_the_width(page) -> None:
@@ -172,8 +175,26 @@ def test_operator_measures_the_transmission_error(tmp_path: Path):
         for p in (phone, page):
             expect(p.locator("#loop-panel")).to_be_visible()
             expect(p.locator("#te-panel")).to_be_hidden()
-            assert p.evaluate("window.rigStats.points || 0") > 10  # the loop drawn
-        assert get_json(url + "api/runs")[0]["run_id"] != run_id
+            expect(p.locator("#metrics-title")).to_contain_text(" completed")  # its result
+        loop_run = get_json(url + "api/runs")[0]["run_id"]
+        assert loop_run != run_id
+
+        # History: the TE run shows its stored curve and figures in the TE panel, the loop
+        # run its loop
+        for p in (page, phone):
+            p.click(f"#runs a[data-run='{run_id}']")
+            expect(p.locator("#te-title")).to_contain_text(f"stored: {run_id}", timeout=30_000)
+            te_shown_not_loop(p, no_loop_yet=False)
+            assert p.evaluate("window.rigStats.te_points") > 300
+            expect(p.locator("#te-pp")).to_have_text(f"{shown:.1f}")
+            expect(p.locator("#te-verdict")).to_have_text("OK")
+        fits_the_width(phone)
+        for p in (page, phone):
+            p.click(f"#runs a[data-run='{loop_run}']")
+            expect(p.locator("#loop-title")).to_contain_text(f"stored: {loop_run}",
+                                                             timeout=30_000)
+            expect(p.locator("#loop-panel")).to_be_visible()
+            expect(p.locator("#te-panel")).to_be_hidden()
         assert not errors, errors
         assert not phone_errors, phone_errors
         browser.close()

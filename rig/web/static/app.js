@@ -1150,6 +1150,8 @@ function wire() {
   $("reset-faults").addEventListener("click", () => run("reset faults", () =>
     api("POST", "/api/devices/reset-faults", { operator: operatorName() })));
   $("lock").addEventListener("click", () => run("input lock", () => {
+    $("start").disabled = true;   // not confirmed while the input moves to its angle
+    $("lock-state").textContent = "locking …";
     const a = num($("lock-angle").value);
     return api("POST", "/api/devices/input-lock", a === null ? { confirm: true } : { angle_deg: a, confirm: true });
   }));
@@ -1343,6 +1345,33 @@ function showTEResult(run, limits) {
     : "raw TE (docs/run-format.md), nothing removed";
 }
 
+// A run clicked in History: a TE run shows its stored curve and figures in the TE panel
+// (GET /api/runs/ID/te), any other run or a campaign the loop panel (showStoredRun draws it)
+function wireStoredTE() {
+  $("runs").addEventListener("click", (e) => {
+    const a = e.target.closest("a[data-run]");
+    if (a) showStoredTE(a.dataset.run).catch((err) => notice(err.message, true));
+  });
+  $("campaigns").addEventListener("click", (e) => {
+    if (e.target.closest("a[data-campaign]")) showTEMode(false);
+  });
+}
+
+async function showStoredTE(runId) {
+  const id = encodeURIComponent(runId);
+  const d = await api("GET", `/api/runs/${id}`);
+  if (((d.meta && d.meta.test) || {}).kind !== TE_TEST) { showTEMode(false); return; }
+  if (!live.stored) live.stored = { T: [], W: [], M: null };   // a stored run is shown: not the last result
+  const t = await api("GET", `/api/runs/${id}/te?max_points=5000`);
+  resetTE(true);
+  te.runId = runId;
+  addTERows({ type: "stored", run_id: runId, output_deg: t.output_deg, te_arcsec: t.te_arcsec,
+    direction: t.direction });
+  showTEResult({ ...t.result, outcome: t.outcome, run_id: runId }, t.limits || {});
+  $("te-title").textContent = `stored: ${runId} ${t.status || ""}`;
+  reveal($("te-panel"));
+}
+
 // ---------------------------------------------------------------- input lock
 // A lock move answers at once; the input's angle comes on the live stream (input_lock
 // events) and in the status until it is locked or fails (issue 33 item 7)
@@ -1362,6 +1391,7 @@ function onInputLock(ev) {
   if (ev.state === "moving") {
     showLockState({ moving: { target_deg: ev.target_deg, angle_deg: ev.angle_deg } });
     $("lock").disabled = true;
+    $("start").disabled = true;
   } else {
     notice("input lock: " + (ev.message || ev.state), ev.state === "failed");
     refreshStatus();
@@ -1372,6 +1402,7 @@ async function init() {
   plot = makePlot();
   tePlot = makeTEPlot();
   window.addEventListener("resize", sizeTEPlot);
+  wireStoredTE();
   showTestFields();
   window.rigPage = { plot, live, scheduleDraw, addRows, tePlot };
   wire();

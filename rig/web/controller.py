@@ -51,6 +51,11 @@ log = logging.getLogger(__name__)
 PREVIEW_LINES = 400
 MONITOR_PERIOD_S = 0.5
 LIVE_METRICS_PERIOD_S = 2.0
+LOCK_ANSWER_S = 0.5
+"""An input lock answers when its move ends within this (s), else at once with ``moving``:
+a lock to +-3599 deg turns for 10-20 s (issue 33 item 7)."""
+LOCK_PROGRESS_PERIOD_S = 0.25
+"""The input angle of a lock move is sent to the pages this often (s)."""
 
 SessionFactory = Callable[[], AbstractContextManager[RigSession]]
 UnitSessionFactory = Callable[[dict[str, Any]], AbstractContextManager[RigSession]]
@@ -289,6 +294,12 @@ class RigController:
         self._lock_confirmed = False
         self._lock_angle: float | None = None
         self._lock_by_motor = False
+        self._lock_move: dict[str, Any] | None = None
+        """The input motor turning to the lock angle now: target, angle (deg), its end."""
+        self._lock_move_result: tuple[bool, str] = (False, "")
+        """The last lock move's end: (failed, what the answer says)."""
+        self._lock_failed: str | None = None
+        self._lock_cancel: str | None = None
         self._twist_ref_arcmin: float | None = None
         """The output angle (arcmin) the twist is counted from: read at zero torque when the
         input lock is confirmed (before that, the first reading after the rig opened)."""
@@ -313,6 +324,7 @@ class RigController:
     def close(self) -> None:
         """Stop any measurement (safe state), stop the monitor, close the rig."""
         self._stop.set()
+        self._stop_lock_move("the control page was shut down")
         engine = self._engine
         if engine is not None:
             engine.abort("the control page was shut down")
@@ -492,6 +504,8 @@ class RigController:
         recorder = tap.recorder if tap is not None else None
         if recorder is None or recorder.finished:
             return
+        if ((recorder.meta.get("test") or {}).get("kind")) == TE_KIND:
+            return  # a transmission error run has no loop: its figures come at its end
         try:
             run = self.store.load_run(recorder.run_id)
             if run.n_samples < 50:
@@ -605,7 +619,11 @@ class RigController:
                     "run_label": progress.run_label, "run_id": progress.run_id},
                 "fault": None if (f := explain(self._fault_reason)) is None else f.to_dict(),
                 "input_lock": {"confirmed": self._lock_confirmed, "angle_deg": self._lock_angle,
-                               "by_motor": self._lock_by_motor},
+                               "by_motor": self._lock_by_motor,
+                               "moving": None if (m := self._lock_move) is None else {
+                                   "target_deg": m["target_deg"],
+                                   "angle_deg": m["angle_deg"]},
+                               "failed": self._lock_failed},
                 "current": None if self._current is None else dict(self._current),
                 "last_result": self._last_result,
                 "message": self.message,
@@ -650,6 +668,10 @@ class RigController:
             if self._busy():
                 raise ControlError(f"a measurement is already {self.state}: abort it first")
             self._refuse_if_faulted("start")
+            if self._lock_move is not None:
+                raise ControlError(f"the input is still moving to "
+                                   f"{self._lock_move['target_deg']:.3f} deg: start once it "
+                                   f"is locked")
             if not self._lock_confirmed:
                 raise ControlError("confirm the input lock first (Devices: Confirm input "
                                    "lock): a test may start only with the input locked")
@@ -676,7 +698,8 @@ class RigController:
             self.message = f"{req.kind} starting"
             self._fault_reason = None
             self._progress = None
-            self._current = {"kind": req.kind, "run_id": None, "campaign_id": None,
+            self._current = {"kind": req.kind, "test": req.test, "run_id": None,
+                             "campaign_id": None,
                              "plan": plan.name, "n_steps": len(steps),
                              "estimated_s": est.total_s,
                              "n_runs": est.n_runs, "measuring": None, "finished": []}
@@ -869,6 +892,7 @@ class RigController:
         """Safe state now, whatever the state: the engine's E-stop if a measurement runs,
         else zero torque and the drive disabled directly. Never refused."""
         reason = "E-stop pressed on the control page"
+        self._stop_lock_move(reason)
         with self._lock:
             engine = self._engine
             if engine is None and self._measuring:
@@ -899,6 +923,8 @@ class RigController:
         session = self._require_session()
         if self._busy():
             raise ControlError("cannot tare during a measurement")
+        if self._lock_move is not None:
+            raise ControlError("cannot tare while the input turns to its lock angle")
         transducer = session.devices.transducer
         if transducer is None:
             raise ControlError("the rig has no torque transducer to tare")
@@ -909,29 +935,133 @@ class RigController:
                 raise ControlError(f"tare refused: {exc}") from exc
         return float(offset)
 
-    def confirm_input_lock(self, req: InputLockRequest) -> str:
+    def confirm_input_lock(self, req: InputLockRequest) -> dict[str, Any]:
         """Lock the input with the motor (if any, at ``angle_deg``) and record the operator's
-        confirmation; ``confirm`` False withdraws it."""
+        confirmation; ``confirm`` False withdraws it. Answers within :data:`LOCK_ANSWER_S`
+        whatever the move's length (issue 33 item 7): a longer move goes on in
+        :meth:`_follow_lock_move` (``moving`` True in the answer), its progress on the live
+        stream (``input_lock`` events) and in the status; the lock is confirmed when it ends.
+        A second lock while the input moves is refused (ControlError)."""
         session = self._require_session()
         if self._busy():
             raise ControlError("cannot change the input lock during a measurement")
+        with self._lock:
+            move = self._lock_move
+        if move is not None:
+            raise ControlError(f"the input is already moving to {move['target_deg']:.3f} deg: "
+                               f"wait until it is locked (or press E-STOP to stop it)")
         if not req.confirm:
             with self._lock:
                 self._lock_confirmed = False
-            return "input lock confirmation withdrawn"
+            return {"ok": True, "message": "input lock confirmation withdrawn"}
         motor = session.devices.input_motor
-        angle = req.angle_deg
-        if motor is not None:
-            target = angle if angle is not None else motor.state().angle_deg
-            with self._device_lock:
-                try:
-                    state = motor.lock_at(target, 30.0)
-                except DeviceError as exc:
-                    raise ControlError(f"the input did not lock: {exc}") from exc
-            angle = state.angle_deg
+        if motor is None:
+            self._confirm_lock(session, req.angle_deg)
+            return {"ok": True, "message": "input lock confirmed by the operator"}
+        done = threading.Event()
+        with self._device_lock:
+            try:
+                target = (float(req.angle_deg) if req.angle_deg is not None
+                          else motor.state().angle_deg)
+                with self._lock:
+                    if self._lock_move is not None:  # another request got here first
+                        raise ControlError(f"the input is already moving to "
+                                           f"{self._lock_move['target_deg']:.3f} deg: wait "
+                                           f"until it is locked (or press E-STOP to stop it)")
+                    self._lock_confirmed = False  # the input moves: not locked meanwhile
+                    self._lock_failed = None
+                    self._lock_cancel = None
+                    self._lock_move = {"target_deg": target, "angle_deg": None, "done": done,
+                                       "result": None}
+                motor.start_lock_at(target)
+            except DeviceError as exc:
+                with self._lock:
+                    self._lock_move = None
+                raise ControlError(f"the input did not lock: {exc}") from exc
+        threading.Thread(target=self._follow_lock_move, args=(session, motor, target),
+                         name="rig web input lock", daemon=True).start()
+        self.hub.add_event({"type": "input_lock", "state": "moving", "target_deg": target,
+                            "angle_deg": None})
+        if done.wait(LOCK_ANSWER_S):  # a short move: its end is the answer
+            failed, text = self._lock_move_result
+            if failed:
+                raise ControlError(text)
+            return {"ok": True, "message": text}
+        return {"ok": True, "moving": True, "target_deg": target,
+                "message": f"the input is moving to {target:.3f} deg; it is confirmed once "
+                           f"locked (progress on the page and the live stream)"}
+
+    def _follow_lock_move(self, session: RigSession, motor: Any, target: float) -> None:
+        """Input lock thread: follow the motor to ``target`` (deg) until it reports LOCKED
+        there, sending its angle every :data:`LOCK_PROGRESS_PERIOD_S`; then confirm the
+        lock. A fault, a timeout (the motor's ``move_timeout_s``), an E-stop or the page
+        closing: the motor stops where it is, the drive goes to the safe state, the lock
+        stays unconfirmed and the reason is sent (``failed``)."""
+        config = getattr(motor, "config", None)
+        timeout_s = float(getattr(config, "move_timeout_s", 30.0))
+        tolerance = float(getattr(config, "lock_tolerance_deg", 0.01))
+        deadline = time.monotonic() + timeout_s
+        next_event = 0.0
+        angle: float | None = None
+        failure: str | None = None
+        try:
+            while True:
+                with self._lock:
+                    cancel = self._lock_cancel
+                if cancel is None and self._stop.is_set():
+                    cancel = "the control page was shut down"
+                if cancel is not None:
+                    failure = f"the input lock move was stopped: {cancel}"
+                    break
+                st = motor.state()
+                angle = st.angle_deg
+                if st.fault:
+                    failure = (f"the input motor reports a fault at {angle:.3f} deg while "
+                               f"turning to {target:.3f} deg")
+                    break
+                if st.locked and abs(angle - target) <= tolerance:
+                    break
+                if time.monotonic() > deadline:
+                    failure = (f"the input did not lock at {target:.3f} deg within "
+                               f"{timeout_s:g} s (it is at {angle:.3f} deg)")
+                    break
+                with self._lock:
+                    if self._lock_move is not None:
+                        self._lock_move["angle_deg"] = angle
+                if time.monotonic() >= next_event:
+                    next_event = time.monotonic() + LOCK_PROGRESS_PERIOD_S
+                    self.hub.add_event({"type": "input_lock", "state": "moving",
+                                        "target_deg": target, "angle_deg": angle})
+                time.sleep(0.05)
+        except DeviceError as exc:
+            failure = f"the input did not lock: {exc}"
+        except Exception as exc:  # a bug: the rig made safe all the same
+            log.exception("input lock move")
+            failure = f"the input did not lock: {type(exc).__name__}: {exc}"
+        if failure is None:
+            angle = self._confirm_lock(session, angle)
             text = f"input locked by the motor at {angle:.3f} deg"
         else:
-            text = "input lock confirmed by the operator"
+            with contextlib.suppress(DeviceError):
+                motor.stop()  # held where it is
+            session.devices.safe_state()
+            log.error("input lock failed: %s", failure)
+            text = failure
+        with self._lock:
+            move, self._lock_move = self._lock_move, None
+            self._lock_move_result = (failure is not None, text)
+            self._lock_failed = failure
+            if failure is not None:
+                self._lock_confirmed = False
+                self.message = f"input lock failed: {failure}"
+        self.hub.add_event({"type": "input_lock", "state": "failed" if failure else "done",
+                            "target_deg": target, "angle_deg": angle, "message": text})
+        if move is not None:
+            move["done"].set()
+
+    def _confirm_lock(self, session: RigSession, angle: float | None) -> float | None:
+        """The input is locked (at ``angle`` deg, None: by hand): the twist counts from the
+        output angle now (zero torque), and the lock is confirmed. Returns ``angle``."""
         ref = None
         with self._device_lock, contextlib.suppress(DeviceError):
             ref = settled_output_arcmin(session.devices.encoder)
@@ -940,4 +1070,17 @@ class RigController:
             self._lock_angle = angle
             if ref is not None and math.isfinite(ref):
                 self._twist_ref_arcmin = ref  # the twist counts from here (zero torque)
-        return text
+        return angle
+
+    def _stop_lock_move(self, reason: str) -> None:
+        """An input lock move in progress stops now (E-stop, shutdown): the motor is told to
+        stop where it is; the move's thread then ends it (safe state, ``failed``)."""
+        with self._lock:
+            moving = self._lock_move is not None
+            if moving:
+                self._lock_cancel = reason
+            session = self.session
+        motor = session.devices.input_motor if session is not None else None
+        if moving and motor is not None:
+            with contextlib.suppress(DeviceError):
+                motor.stop()

@@ -48,7 +48,7 @@ class TapRecorder:
         self._t0_wall = time.time()
         self.latest: tuple[float, ...] | None = None
         """The newest row: (t_s, torque_Nm, twist_arcmin, t_wall_s[, temperature_C])."""
-        hub.begin_run(recorder.run_id)
+        hub.begin_run(recorder.run_id, "transmission_error" if self._te is not None else None)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._recorder, name)

@@ -343,6 +343,16 @@ class Message(BaseModel):
     message: str
 
 
+class InputLockAnswer(Message):
+    """The answer to an input lock: at once, whatever the move's length. ``moving`` True
+    (HTTP 202): the motor is turning to ``target_deg`` (deg); its progress comes on the live
+    stream (``input_lock`` events) and in ``/api/status`` (``input_lock.moving``), and the lock
+    is confirmed when it ends. False: done (locked, or confirmed by the operator)."""
+
+    moving: bool = False
+    target_deg: float | None = None
+
+
 class TareResult(BaseModel):
     """The torque transducer's stored tare offset (N*m) after taring."""
 
@@ -407,12 +417,23 @@ class FaultOut(BaseModel):
     detail: str
 
 
+class InputLockMove(BaseModel):
+    """The input motor turning to the lock angle: target and angle now (deg)."""
+
+    target_deg: float
+    angle_deg: float | None = None
+
+
 class InputLock(BaseModel):
     """Whether the operator confirmed the input lock (a run may start only then)."""
 
     confirmed: bool
     angle_deg: float | None
     by_motor: bool
+    moving: InputLockMove | None = None
+    """The motor turning to the lock angle now (None: not moving)."""
+    failed: str | None = None
+    """Why the last lock move failed (None: it did not, or a later one succeeded)."""
 
 
 class LatchedFault(BaseModel):
@@ -517,6 +538,24 @@ class LoopData(BaseModel):
     (rig/results/outcome.py; None while running)."""
     verdict: str | None = None
     """The displayed word of ``outcome``: OK, NOT OK, INCOMPLETE, NO LIMITS."""
+    limits: dict[str, Any] | None = None
+    status: str | None = None
+
+
+class TEData(BaseModel):
+    """A stored transmission error run for drawing, as the page draws it live: the raw TE
+    (arcsec, docs/run-format.md, before each direction's mean) against the output angle (deg)
+    and the direction (+1 forward, -1 reverse) of each row of the turns, decimated; and the
+    run's recorded ``result`` (``te_pp_arcsec`` ...), verdict and limits."""
+
+    run_id: str
+    n_samples: int
+    output_deg: list[float | None]
+    te_arcsec: list[float | None]
+    direction: list[float | None]
+    result: dict[str, Any]
+    outcome: str | None = None
+    verdict: str | None = None
     limits: dict[str, Any] | None = None
     status: str | None = None
 

@@ -15,6 +15,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, HTTPException, Request
 from fastapi import Path as PathParam
+from fastapi.responses import JSONResponse
 
 from rig.core.errors import RigError
 from rig.plans.campaign_file import CampaignError
@@ -28,6 +29,7 @@ from rig.web.models import (
     CampaignSetup,
     CampaignUpload,
     ErrorBody,
+    InputLockAnswer,
     InputLockRequest,
     Message,
     PlanPreview,
@@ -162,12 +164,23 @@ def reset_faults(request: Request, _token: Operator,
     return _do(lambda: _controller(request).reset_faults(who))
 
 
-@router.post("/devices/input-lock", response_model=Message,
-             responses={**AUTH, **CONFLICT, **BAD_BODY},
-             summary="Lock the input (motor) and confirm it, or withdraw the confirmation")
-def input_lock(request: Request, body: InputLockRequest,
-               _token: Operator) -> dict[str, Any]:
-    return {"ok": True, "message": _do(lambda: _controller(request).confirm_input_lock(body))}
+@router.post("/devices/input-lock", response_model=InputLockAnswer,
+             responses={**AUTH, **CONFLICT, **BAD_BODY,
+                        202: {"model": InputLockAnswer,
+                              "description": "The input is moving to the lock angle "
+                                             "(``moving``): progress on /api/live "
+                                             "(``input_lock`` events) and /api/status; "
+                                             "confirmed when it is locked."}},
+             summary="Lock the input (motor) and confirm it, or withdraw the confirmation; "
+                     "answers at once (202 while the input still moves)")
+def input_lock(request: Request, body: InputLockRequest, _token: Operator) -> Any:
+    """A short move's answer is its end (200); a longer one (a lock at +-3599 deg turns for
+    10-20 s) answers at once with 202 and ``moving`` (issue 33 item 7). 409 while a lock
+    move or a measurement is under way."""
+    answer = _do(lambda: _controller(request).confirm_input_lock(body))
+    if answer.get("moving"):
+        return JSONResponse(InputLockAnswer(**answer).model_dump(), status_code=202)
+    return answer
 
 
 @router.get("/units", response_model=list[UnitExample],

@@ -39,6 +39,7 @@ from rig.web.models import (
     OutcomeWord,
     RunDetail,
     RunSummary,
+    TEData,
 )
 
 router = APIRouter(prefix="/api", tags=["history"])
@@ -143,6 +144,51 @@ def run_loop(request: Request, run_id: RunId,
         "model_twist_arcmin": model, "band_Nm": band, "metrics": metrics,
         "analysis_error": error, "outcome": outcome,
         "verdict": None if outcome is None else outcome_word(outcome),
+        "limits": run.meta.get("limits"), "status": run.meta.get("status"),
+    })
+
+
+@router.get("/runs/{run_id}/te", response_model=TEData,
+            responses={**NOT_FOUND, **UNPROCESSABLE},
+            summary="A transmission error run's TE against the output angle, for drawing "
+                    "(409 for a run of another test)")
+def run_te(request: Request, run_id: RunId,
+           max_points: Annotated[int, Query(ge=10, le=100_000)] = 5000) -> dict[str, Any]:
+    """What the page draws of a stored TE run (History): never a loop (issue 33 item 15)."""
+    import numpy as np
+
+    from rig.plans import TE_KIND
+    from rig.results.te_curve import te_arcsec
+
+    store = _store(request)
+    _run_info(store, run_id)
+    try:
+        run = store.load_run(run_id)
+    except RigError as exc:
+        raise HTTPException(409, f"run {run_id} cannot be read: {exc}") from exc
+    ratio = run.test.get("ratio")
+    if run.test.get("kind") != TE_KIND:
+        raise HTTPException(409, f"run {run_id} is not a transmission error run: its loop "
+                                 f"is GET /api/runs/{run_id}/loop")
+    inp = run.input_angle_deg
+    if (inp is None or "direction" not in run.data or not isinstance(ratio, int | float)
+            or not ratio):
+        raise HTTPException(409, f"run {run_id} has no input angle, direction or ratio: no "
+                                 f"transmission error to draw")
+    direction = run.data["direction"]
+    if not isinstance(direction, np.ndarray):
+        raise HTTPException(409, f"run {run_id}: its direction column is not numeric")
+    out = run.output_angle_deg
+    te = te_arcsec(out, inp, float(ratio))
+    turning = [i for i in range(run.n_samples) if direction[i] in (1.0, -1.0)]
+    keep = decimate(turning, max_points)
+    outcome = recorded_outcome(run.meta)
+    result = run.meta.get("result") if isinstance(run.meta.get("result"), dict) else {}
+    return json_safe({
+        "run_id": run_id, "n_samples": int(run.n_samples),
+        "output_deg": [float(out[i]) for i in keep], "te_arcsec": [float(te[i]) for i in keep],
+        "direction": [float(direction[i]) for i in keep], "result": result,
+        "outcome": outcome, "verdict": None if outcome is None else outcome_word(outcome),
         "limits": run.meta.get("limits"), "status": run.meta.get("status"),
     })
 

@@ -141,6 +141,7 @@ function drawNow() {
 }
 
 function addRows(msg) {
+  if (msg.te_arcsec) { addTERows(msg); return; }   // a TE run: its panel, never a loop
   if (msg.run_id && msg.run_id !== live.runId) { live.T = []; live.W = []; live.runId = msg.run_id; }
   live.stored = null;
   for (let i = 0; i < msg.torque_Nm.length; i++) {
@@ -152,7 +153,6 @@ function addRows(msg) {
     live.T.splice(0, live.T.length - MAX_POINTS);
     live.W.splice(0, live.W.length - MAX_POINTS);
   }
-  if (msg.te_arcsec) addTERows(msg);
   window.rigStats.batches += 1;
   window.rigStats.points = live.T.length;
   $("loop-title").textContent = live.runId ? "live: " + live.runId : "";
@@ -347,9 +347,7 @@ function renderStatus(s) {
   $("v-safe").textContent = s.safe === null ? "–" : (s.safe ? "yes" : "no");
   $("v-safe").className = "num " + (s.safe ? "pass" : "");
   const lock = s.input_lock;
-  $("lock-state").textContent = lock.confirmed
-    ? "confirmed" + (lock.angle_deg !== null ? " at " + fmt(lock.angle_deg, 2) + " deg" : "")
-    : "not confirmed";
+  showLockState(lock);
   // progress
   const p = s.progress;
   const busy = ["running", "paused", "stopping"].includes(s.state);
@@ -396,12 +394,13 @@ function renderStatus(s) {
   $("resume").disabled = !op || s.state !== "paused";
   $("abort").disabled = !op || !busy;
   $("tare").disabled = !op || busy || !connected;
-  $("lock").disabled = !op || busy || !connected;
+  $("lock").disabled = !op || busy || !connected || !!lock.moving;
   // while measuring, the panel shows the run measured now or nothing (never the last result)
   const nowRun = (s.current && s.current.run_id) || (p && p.run_id) || null;
   if (busy && shown.key !== "live:" + nowRun)
     clearResult("live:" + nowRun, nowRun ? `run ${nowRun}: measuring` : "measurement starting");
   // a stored run drawn from the history keeps its own numbers beside it
+  if (busy && s.current && s.current.test) showTEMode(s.current.test === TE_TEST);
   if (s.last_result && !busy && !live.stored) renderResult(s.last_result);
 }
 
@@ -549,6 +548,7 @@ function renderResult(r) {
   $("m-verdict").innerHTML = verdict;   // the verdict of what the title names
   const teRun = runs.filter((x) => x.te_raw || x.test_kind === "transmission_error").pop();
   if (teRun) showTEResult(teRun, r.limits || teRun.limits || {});
+  showTEMode(!!teRun);   // a later loop run hides an earlier TE run's panel
 }
 
 // The run of a campaign with the largest lost motion (completed runs; a figure below zero is
@@ -586,6 +586,7 @@ function connectLive() {
   es.addEventListener("run_begin", (e) => {
     const m = JSON.parse(e.data);
     live.T = []; live.W = []; live.runId = m.run_id; live.stored = null;
+    showTEMode(m.test === TE_TEST);
     clearResult("live:" + m.run_id, `run ${m.run_id}: measuring`);
     scheduleDraw();
   });
@@ -608,6 +609,7 @@ function connectLive() {
   });
   es.addEventListener("state", () => { refreshStatus(); refreshHistory(); });
   es.addEventListener("status", () => refreshStatus());
+  es.addEventListener("input_lock", (e) => onInputLock(JSON.parse(e.data)));
   window.rigEvents = es;
 }
 
@@ -1148,6 +1150,8 @@ function wire() {
   $("reset-faults").addEventListener("click", () => run("reset faults", () =>
     api("POST", "/api/devices/reset-faults", { operator: operatorName() })));
   $("lock").addEventListener("click", () => run("input lock", () => {
+    $("start").disabled = true;   // not confirmed while the input moves to its angle
+    $("lock-state").textContent = "locking …";
     const a = num($("lock-angle").value);
     return api("POST", "/api/devices/input-lock", a === null ? { confirm: true } : { angle_deg: a, confirm: true });
   }));
@@ -1161,7 +1165,7 @@ function wire() {
     live.T = []; live.W = []; live.stored = null; live.finished = null;
     resetTE(request().test === "transmission_error");
     clearResult("starting", "measurement starting");
-    reveal($("loop-panel"));   // the progress and the loop, wherever the Start button was
+    reveal($(teMode ? "te-panel" : "loop-panel"));   // the progress and the loop (or TE), wherever the Start button was
     return answer;
   }));
   // the state badge: tapped, it shows the fault and Reset faults (else the loop)
@@ -1237,15 +1241,18 @@ async function logIn() {
 // (docs/run-format.md), each direction less its running mean (c_d); the rig sends the raw
 // TE of each recorded row (rig/web/live_tap.py). After the run: the figures of the run's
 // analysis (rig/results/te.py), its limits and the verdict.
-const te = { F: [[], []], R: [[], []], sumF: 0, nF: 0, sumR: 0, nR: 0 };
+const te = { F: [[], []], R: [[], []], sumF: 0, nF: 0, sumR: 0, nR: 0, runId: null };
 let tePlot = null;
+const TE_TEST = "transmission_error";
+const TE_PLOT_HEIGHT = 320;
 
 function makeTEPlot() {
   const el = $("te-plot");
-  const facets = [{ scale: "x", auto: true }, { scale: "y", auto: true }];
+  // the whole output turn always (0-360 deg), whatever part of it is measured yet
+  const facets = [{ scale: "x", auto: false }, { scale: "y", auto: true }];
   return new uPlot({
-    mode: 2, width: plotWidth(el), height: 320, title: "",
-    scales: { x: { time: false }, y: {} },
+    mode: 2, width: plotWidth(el), height: TE_PLOT_HEIGHT, title: "",
+    scales: { x: { time: false, auto: false, range: [0, 360] }, y: {} },
     axes: [axis("output angle (deg)"), axis("transmission error (arcsec)")],
     legend: { show: true, live: false },
     series: [{},
@@ -1258,17 +1265,42 @@ function makeTEPlot() {
 function showTestFields() {
   const f = $("setup");
   f.dataset.test = f.elements.test.value;
-  $("te-panel").hidden = f.elements.test.value !== "transmission_error" && !te.nF && !te.nR;
+}
+
+// A transmission error run is shown in the TE panel, in the loop panel's place (top right,
+// pinned); a loop run in the loop panel: never the one drawn as the other (issue 33 item 15).
+// The progress bar and the campaign line go with the panel shown.
+let teMode = false;
+function showTEMode(on) {
+  teMode = !!on;
+  $("loop-panel").hidden = teMode;
+  $("te-panel").hidden = !teMode;
+  const host = teMode ? $("te-panel") : $("loop-panel");
+  if ($("progress").parentElement !== host)
+    host.querySelector("h2").after($("progress"), $("campaign-now"));
+  if (teMode) sizeTEPlot();
+}
+
+// The TE plot as wide as its panel (it was made while hidden, at no width)
+function sizeTEPlot() {
+  if (!tePlot || $("te-panel").hidden) return;
+  const width = plotWidth($("te-plot"));
+  if (Math.abs(width - tePlot.width) > 1) tePlot.setSize({ width, height: TE_PLOT_HEIGHT });
 }
 
 function resetTE(show) {
-  te.F = [[], []]; te.R = [[], []]; te.sumF = te.sumR = 0; te.nF = te.nR = 0;
+  te.F = [[], []]; te.R = [[], []]; te.sumF = te.sumR = 0; te.nF = te.nR = 0; te.runId = null;
   for (const id of ["te-pp", "te-pp-u", "te-pp-dirs", "te-hyst", "te-limit", "te-verdict", "te-note"]) $(id).textContent = "";
-  if (show) $("te-panel").hidden = false;
+  $("te-title").textContent = "";
+  showTEMode(show);
   drawTE();
 }
 
 function addTERows(msg) {
+  if (msg.run_id && msg.run_id !== te.runId) {   // another run (a campaign's next): its own curve
+    resetTE(true);
+    te.runId = msg.run_id;
+  }
   for (let i = 0; i < msg.te_arcsec.length; i++) {
     const d = msg.direction[i], v = msg.te_arcsec[i], a = msg.output_deg[i];
     if (v === null || a === null || !d) continue;
@@ -1276,8 +1308,10 @@ function addTERows(msg) {
     if (d > 0) { te.F[0].push(x); te.F[1].push(v); te.sumF += v; te.nF += 1; }
     else { te.R[0].push(x); te.R[1].push(v); te.sumR += v; te.nR += 1; }
   }
-  $("te-panel").hidden = false;
-  $("te-title").textContent = msg.run_id ? "live: " + msg.run_id : "";
+  showTEMode(true);
+  if (msg.type === "rows") $("te-title").textContent = msg.run_id ? "live: " + msg.run_id : "";
+  else if (!$("te-title").textContent) $("te-title").textContent = msg.run_id || "";
+  window.rigStats.batches += 1;
   drawTE();
 }
 
@@ -1289,7 +1323,6 @@ function drawTE() {
 }
 
 function showTEResult(run, limits) {
-  $("te-panel").hidden = false;
   const raw = run.te_raw || {};
   const pp = run.te_pp_arcsec !== undefined && run.te_pp_arcsec !== null ? run.te_pp_arcsec : raw.pp_arcsec;
   $("te-pp").textContent = fmt(pp, 1);
@@ -1312,11 +1345,66 @@ function showTEResult(run, limits) {
     : "raw TE (docs/run-format.md), nothing removed";
 }
 
+// A run clicked in History: a TE run shows its stored curve and figures in the TE panel
+// (GET /api/runs/ID/te), any other run or a campaign the loop panel (showStoredRun draws it)
+function wireStoredTE() {
+  $("runs").addEventListener("click", (e) => {
+    const a = e.target.closest("a[data-run]");
+    if (a) showStoredTE(a.dataset.run).catch((err) => notice(err.message, true));
+  });
+  $("campaigns").addEventListener("click", (e) => {
+    if (e.target.closest("a[data-campaign]")) showTEMode(false);
+  });
+}
+
+async function showStoredTE(runId) {
+  const id = encodeURIComponent(runId);
+  const d = await api("GET", `/api/runs/${id}`);
+  if (((d.meta && d.meta.test) || {}).kind !== TE_TEST) { showTEMode(false); return; }
+  if (!live.stored) live.stored = { T: [], W: [], M: null };   // a stored run is shown: not the last result
+  const t = await api("GET", `/api/runs/${id}/te?max_points=5000`);
+  resetTE(true);
+  te.runId = runId;
+  addTERows({ type: "stored", run_id: runId, output_deg: t.output_deg, te_arcsec: t.te_arcsec,
+    direction: t.direction });
+  showTEResult({ ...t.result, outcome: t.outcome, run_id: runId }, t.limits || {});
+  $("te-title").textContent = `stored: ${runId} ${t.status || ""}`;
+  reveal($("te-panel"));
+}
+
+// ---------------------------------------------------------------- input lock
+// A lock move answers at once; the input's angle comes on the live stream (input_lock
+// events) and in the status until it is locked or fails (issue 33 item 7)
+function showLockState(lock) {
+  const el = $("lock-state");
+  if (lock.moving) {
+    el.textContent = `moving to ${fmt(lock.moving.target_deg, 1)} deg` +
+      (lock.moving.angle_deg !== null && lock.moving.angle_deg !== undefined
+        ? `: now at ${fmt(lock.moving.angle_deg, 1)} deg` : "") + " (not confirmed yet)";
+  } else if (lock.confirmed) {
+    el.textContent = "confirmed" + (lock.angle_deg !== null ? " at " + fmt(lock.angle_deg, 2) + " deg" : "");
+  } else el.textContent = lock.failed ? "not confirmed: " + lock.failed : "not confirmed";
+  el.className = lock.failed && !lock.confirmed && !lock.moving ? "fail" : "muted";
+}
+
+function onInputLock(ev) {
+  if (ev.state === "moving") {
+    showLockState({ moving: { target_deg: ev.target_deg, angle_deg: ev.angle_deg } });
+    $("lock").disabled = true;
+    $("start").disabled = true;
+  } else {
+    notice("input lock: " + (ev.message || ev.state), ev.state === "failed");
+    refreshStatus();
+  }
+}
+
 async function init() {
   plot = makePlot();
   tePlot = makeTEPlot();
+  window.addEventListener("resize", sizeTEPlot);
+  wireStoredTE();
   showTestFields();
-  window.rigPage = { plot, live, scheduleDraw, addRows };
+  window.rigPage = { plot, live, scheduleDraw, addRows, tePlot };
   wire();
   try {
     units = await api("GET", "/api/units");

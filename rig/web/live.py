@@ -92,12 +92,14 @@ class LiveHub:
         self.batches_out = 0
 
     # -- from any thread (the engine's) ------------------------------------------------------
-    def begin_run(self, run_id: str) -> None:
-        """A new run is being recorded: the display loop starts empty."""
+    def begin_run(self, run_id: str, label: str | None = None) -> None:
+        """A new run is being recorded: the display loop starts empty. ``label``: the plan's
+        name of the run (``pos090-a100-r0``), which the page shows with the id."""
         with self._lock:
             self._pending.clear()
             self._run_id = run_id
-            self._events.append({"type": "run_begin", "run_id": run_id})
+            self._events.append({"type": "run_begin", "run_id": run_id,
+                                 **({"label": label} if label else {})})
 
     def add_rows(self, rows: list[tuple[float, ...]]) -> None:
         """Queue rows for display (cheap; called on the acquisition thread)."""

@@ -458,6 +458,17 @@ class RigController:
         live["output_angle_deg"] = raw / ARCMIN_PER_DEG
         if self._twist_ref_arcmin is None and not busy:
             self._twist_ref_arcmin = raw
+        inp = live.get("input_angle_deg")
+        if not busy and isinstance(inp, int | float) and math.isfinite(inp) and (
+                self._twist_ref_arcmin is not None):
+            # at rest (safe state: no torque) with the input where a measurement left it,
+            # elsewhere than where the reference was read: the twist counts from here
+            with self._lock:
+                if self._twist_ref_input_deg is None:
+                    self._twist_ref_input_deg = float(inp)
+                elif abs(float(inp) - self._twist_ref_input_deg) >= 0.5:
+                    self._twist_ref_arcmin = raw
+                    self._twist_ref_input_deg = float(inp)
         if self._twist_ref_arcmin is not None:
             live["twist_arcmin"] = wrapped_arcmin(raw - self._twist_ref_arcmin)
 
@@ -852,6 +863,9 @@ class RigController:
             if event.kind == "run_finished" and self._current is not None:
                 self._current["finished"].append(finished_run(event.data))
                 self._current["measuring"] = None
+        tap = self._tap
+        if event.kind == "run_finished" and tap is not None and tap.recorder is not None:
+            self._twist_ref_from_run(tap.recorder)  # a run shorter than a status poll too
         self.hub.add_event({"type": "progress", **json_safe(event.to_dict())})
 
     def _measuring_now(self, event: ProgressEvent) -> dict[str, Any]:

@@ -88,10 +88,10 @@ class _ForwardingHub:
         self.broken = threading.Event()
         threading.Thread(target=self._send_loop, name="engine live sender", daemon=True).start()
 
-    def begin_run(self, run_id: str) -> None:
+    def begin_run(self, run_id: str, label: str | None = None) -> None:
         with self._lock:
             self._flush_rows_locked()
-            self._messages.append(("begin_run", run_id))
+            self._messages.append(("begin_run", (run_id, label)))
 
     def add_rows(self, rows: list[tuple[float, ...]]) -> None:
         with self._lock:
@@ -371,6 +371,9 @@ class EngineHost:
                 return
             for method, payload in batch:
                 try:
-                    getattr(self.hub, method)(payload)
+                    if method == "begin_run":  # (run id, label)
+                        self.hub.begin_run(*payload)
+                    else:
+                        getattr(self.hub, method)(payload)
                 except Exception:  # the display must never stop the receiver
                     log.exception("live %s", method)

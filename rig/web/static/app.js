@@ -60,9 +60,9 @@ const fmt = (v, digits = 3) => (v === null || v === undefined || !isFinite(v)) ?
 // the plan's label with the run id, "pos090-a100-r0 (U-7-20261128T101500Z-1)"; the id alone
 // for a run without a label
 const runName = (label, id) => (label && id && label !== id ? `${label} (${id})` : label || id || "");
-const labels = {};   // run id -> label, as the live events and the status name them
-function rememberLabel(id, label) { if (id && label) labels[id] = label; }
-const liveRunName = (id) => runName(labels[id], id);
+const runLabels = {};   // run id -> label, as the live events, the status and History name them
+function rememberLabel(id, label) { if (id && label) runLabels[id] = label; }
+const liveRunName = (id) => runName(runLabels[id], id);
 
 // ---------------------------------------------------------------- the loop plot (uPlot)
 const live = { T: [], W: [], runId: null, model: null, bandNm: null, stored: null };
@@ -172,8 +172,9 @@ function drawNow() {
 }
 
 function addRows(msg) {
-  if (msg.run_id && msg.run_id !== live.runId) { live.T = []; live.W = []; live.runId = msg.run_id; }
-  live.stored = null;
+  // a loop clicked in History stays until another run is drawn: a late batch of the run
+  // measured before never replaces it (issue 33 item 16)
+  if (msg.run_id && msg.run_id !== live.runId) { live.T = []; live.W = []; live.runId = msg.run_id; live.stored = null; }
   for (let i = 0; i < msg.torque_Nm.length; i++) {
     if (msg.torque_Nm[i] === null || msg.twist_arcmin[i] === null) continue;
     live.T.push(msg.torque_Nm[i]);
@@ -186,7 +187,7 @@ function addRows(msg) {
   if (msg.te_arcsec) addTERows(msg);
   window.rigStats.batches += 1;
   window.rigStats.points = live.T.length;
-  $("loop-title").textContent = live.runId ? "live: " + liveRunName(live.runId) : "";
+  if (!live.stored) $("loop-title").textContent = live.runId ? "live: " + liveRunName(live.runId) : "";
   if (msg.type === "rows" && msg.t_s.length) {
     const span = msg.t_s[msg.t_s.length - 1] - msg.t_s[0];
     scheduleDraw(msg.t_wall_s, msg.t_wall_s - span);
@@ -432,8 +433,10 @@ function renderStatus(s) {
   const nowRun = (s.current && s.current.run_id) || (p && p.run_id) || null;
   if (p) rememberLabel(p.run_id, p.run_label);
   if (s.current && s.current.measuring) rememberLabel(s.current.measuring.run_id, s.current.measuring.label);
-  if (busy && shown.key !== "live:" + nowRun)
+  if (busy && shown.key !== "live:" + nowRun) {
+    live.stored = null;   // the loop too is the run measured now
     clearResult("live:" + nowRun, nowRun ? `run ${liveRunName(nowRun)}: measuring` : "measurement starting");
+  }
   // a stored run drawn from the history keeps its own numbers beside it
   if (s.last_result && !busy && !live.stored) renderResult(s.last_result);
 }
@@ -1181,7 +1184,7 @@ async function showStoredRun(runId, ctx) {
   const d = await api("GET", `/api/runs/${encodeURIComponent(runId)}/loop?max_points=5000`);
   live.stored = { T: d.torque_Nm, W: d.twist_arcmin, M: d.model_twist_arcmin };
   live.bandNm = d.band_Nm;
-  const name = runName(labels[runId], runId);
+  const name = liveRunName(runId);
   $("loop-title").textContent = "stored: " + name + (d.analysis_error ? " (" + d.analysis_error + ")" : "");
   showMetrics(d.metrics, null);
   shown.key = "stored";
@@ -1206,7 +1209,7 @@ async function showStoredCampaign(campaignId) {
   const worst = worstRun(runs);
   if (worst) {
     await showStoredRun(worst.run_id, { outcome: c.outcome, result,
-      title: `campaign ${c.campaign_id} ${c.status}: worst run ${runName(labels[worst.run_id], worst.run_id)} ` +
+      title: `campaign ${c.campaign_id} ${c.status}: worst run ${liveRunName(worst.run_id)} ` +
         `(the largest lost motion of ${runs.length} run(s))` });
   } else {
     live.stored = { T: [], W: [], M: null };

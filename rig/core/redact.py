@@ -22,7 +22,8 @@ import os
 import re
 from collections.abc import Iterable, Mapping
 
-__all__ = ["MASK", "SECRET_ENV", "redact", "redact_argv", "redact_environment", "redact_text"]
+__all__ = ["MASK", "SECRET_ENV", "redact", "redact_argv", "redact_environment", "redact_text",
+           "without_paths"]
 
 MASK = "***"
 SECRET_ENV = ("PGPASSWORD", "RIG_WEB_TOKEN")
@@ -132,3 +133,31 @@ def redact_environment(environ: Mapping[str, str] | None = None,
         else:
             shown[name] = redact_text(value, env)
     return shown
+
+
+_ABS_PATH = re.compile(r"(?<![\w.:/~-])/(?:[^\s/'\"<>`]+/)+[^\s/'\"<>`]*")
+_PATH_TAIL = ".,:;)]}!"
+
+
+def _last_part(path: str) -> str:
+    core = path.rstrip(_PATH_TAIL)
+    name = core.rstrip("/").rsplit("/", 1)[-1]
+    return (name or "a folder") + path[len(core):]
+
+
+def without_paths(text: str, roots: Iterable[str] = ()) -> str:
+    """``text`` without the server's folder paths (issue 33 item 13: an answer to a browser
+    never shows where the server keeps its files): a path under one of ``roots`` (the
+    store's folder, as given or resolved) and any absolute path become their last part
+    (``/srv/rig-store/campaigns/c-1: no runs`` -> ``c-1: no runs``); a root itself becomes
+    "the store". URLs are left as they are."""
+    if not text:
+        return text
+    out = text
+    for root in sorted({r.rstrip("/") for r in roots if r and r.rstrip("/")}, key=len,
+                       reverse=True):
+        pattern = re.compile(re.escape(root) + r"(/[^\s'\"<>`]*)?")
+        out = pattern.sub(lambda m: _last_part(m.group(1)) if m.group(1) and
+                          m.group(1).rstrip(_PATH_TAIL).strip("/") else
+                          "the store" + (m.group(1) or ""), out)
+    return _ABS_PATH.sub(lambda m: _last_part(m.group(0)), out)

@@ -523,6 +523,7 @@ class Store:
             n_samples=values["n_samples"], path=self.root / record["path"],
             metrics=values["metrics"], outcome=values.get("outcome"),
             design=unit.get("design") if unit.get("design") is not None else unit.get("model"),
+            label=meta.get("label") if isinstance(meta.get("label"), str) else None,
         )
 
     def recover(self) -> list[str]:

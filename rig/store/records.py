@@ -105,6 +105,9 @@ class RunInfo:
     writer_host: str | None = field(default=None, compare=False)
     outcome: str | None = None
     design: str | None = None
+    label: str | None = field(default=None, compare=False)
+    """The plan's name of the run (run.json ``label``: ``pos090-a100-r0``), when the index
+    keeps the run's record; the page names a run by it beside its id."""
 
     @property
     def calibration_warnings(self) -> list[str]:
@@ -163,7 +166,14 @@ def run_info(row: Mapping[str, Any], root: Path) -> RunInfo:
         metrics=from_json(row["metrics"]),
         outcome=_indexed_outcome(row),
         design=row.get("design"),
+        label=_indexed_label(row),
     )
+
+
+def _indexed_label(row: Mapping[str, Any]) -> str | None:
+    meta = from_json(row.get("meta"))
+    label = meta.get("label") if isinstance(meta, dict) else None
+    return label if isinstance(label, str) else None
 
 
 # The columns a RunInfo takes as they are.

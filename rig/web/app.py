@@ -25,7 +25,7 @@ from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from rig import __version__
-from rig.core.redact import redact_text
+from rig.core.redact import redact_text, without_paths
 from rig.store import Store
 from rig.web.controller import RigController
 from rig.web.guard import GuardMiddleware
@@ -83,6 +83,7 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
 
     app.include_router(routes_control.router)
     app.include_router(routes_history.router)
+    store_roots = routes_history.store_roots
     app.include_router(routes_live.router)
     from rig.web.routes import spc as routes_spc
 
@@ -96,9 +97,10 @@ def create_app(settings: WebSettings, controller: RigController | None = None, *
     @app.exception_handler(StarletteHTTPException)
     async def redacted_error(request: Request, exc: StarletteHTTPException) -> Response:
         """Every error message without a password or token (a store error names the store
-        by its connection string; rig/core/redact.py)."""
+        by its connection string; rig/core/redact.py), and without a folder path of the
+        server (an unreadable run or campaign names its file: its last part is kept)."""
         if isinstance(exc.detail, str):
-            exc.detail = redact_text(exc.detail)
+            exc.detail = without_paths(redact_text(exc.detail), store_roots(store))
         return await http_exception_handler(request, exc)
 
     @app.exception_handler(RequestValidationError)

@@ -302,7 +302,11 @@ class RigController:
         self._lock_cancel: str | None = None
         self._twist_ref_arcmin: float | None = None
         """The output angle (arcmin) the twist is counted from: read at zero torque when the
-        input lock is confirmed (before that, the first reading after the rig opened)."""
+        input lock is confirmed (before that, the first reading after the rig opened), and
+        again at the first sample of a run whose input position differs (a campaign locks
+        the input at each of its positions, turning the output with it)."""
+        self._twist_ref_input_deg: float | None = None
+        """The input angle (deg) the twist reference was read at (None: not known)."""
         self._profile: str | None = None
         self._measuring = False
         self._monitor_lock = threading.Lock()
@@ -392,6 +396,8 @@ class RigController:
         else:
             tap = self._tap
             latest = tap.recorder.latest if tap is not None and tap.recorder else None
+            if tap is not None and tap.recorder is not None:
+                self._twist_ref_from_run(tap.recorder)
             if latest is not None:
                 live.update(torque_Nm=latest[1], output_arcmin=latest[2])
                 if len(latest) > 4:
@@ -438,6 +444,23 @@ class RigController:
                           + str(old.get("detail", ""))})
         return out + list(fresh.values())
 
+    def _twist_ref_from_run(self, recorder: Any) -> None:
+        """During a measurement: a run at another input position than the reference's counts
+        the twist from its own first sample (zero torque, right after the engine locked the
+        input there). Without this, after a campaign over 0-270 deg the twist read the
+        output's turn through the gear, -2025 arcmin at 270 deg (issue 33 item 16)."""
+        first = recorder.first
+        test = (recorder.meta or {}).get("test") or {}
+        angle = test.get("input_angle_deg")
+        if first is None or not isinstance(angle, int | float) or not math.isfinite(first[2]):
+            return
+        with self._lock:
+            if (self._twist_ref_input_deg is not None
+                    and abs(float(angle) - self._twist_ref_input_deg) < 0.5):
+                return
+            self._twist_ref_arcmin = first[2]
+            self._twist_ref_input_deg = float(angle)
+
     def _twist_from_angle(self, live: dict[str, Any], busy: bool) -> None:
         """``live``: the raw output angle (``output_arcmin``) becomes ``output_angle_deg`` and
         the twist (arcmin) counted from the reference, wrapped to +-180 deg."""
@@ -447,6 +470,17 @@ class RigController:
         live["output_angle_deg"] = raw / ARCMIN_PER_DEG
         if self._twist_ref_arcmin is None and not busy:
             self._twist_ref_arcmin = raw
+        inp = live.get("input_angle_deg")
+        if not busy and isinstance(inp, int | float) and math.isfinite(inp) and (
+                self._twist_ref_arcmin is not None):
+            # at rest (safe state: no torque) with the input where a measurement left it,
+            # elsewhere than where the reference was read: the twist counts from here
+            with self._lock:
+                if self._twist_ref_input_deg is None:
+                    self._twist_ref_input_deg = float(inp)
+                elif abs(float(inp) - self._twist_ref_input_deg) >= 0.5:
+                    self._twist_ref_arcmin = raw
+                    self._twist_ref_input_deg = float(inp)
         if self._twist_ref_arcmin is not None:
             live["twist_arcmin"] = wrapped_arcmin(raw - self._twist_ref_arcmin)
 
@@ -788,6 +822,7 @@ class RigController:
         with self._lock:
             if ref is not None and math.isfinite(ref):
                 self._twist_ref_arcmin = ref
+                self._twist_ref_input_deg = self._lock_angle
             self.message = f"{req.kind} starting on the simulated {kind} plant"
         return session
 
@@ -851,6 +886,9 @@ class RigController:
             if event.kind == "run_finished" and self._current is not None:
                 self._current["finished"].append(finished_run(event.data))
                 self._current["measuring"] = None
+        tap = self._tap
+        if event.kind == "run_finished" and tap is not None and tap.recorder is not None:
+            self._twist_ref_from_run(tap.recorder)  # a run shorter than a status poll too
         self.hub.add_event({"type": "progress", **json_safe(event.to_dict())})
 
     def _measuring_now(self, event: ProgressEvent) -> dict[str, Any]:
@@ -1070,6 +1108,7 @@ class RigController:
             self._lock_angle = angle
             if ref is not None and math.isfinite(ref):
                 self._twist_ref_arcmin = ref  # the twist counts from here (zero torque)
+                self._twist_ref_input_deg = angle
         return angle
 
     def _stop_lock_move(self, reason: str) -> None:

@@ -88,10 +88,10 @@ class _ForwardingHub:
         self.broken = threading.Event()
         threading.Thread(target=self._send_loop, name="engine live sender", daemon=True).start()
 
-    def begin_run(self, run_id: str, test: str | None = None) -> None:
+    def begin_run(self, run_id: str, label: str | None = None, test: str | None = None) -> None:
         with self._lock:
             self._flush_rows_locked()
-            self._messages.append(("begin_run", (run_id, test)))
+            self._messages.append(("begin_run", (run_id, label, test)))
 
     def add_rows(self, rows: list[tuple[float, ...]]) -> None:
         with self._lock:
@@ -371,8 +371,9 @@ class EngineHost:
                 return
             for method, payload in batch:
                 try:
-                    # begin_run's payload is (run_id, test kind); the others one value
-                    args = payload if method == "begin_run" else (payload,)
-                    getattr(self.hub, method)(*args)
+                    if method == "begin_run":  # (run id, label, test kind)
+                        self.hub.begin_run(*payload)
+                    else:
+                        getattr(self.hub, method)(payload)
                 except Exception:  # the display must never stop the receiver
                     log.exception("live %s", method)

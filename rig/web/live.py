@@ -92,14 +92,16 @@ class LiveHub:
         self.batches_out = 0
 
     # -- from any thread (the engine's) ------------------------------------------------------
-    def begin_run(self, run_id: str, test: str | None = None) -> None:
-        """A new run is being recorded: the display loop starts empty. ``test``: the run's
-        test kind when it is not a loop (``transmission_error``: the page shows its TE panel,
-        never a loop, from the first event on)."""
+    def begin_run(self, run_id: str, label: str | None = None, test: str | None = None) -> None:
+        """A new run is being recorded: the display loop starts empty. ``label``: the plan's
+        name of the run (``pos090-a100-r0``), which the page shows with the id. ``test``: the
+        run's test kind when it is not a loop (``transmission_error``: the page shows its TE
+        panel, never a loop, from the first event on)."""
         with self._lock:
             self._pending.clear()
             self._run_id = run_id
             self._events.append({"type": "run_begin", "run_id": run_id,
+                                 **({"label": label} if label else {}),
                                  **({"test": test} if test else {})})
 
     def add_rows(self, rows: list[tuple[float, ...]]) -> None:

@@ -48,7 +48,11 @@ class TapRecorder:
         self._t0_wall = time.time()
         self.latest: tuple[float, ...] | None = None
         """The newest row: (t_s, torque_Nm, twist_arcmin, t_wall_s[, temperature_C])."""
-        hub.begin_run(recorder.run_id, "transmission_error" if self._te is not None else None)
+        self.first: tuple[float, ...] | None = None
+        """The run's first row, as :attr:`latest` (a run begins at zero torque)."""
+        label = (getattr(recorder, "meta", None) or {}).get("label")
+        hub.begin_run(recorder.run_id, label if isinstance(label, str) else None,
+                      "transmission_error" if self._te is not None else None)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._recorder, name)
@@ -76,6 +80,8 @@ class TapRecorder:
         if math.isfinite(item[2]):
             temp = values[self._i_temp] if self._i_temp is not None else None
             self.latest = item if not isinstance(temp, int | float) else (*item, float(temp))
+            if self.first is None:
+                self.first = self.latest
             self._hub.add_rows([self._with_te(item, values)])
 
     def _with_te(self, item: tuple[float, ...], values: list[Any]) -> tuple[float, ...]:

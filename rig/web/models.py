@@ -509,6 +509,8 @@ class RunSummary(BaseModel):
     while running or when none is recorded)."""
     verdict: str | None = None
     """The displayed word of ``outcome``: OK, NOT OK, INCOMPLETE, NO LIMITS."""
+    label: str | None = None
+    """The plan's name of the run (``pos090-a100-r0``), as the live panel calls it too."""
 
 
 class RunDetail(BaseModel):
@@ -574,6 +576,10 @@ class CampaignSummary(BaseModel):
     """The campaign's verdict (rig/results/outcome.py codes, as for a run)."""
     verdict: str | None = None
     """The displayed word of ``outcome``: OK, NOT OK, INCOMPLETE, NO LIMITS."""
+    no_diagnosis: str | None = None
+    """Why the campaign has no diagnosis report, in one sentence ("no diagnosis: the
+    campaign was aborted in its first run (E-STOP ...)"); None when it has one or can have
+    one (made when first asked for)."""
     runs: list[RunSummary]
 
 

@@ -152,13 +152,13 @@ def check_history_links(page, served, *, all_clicks: bool) -> None:
             with page.expect_download(timeout=60_000) as got:
                 run.get_by_role("link", name=text, exact=True).click()
             assert got.value.failure() is None, (text, got.value.failure())
-        for text in ("html", "json"):  # a download attribute: the download starts (a
-            with page.expect_download(timeout=60_000):  # one-position campaign's diagnosis
-                camp.get_by_role("link", name=text, exact=True).click()  # is a 409)
-    if all_clicks:  # (target _blank: a page of its own)
-        with page.context.expect_page(timeout=30_000) as popup:
-            camp.get_by_role("link", name="diagnosis", exact=True).click()
-        popup.value.close()
+        # the closed-form campaign's runs carry no unit data: its diagnosis is refused, said
+        # in the notice (never a silent download), and History then says why instead of
+        # offering it (issue 33 item 13; tests/e2e/test_history_and_live_panel.py)
+        camp.get_by_role("link", name="json", exact=True).click()
+        expect(page.locator("#notice")).to_contain_text("cannot be diagnosed", timeout=120_000)
+        expect(camp.locator(".no-diagnosis")).to_contain_text("no diagnosis: ")
+        assert camp.locator("a[data-diagnosis]").count() == 0
     for row, text, path in worker:
         with page.expect_request(lambda r, path=path: r.url.endswith(path), timeout=10_000):
             row.get_by_role("link", name=text, exact=True).click()

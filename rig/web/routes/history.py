@@ -7,6 +7,7 @@ so no request can name a file outside the store.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import tempfile
 import zipfile
@@ -19,6 +20,7 @@ from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 
 from rig.core.errors import RigError
 from rig.core.json_files import json_safe
+from rig.core.redact import without_paths
 from rig.results.outcome import (
     OUTCOME_MEANINGS,
     OUTCOME_WORDS,
@@ -29,7 +31,7 @@ from rig.results.outcome import (
 )
 from rig.runformat import RUN_JSON, SAMPLES_CSV, sample_columns, samples_csv_bytes
 from rig.store import Store, UnknownIdError
-from rig.store.records import RunInfo
+from rig.store.records import CampaignInfo, RunInfo
 from rig.web.live import decimate
 from rig.web.models import (
     ID_PATTERN,
@@ -62,6 +64,7 @@ def _store(request: Request) -> Store:
 def summary_of(info: RunInfo) -> dict[str, Any]:
     d = info.to_dict()
     d["verdict"] = None if info.outcome is None else outcome_word(info.outcome)
+    d["label"] = info.label
     keys = RunSummary.model_fields
     return json_safe({k: d.get(k) for k in keys})
 
@@ -130,7 +133,7 @@ def run_loop(request: Request, run_id: RunId,
         band = analysis.lost_motion_pct / 100.0 * analysis.rated_torque_Nm
     except Exception as exc:  # an aborted or short run still has a loop to draw
         model_twist = None
-        error = f"{type(exc).__name__}: {exc}"
+        error = without_paths(f"{type(exc).__name__}: {exc}", store_roots(store))
     outcome = recorded_outcome(run.meta)
     n = int(run.n_samples)
     keep = decimate(list(range(n)), max_points) if n else []
@@ -271,6 +274,7 @@ def _campaign(store: Store, campaign_id: str) -> dict[str, Any]:
         raise HTTPException(404, str(exc)) from exc
     runs = store.list_runs(campaign_id=campaign_id)
     d = info.to_dict()
+    d["no_diagnosis"] = no_diagnosis(store, info, runs)
     summary = info.summary or {}
     d["outcome"] = recorded_campaign_outcome(
         info.meta.get("outcome") or summary.get("outcome"),
@@ -287,26 +291,74 @@ def get_campaign(request: Request, campaign_id: CampaignId) -> dict[str, Any]:
     return _campaign(_store(request), campaign_id)
 
 
+def _diagnosis_folder(store: Store) -> Path:
+    return store.root / "web" / "diagnosis"
+
+
+def no_diagnosis(store: Store, info: CampaignInfo, runs: list[RunInfo]) -> str | None:
+    """Why a campaign has no diagnosis report, as one plain sentence for the operator; None
+    when it has one or can have one (made when first asked for). The diagnosis reads the
+    campaign's completed runs: a campaign aborted before any was completed has none, and a
+    diagnosis tried once and refused keeps its reason (``<id>.none`` beside the cache)."""
+    if info.status == "running":
+        return "no diagnosis yet: the campaign is still running"
+    if any(r.status == "completed" for r in runs):
+        refused = _diagnosis_folder(store) / f"{info.campaign_id}.none"
+        with contextlib.suppress(OSError):
+            if refused.is_file():
+                return refused.read_text(encoding="utf-8").strip() or None
+        return None
+    summary = info.summary or {}
+    reason = summary.get("reason") or info.meta.get("reason") or next(
+        (r.reason for r in reversed(runs) if r.reason), None)
+    why = f" ({without_paths(str(reason), store_roots(store))})" if reason else ""
+    if info.status != "aborted":
+        return f"no diagnosis: no run of the campaign was completed{why}"
+    where = ("before its first run" if not runs else "in its first run" if len(runs) == 1
+             else f"before any of its {len(runs)} runs was completed")
+    return f"no diagnosis: the campaign was aborted {where}{why}"
+
+
+def store_roots(store: Store) -> list[str]:
+    """The store's folder as given and as resolved: what an error never shows."""
+    roots = [str(store.root)]
+    with contextlib.suppress(OSError, RuntimeError):
+        roots.append(str(store.root.resolve()))
+    return roots
+
+
 def _diagnosis(store: Store, campaign_id: str, suffix: str) -> str:
     """The campaign's diagnosis as ``suffix`` ("json" or "html"), computed once and cached
-    beside the store (``<store>/web/diagnosis/``)."""
+    beside the store (``<store>/web/diagnosis/``). A campaign without one is a 409 whose
+    detail says why in one sentence, never with a folder of the server."""
     from rig.web.report import diagnose_campaign_folder
-    from rig.web.workers import run_in_worker
+    from rig.web.workers import PoolBusy, run_in_worker
 
     try:
         info = store.get_campaign(campaign_id)
     except UnknownIdError as exc:
         raise HTTPException(404, str(exc)) from exc
     if info.status == "running":
-        raise HTTPException(409, f"campaign {campaign_id} is still running")
-    folder = store.root / "web" / "diagnosis"
+        raise HTTPException(409, f"campaign {campaign_id} is still running: no diagnosis yet")
+    folder = _diagnosis_folder(store)
     cache = folder / f"{campaign_id}.{suffix}"
     if not cache.is_file():
+        why = no_diagnosis(store, info, store.list_runs(campaign_id=campaign_id))
+        if why is not None:
+            raise HTTPException(409, f"campaign {campaign_id} has {why}")
         try:
             report, page = run_in_worker(diagnose_campaign_folder, info.path)
         except Exception as exc:  # too few runs, unreadable runs: said, not a 500
+            text = without_paths(str(exc), store_roots(store)).removeprefix(
+                f"campaign {campaign_id}: ")
+            if isinstance(exc, RigError) and not isinstance(exc, PoolBusy) and (
+                    "worker was stopped" not in text):  # the data's answer: kept
+                with contextlib.suppress(OSError):
+                    folder.mkdir(parents=True, exist_ok=True)
+                    (folder / f"{campaign_id}.none").write_text(
+                        f"no diagnosis: {text}", encoding="utf-8")
             raise HTTPException(409, f"campaign {campaign_id} cannot be diagnosed: "
-                                     f"{exc}") from exc
+                                     f"{text}") from exc
         folder.mkdir(parents=True, exist_ok=True)
         (folder / f"{campaign_id}.json").write_text(json.dumps(report, indent=2),
                                                     encoding="utf-8")

@@ -56,6 +56,14 @@ function notice(text, isError) {   // an answer to the last command; errors stay
 const fmt = (v, digits = 3) => (v === null || v === undefined || !isFinite(v)) ? "–"
   : Number(v).toFixed(digits);
 
+// One name for a run wherever the page shows it, live and in History (issue 33 item 16):
+// the plan's label with the run id, "pos090-a100-r0 (U-7-20261128T101500Z-1)"; the id alone
+// for a run without a label
+const runName = (label, id) => (label && id && label !== id ? `${label} (${id})` : label || id || "");
+const runLabels = {};   // run id -> label, as the live events, the status and History name them
+function rememberLabel(id, label) { if (id && label) runLabels[id] = label; }
+const liveRunName = (id) => runName(runLabels[id], id);
+
 // ---------------------------------------------------------------- the loop plot (uPlot)
 const live = { T: [], W: [], runId: null, model: null, bandNm: null, stored: null };
 window.rigStats = { latency_s: [], latency_oldest_s: [], batches: 0, points: 0, drawn: 0 };
@@ -77,6 +85,29 @@ function axis(label) {
   return { label, stroke: ink, grid: { stroke: line, width: 1 }, ticks: { stroke: line, width: 1 } };
 }
 const plotWidth = (el) => Math.max(200, el.clientWidth || 800);
+
+// A loop's path: every point joined in the order measured, broken at a missing value (issue
+// 33 item 16). uPlot's own linear path thins points that share a pixel column assuming x
+// only grows; a loop's torque goes up and down, so on a narrow plot (a phone) it drew
+// vertical segments the data do not have.
+function loopPath(u, seriesIdx) {
+  const [xs, ys] = u.data[seriesIdx];
+  const stroke = new Path2D();
+  let pen = false;
+  for (let i = 0; i < xs.length; i++) {
+    const x = xs[i], y = ys[i];
+    if (x === null || y === null || x === undefined || y === undefined || !isFinite(x) || !isFinite(y)) {
+      pen = false;
+      continue;
+    }
+    const px = u.valToPos(x, "x", true), py = u.valToPos(y, "y", true);
+    if (pen) stroke.lineTo(px, py); else stroke.moveTo(px, py);
+    pen = true;
+  }
+  const clip = new Path2D();
+  clip.rect(u.bbox.left, u.bbox.top, u.bbox.width, u.bbox.height);
+  return { stroke, fill: null, clip, band: null, gaps: null, flags: 0 };
+}
 const PLOT_HEIGHT = 400;
 
 function makePlot() {
@@ -91,9 +122,9 @@ function makePlot() {
     cursor: { drag: { x: true, y: true } },
     series: [
       {},
-      { label: "measured", stroke: "#1f5fbf", width: 1.2, paths: uPlot.paths.linear(),
+      { label: "measured", stroke: "#1f5fbf", width: 1.2, paths: loopPath,
         points: { show: false }, facets: [{ scale: "x", auto: true }, { scale: "y", auto: true }] },
-      { label: "nominal model (no runout)", stroke: cssVar("--ink") || "#222", width: 1.2, dash: [6, 4], paths: uPlot.paths.linear(),
+      { label: "nominal model (no runout)", stroke: cssVar("--ink") || "#222", width: 1.2, dash: [6, 4], paths: loopPath,
         points: { show: false }, facets: [{ scale: "x", auto: true }, { scale: "y", auto: true }] },
     ],
     hooks: { drawClear: [bandHook] },
@@ -142,8 +173,9 @@ function drawNow() {
 
 function addRows(msg) {
   if (msg.te_arcsec) { addTERows(msg); return; }   // a TE run: its panel, never a loop
-  if (msg.run_id && msg.run_id !== live.runId) { live.T = []; live.W = []; live.runId = msg.run_id; }
-  live.stored = null;
+  // a loop clicked in History stays until another run is drawn: a late batch of the run
+  // measured before never replaces it (issue 33 item 16)
+  if (msg.run_id && msg.run_id !== live.runId) { live.T = []; live.W = []; live.runId = msg.run_id; live.stored = null; }
   for (let i = 0; i < msg.torque_Nm.length; i++) {
     if (msg.torque_Nm[i] === null || msg.twist_arcmin[i] === null) continue;
     live.T.push(msg.torque_Nm[i]);
@@ -155,7 +187,7 @@ function addRows(msg) {
   }
   window.rigStats.batches += 1;
   window.rigStats.points = live.T.length;
-  $("loop-title").textContent = live.runId ? "live: " + live.runId : "";
+  if (!live.stored) $("loop-title").textContent = live.runId ? "live: " + liveRunName(live.runId) : "";
   if (msg.type === "rows" && msg.t_s.length) {
     const span = msg.t_s[msg.t_s.length - 1] - msg.t_s[0];
     scheduleDraw(msg.t_wall_s, msg.t_wall_s - span);
@@ -397,8 +429,12 @@ function renderStatus(s) {
   $("lock").disabled = !op || busy || !connected || !!lock.moving;
   // while measuring, the panel shows the run measured now or nothing (never the last result)
   const nowRun = (s.current && s.current.run_id) || (p && p.run_id) || null;
-  if (busy && shown.key !== "live:" + nowRun)
-    clearResult("live:" + nowRun, nowRun ? `run ${nowRun}: measuring` : "measurement starting");
+  if (p) rememberLabel(p.run_id, p.run_label);
+  if (s.current && s.current.measuring) rememberLabel(s.current.measuring.run_id, s.current.measuring.label);
+  if (busy && shown.key !== "live:" + nowRun) {
+    live.stored = null;   // the loop too is the run measured now
+    clearResult("live:" + nowRun, nowRun ? `run ${liveRunName(nowRun)}: measuring` : "measurement starting");
+  }
   // a stored run drawn from the history keeps its own numbers beside it
   if (busy && s.current && s.current.test) showTEMode(s.current.test === TE_TEST);
   if (s.last_result && !busy && !live.stored) renderResult(s.last_result);
@@ -466,11 +502,11 @@ function renderCampaignNow(cur, busy) {
     parts.push(m.temperature_C !== null && m.temperature_C !== undefined
       ? `housing ${fmt(m.temperature_C, 1)} °C` : "temperature not controlled");
     html += `<b>Now measuring run ${esc(m.number)}${m.n_runs ? " of " + esc(m.n_runs) : ""}: ` +
-      `${esc(m.label || "")}</b> · ${parts.map(esc).join(" · ")}`;
+      `${esc(runName(m.label, m.run_id))}</b> · ${parts.map(esc).join(" · ")}`;
   } else html += "<b>between runs</b>";
   const done = cur.finished || [];
   if (done.length) {
-    html += "<ol class=\"finished\">" + done.map((r) => `<li>${esc(r.label || r.run_id)}: ` +
+    html += "<ol class=\"finished\">" + done.map((r) => `<li>${esc(runName(r.label, r.run_id))}: ` +
       (measurable(r.lost_motion_arcmin)
         ? `lost motion ${fmt(r.lost_motion_arcmin)}${r.lost_motion_u_arcmin ? " ± " + fmt(r.lost_motion_u_arcmin) : ""} arcmin`
         : esc((r.status || "") + (r.reason ? " (" + r.reason + ")" : ""))) +
@@ -537,12 +573,12 @@ function renderResult(r) {
     const worst = worstRun(runs);
     showMetrics(worst, null);
     titleMetrics(worst ? `campaign ${r.campaign_id || ""} ${r.status}: worst run ` +
-      `${worst.label || worst.run_id} (the largest lost motion of ${runs.length} run(s))`
+      `${runName(worst.label, worst.run_id)} (the largest lost motion of ${runs.length} run(s))`
       : `campaign ${r.campaign_id || ""} ${r.status}: no run measured`);
   } else {
     const last = runs.length ? runs[runs.length - 1] : null;
     showMetrics(last && last.status === "completed" ? last : null, null);
-    titleMetrics(last ? `run ${last.label || last.run_id} ${last.status || r.status}` : `run ${r.status}`);
+    titleMetrics(last ? `run ${runName(last.label, last.run_id)} ${last.status || r.status}` : `run ${r.status}`);
   }
   shown.key = "result";
   $("m-verdict").innerHTML = verdict;   // the verdict of what the title names
@@ -585,25 +621,40 @@ function connectLive() {
   es.addEventListener("rows_replay", (e) => addRows(JSON.parse(e.data)));
   es.addEventListener("run_begin", (e) => {
     const m = JSON.parse(e.data);
+    rememberLabel(m.run_id, m.label);
     live.T = []; live.W = []; live.runId = m.run_id; live.stored = null;
     showTEMode(m.test === TE_TEST);
-    clearResult("live:" + m.run_id, `run ${m.run_id}: measuring`);
+    clearResult("live:" + m.run_id, `run ${liveRunName(m.run_id)}: measuring`);
     scheduleDraw();
   });
   es.addEventListener("metrics", (e) => {
     const m = JSON.parse(e.data);
     if (m.run_id !== live.runId || shown.key !== "live:" + m.run_id || live.finished === m.run_id) return;
     showMetrics(m.metrics, live.model, m.partial !== false);
-    titleMetrics(`run ${m.run_id}: measuring, partial figures (the loop is not closed yet)`);
+    titleMetrics(`run ${liveRunName(m.run_id)}: measuring, partial figures (the loop is not closed yet)`);
     window.rigStats.partial = (window.rigStats.partial || 0) + 1;
   });
   es.addEventListener("progress", (e) => {
     const ev = JSON.parse(e.data);
+    rememberLabel(ev.run_id, ev.run_label);
     if (ev.kind === "run_finished" && ev.data && shown.key === "live:" + ev.run_id) {
       live.finished = ev.run_id;
       showMetrics(ev.data, live.model);
-      $("m-verdict").innerHTML = outcomeHtml(ev.data.outcome);
-      titleMetrics(`run ${ev.run_label || ev.run_id} ${ev.data.status || "finished"}`);
+      const cur = lastStatus && lastStatus.current;
+      const name = liveRunName(ev.run_id);
+      if (cur && cur.kind === "campaign") {
+        // a run of a campaign: its verdict is listed with the campaign's runs above; the big
+        // verdict waits for the campaign's own (issue 33 item 16)
+        const k = cur.measuring && cur.measuring.run_id === ev.run_id ? cur.measuring.number
+          : (cur.finished || []).length + 1;
+        const of = cur.n_runs ? ` of ${cur.n_runs}` : "";
+        $("m-verdict").innerHTML = `<span class="between">campaign running: run ${esc(k)}${esc(of)} done</span>`;
+        titleMetrics(`run ${k}${of} ${name} ${ev.data.status || "finished"}; the campaign goes on ` +
+          "(its verdict at its end)");
+      } else {
+        $("m-verdict").innerHTML = outcomeHtml(ev.data.outcome);
+        titleMetrics(`run ${name} ${ev.data.status || "finished"}`);
+      }
     }
     refreshStatus();
   });
@@ -1059,7 +1110,8 @@ async function refreshHistory() {
     for (const r of runs) {
       const tr = document.createElement("tr");
       const id = encodeURIComponent(r.run_id);
-      tr.innerHTML = `<td><a href="#" data-run="${esc(r.run_id)}">${esc(r.run_id)}</a></td>` +
+      rememberLabel(r.run_id, r.label);
+      tr.innerHTML = `<td><a href="#" data-run="${esc(r.run_id)}">${esc(runName(r.label, r.run_id))}</a></td>` +
         `<td>${esc(r.status)}${r.reason ? ": " + esc(r.reason) : ""}</td>` +
         `<td class="verdict">${outcomeHtml(r.outcome)}</td><td>${esc(r.unit_serial || "")}</td>` +
         `<td>${esc(r.started_at)}</td><td class="lost-motion">${lostMotionText(r.metrics)}</td>` +
@@ -1079,15 +1131,44 @@ async function refreshHistory() {
         .map((x) => `${fmt(x.input_angle_deg, 0)}°: ${measurable(x.lost_motion_arcmin)
           ? fmt(x.lost_motion_arcmin) : "–"}`).join(", ");
       const tr = document.createElement("tr");
+      // only the reports that exist; a campaign without a diagnosis says why (issue 33 item 13)
+      const diagnosis = c.no_diagnosis ? `<span class="no-diagnosis">${esc(c.no_diagnosis)}</span>`
+        : `<a href="/api/campaigns/${id}/diagnosis.html" target="_blank" data-diagnosis="page">diagnosis</a>` +
+          ` · <a href="/api/campaigns/${id}/diagnosis.html" download="${esc(c.campaign_id)}-diagnosis.html" data-diagnosis="html">html</a>` +
+          ` · <a href="/api/campaigns/${id}/diagnosis.json" download="${esc(c.campaign_id)}-diagnosis.json" data-diagnosis="json">json</a>`;
       tr.innerHTML = `<td><a href="#" data-campaign="${esc(c.campaign_id)}">${esc(c.campaign_id)}</a></td><td>${esc(c.status)}</td><td class="verdict">${verdict}</td>` +
-        `<td>${byPos}</td><td><a href="/api/campaigns/${id}/diagnosis.html" target="_blank">diagnosis</a>` +
-        ` · <a href="/api/campaigns/${id}/diagnosis.html" download="${esc(c.campaign_id)}-diagnosis.html">html</a>` +
-        ` · <a href="/api/campaigns/${id}/diagnosis.json" download>json</a>` +
+        `<td>${byPos}</td><td class="reports">${diagnosis}` +
         ` · <a href="/api/campaigns/${id}/certificate.pdf">Certificate</a>` +
         ` (<a href="/api/campaigns/${id}/certificate.html" target="_blank">as a page</a>)</td>`;
       cb.appendChild(tr);
     }
   } catch (e) { notice("history: " + e.message, true); }
+}
+
+// A diagnosis link: asked for first (a campaign's diagnosis is made on the first request),
+// then opened or downloaded; a refusal is said in the notice and History then says why
+// (never a raw error page, never a silent download that fails: issue 33 item 13)
+async function openDiagnosis(a) {
+  const tab = a.dataset.diagnosis === "page" ? window.open("", "_blank") : null;
+  try {
+    const res = await fetch(a.href);
+    if (!res.ok) {
+      let msg = res.status + " " + res.statusText;
+      try { const d = await res.json(); if (d && typeof d.detail === "string") msg = d.detail; } catch (e) { /* none */ }
+      throw new Error(msg);
+    }
+    if (tab) { tab.location.href = a.href; return; }   // made and kept: served at once
+    const link = document.createElement("a");
+    link.href = a.href;
+    link.download = a.getAttribute("download") || "";
+    document.body.appendChild(link);
+    link.click();
+    link.remove();
+  } catch (err) {
+    if (tab) tab.close();
+    notice(err.message, true);
+    refreshHistory();
+  }
 }
 
 // A run's lost motion (arcmin) ± its uncertainty, as History lists it
@@ -1105,13 +1186,14 @@ async function showStoredRun(runId, ctx) {
   const d = await api("GET", `/api/runs/${encodeURIComponent(runId)}/loop?max_points=5000`);
   live.stored = { T: d.torque_Nm, W: d.twist_arcmin, M: d.model_twist_arcmin };
   live.bandNm = d.band_Nm;
-  $("loop-title").textContent = "stored: " + runId + (d.analysis_error ? " (" + d.analysis_error + ")" : "");
+  const name = liveRunName(runId);
+  $("loop-title").textContent = "stored: " + name + (d.analysis_error ? " (" + d.analysis_error + ")" : "");
   showMetrics(d.metrics, null);
   shown.key = "stored";
-  titleMetrics(ctx ? ctx.title : `stored run ${runId} ${d.status || ""}`);
+  titleMetrics(ctx ? ctx.title : `stored run ${name} ${d.status || ""}`);
   $("m-verdict").innerHTML = outcomeHtml(ctx ? ctx.outcome : d.outcome);
   $("result").innerHTML = ctx ? ctx.result
-    : `stored run ${esc(runId)} ${esc(d.status || "")}: ${outcomeHtml(d.outcome)}`;
+    : `stored run ${esc(name)} ${esc(d.status || "")}: ${outcomeHtml(d.outcome)}`;
   scheduleDraw();
 }
 
@@ -1124,11 +1206,12 @@ async function showStoredCampaign(campaignId) {
   const causes = (s.failures || []).slice(0, 5);
   const result = `campaign ${esc(c.campaign_id)} ${esc(c.status)}: ${outcomeHtml(c.outcome)}` +
     (causes.length ? "<br>" + causes.map(esc).join("<br>") : "");
+  for (const r of c.runs || []) rememberLabel(r.run_id, r.label);
   const runs = (c.runs || []).map((r) => ({ ...(r.metrics || {}), run_id: r.run_id, status: r.status }));
   const worst = worstRun(runs);
   if (worst) {
     await showStoredRun(worst.run_id, { outcome: c.outcome, result,
-      title: `campaign ${c.campaign_id} ${c.status}: worst run ${worst.run_id} ` +
+      title: `campaign ${c.campaign_id} ${c.status}: worst run ${liveRunName(worst.run_id)} ` +
         `(the largest lost motion of ${runs.length} run(s))` });
   } else {
     live.stored = { T: [], W: [], M: null };
@@ -1176,8 +1259,19 @@ function wire() {
   });
   $("campaign-upload").addEventListener("change", (e) => {
     const file = e.target.files && e.target.files[0];
-    if (file) run("campaign file", async () => fillFromCampaign(await api("POST",
-      "/api/campaign-upload", { file_name: file.name, text: await file.text() })));
+    if (file) run("campaign file", async () => {
+      let answer;
+      try {
+        answer = await api("POST", "/api/campaign-upload", { file_name: file.name, text: await file.text() });
+      } catch (err) {
+        // the note says what was opened: a file that could not be, and that the set-up is
+        // unchanged (never "opened" of the previous file, issue 33 item 16)
+        $("campaign-file-note").textContent = `${file.name} was not opened (${err.message}); ` +
+          "the set-up is unchanged";
+        throw err;
+      } finally { e.target.value = ""; }   // the same file chosen again is read again
+      return fillFromCampaign(answer);
+    });
   });
   $("pause").addEventListener("click", () => run("pause", () => api("POST", "/api/control/pause")));
   $("resume").addEventListener("click", () => run("resume", () => api("POST", "/api/control/resume")));
@@ -1206,15 +1300,26 @@ function wire() {
   $("setup").addEventListener("change", onSetup);
   $("lock-angle").addEventListener("input", saveSetup);
   document.addEventListener("keydown", onKey);
+  // a run or campaign clicked in History: its loop is drawn, and brought into view (the loop
+  // panel is far above History, issue 33 item 16)
   $("campaigns").addEventListener("click", async (e) => {
+    const d = e.target.closest("a[data-diagnosis]");
+    if (d) { e.preventDefault(); openDiagnosis(d); return; }
     const a = e.target.closest("a[data-campaign]");
     if (!a) return;
     e.preventDefault();
-    try { await showStoredCampaign(a.dataset.campaign); } catch (err) { notice(err.message, true); }
+    try { await showStoredCampaign(a.dataset.campaign); reveal($("loop-panel")); } catch (err) { notice(err.message, true); }
   });
-  $("runs").addEventListener("click", (e) => {
+  // a transmission error run shows its TE panel, never a loop (issue 33 item 15)
+  $("runs").addEventListener("click", async (e) => {
     const a = e.target.closest("a[data-run]");
-    if (a) { e.preventDefault(); showStoredRun(a.dataset.run).catch((err) => notice(err.message, true)); }
+    if (!a) return;
+    e.preventDefault();
+    try {
+      if (await showStoredTE(a.dataset.run)) return;
+      await showStoredRun(a.dataset.run);
+      reveal($("loop-panel"));
+    } catch (err) { notice(err.message, true); }
   });
   window.addEventListener("resize", () => {
     plot.setSize({ width: plotWidth($("loop-plot")), height: PLOT_HEIGHT });
@@ -1339,19 +1444,16 @@ function showTEResult(run, limits) {
   if (limits.te_hysteresis_max_arcmin) lim.push(`hysteresis ≤ ${fmt(limits.te_hysteresis_max_arcmin, 3)} arcmin`);
   $("te-limit").textContent = lim.length ? lim.join(", ") : "none set";
   $("te-verdict").innerHTML = outcomeHtml(run.outcome);
-  $("te-title").textContent = run.label || run.run_id || "";
+  $("te-title").textContent = run.run_id ? runName(run.label || runLabels[run.run_id], run.run_id) : (run.label || "");
   $("te-note").textContent = run.te_pp_arcsec !== undefined && run.te_pp_arcsec !== null
     ? "the run's analysis (docs/transmission-error.md: the encoder eccentricity as calibrated); the plot: the raw TE"
     : "raw TE (docs/run-format.md), nothing removed";
 }
 
 // A run clicked in History: a TE run shows its stored curve and figures in the TE panel
-// (GET /api/runs/ID/te), any other run or a campaign the loop panel (showStoredRun draws it)
+// (GET /api/runs/ID/te; showStoredTE says true), any other run or a campaign the loop panel
+// (showStoredRun draws it; the History click handlers in wire())
 function wireStoredTE() {
-  $("runs").addEventListener("click", (e) => {
-    const a = e.target.closest("a[data-run]");
-    if (a) showStoredTE(a.dataset.run).catch((err) => notice(err.message, true));
-  });
   $("campaigns").addEventListener("click", (e) => {
     if (e.target.closest("a[data-campaign]")) showTEMode(false);
   });
@@ -1360,7 +1462,7 @@ function wireStoredTE() {
 async function showStoredTE(runId) {
   const id = encodeURIComponent(runId);
   const d = await api("GET", `/api/runs/${id}`);
-  if (((d.meta && d.meta.test) || {}).kind !== TE_TEST) { showTEMode(false); return; }
+  if (((d.meta && d.meta.test) || {}).kind !== TE_TEST) { showTEMode(false); return false; }
   if (!live.stored) live.stored = { T: [], W: [], M: null };   // a stored run is shown: not the last result
   const t = await api("GET", `/api/runs/${id}/te?max_points=5000`);
   resetTE(true);
@@ -1368,8 +1470,9 @@ async function showStoredTE(runId) {
   addTERows({ type: "stored", run_id: runId, output_deg: t.output_deg, te_arcsec: t.te_arcsec,
     direction: t.direction });
   showTEResult({ ...t.result, outcome: t.outcome, run_id: runId }, t.limits || {});
-  $("te-title").textContent = `stored: ${runId} ${t.status || ""}`;
+  $("te-title").textContent = `stored: ${liveRunName(runId)} ${t.status || ""}`;
   reveal($("te-panel"));
+  return true;
 }
 
 // ---------------------------------------------------------------- input lock

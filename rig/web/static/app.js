@@ -197,7 +197,7 @@ function addRows(msg) {
 // Quantities that cannot be below zero: a negative figure is noise or a bad loop, never shown
 // as a measurement (issue 21 item 15)
 const NON_NEGATIVE = new Set(["lost_motion_arcmin", "loop_area_J"]);
-const BELOW_ZERO = " below zero: not a measurement";
+const BELOW_ZERO = " below zero: no measurement";   // rig/results/outcome.py BELOW_ZERO: one wording
 const measurable = (v) => v !== null && v !== undefined && isFinite(v) && Number(v) >= 0;
 
 function withU(m, key, digits = 3) {   // ["4.304", " ± 0.001"] (the uncertainty when known)

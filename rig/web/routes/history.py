@@ -110,12 +110,7 @@ def run_loop(request: Request, run_id: RunId,
              max_points: Annotated[int, Query(ge=10, le=100_000)] = 5000) -> dict[str, Any]:
     from rig.results.analyse import analyse_run, loop_centre_arcmin
 
-    store = _store(request)
-    _run_info(store, run_id)
-    try:
-        run = store.load_run(run_id)
-    except RigError as exc:
-        raise HTTPException(409, f"run {run_id} cannot be read: {exc}") from exc
+    run = _stored_run(request, run_id)
     torque = run.torque_Nm
     twist = run.output_angle_deg * 60.0
     model = None
@@ -133,7 +128,7 @@ def run_loop(request: Request, run_id: RunId,
         band = analysis.lost_motion_pct / 100.0 * analysis.rated_torque_Nm
     except Exception as exc:  # an aborted or short run still has a loop to draw
         model_twist = None
-        error = without_paths(f"{type(exc).__name__}: {exc}", store_roots(store))
+        error = without_paths(f"{type(exc).__name__}: {exc}", store_roots(_store(request)))
     outcome = recorded_outcome(run.meta)
     n = int(run.n_samples)
     keep = decimate(list(range(n)), max_points) if n else []
@@ -163,12 +158,7 @@ def run_te(request: Request, run_id: RunId,
     from rig.plans import TE_KIND
     from rig.results.te_curve import te_arcsec
 
-    store = _store(request)
-    _run_info(store, run_id)
-    try:
-        run = store.load_run(run_id)
-    except RigError as exc:
-        raise HTTPException(409, f"run {run_id} cannot be read: {exc}") from exc
+    run = _stored_run(request, run_id)
     ratio = run.test.get("ratio")
     if run.test.get("kind") != TE_KIND:
         raise HTTPException(409, f"run {run_id} is not a transmission error run: its loop "
@@ -228,6 +218,17 @@ def run_zip(request: Request, run_id: RunId) -> Response:
         data = tmp.read()
     return Response(data, media_type="application/zip", headers={
         "Content-Disposition": f'attachment; filename="{run_id}.zip"'})
+
+
+def _stored_run(request: Request, run_id: str) -> Any:
+    """The stored run ``run_id`` read whole (404 if the store has none, 409 if its files
+    cannot be read)."""
+    store = _store(request)
+    _run_info(store, run_id)
+    try:
+        return store.load_run(run_id)
+    except RigError as exc:
+        raise HTTPException(409, f"run {run_id} cannot be read: {exc}") from exc
 
 
 def _samples_csv(store: Store, run_id: str) -> bytes:

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import binomtest
 
-from analysis.diagnosis.calibration import REPLICATES
+from analysis.diagnosis.calibration import REPLICATES, floored, resolution
 from analysis.diagnosis.data import (
     TARGET_POINTS,
     PreparedRun,
@@ -57,66 +57,41 @@ from analysis.diagnosis.fit import (
     with_kind_play_reference,
 )
 from analysis.diagnosis.flanks import flank_asymmetry
+from analysis.diagnosis.policy import POLICY, DecisionPolicy
 from analysis.diagnosis.report_measurement import measurement_report
 from analysis.diagnosis.where import gap_map, lack_of_fit, per_run_play, play_fourier
 from analysis.effects import CANDIDATES, arcmin_to_um, bearing_play_arcmin, tooth_pair_phase
 from analysis.errors import AnalysisError
 
 ARCSEC = 60.0
-#: Default level of every calibrated decision: an effect is called when the probability that
-#: this campaign's own errors give its evidence by chance is at most this
-#: (``rig diagnose --alpha``).
-ALPHA = 0.01
-#: A candidate with calibrated evidence that closes at least this share of the held-out RMS
-#: gap is a finding even when the gap's systematic part is within the noise floor.
-MATERIAL_SHRINK = 0.1
-#: Coulomb friction up to this share of rated torque is the ordinary drag of every unit and
-#: rig (seals, support bearings): carried by the null model, not a finding.
-FRICTION_ALLOWANCE = 0.01
-#: A torque zero common to every run up to this share of rated torque is what a re-tare and
-#: the zero's drift over a campaign leave on a sound strain-gauge transducer (accuracy class
-#: 0.05-0.1 % plus a drift of the same order): the measuring system's, taken out by the null
-#: model, not a torque-sensor offset.
-ZERO_ALLOWANCE = 0.0025
-#: A loaded slope below seed 004 eq. (8) names the verdict (a series compliance) when no
-#: candidate closes the structural gap and the slope takes at least this share of the
-#: predictive gap (most of what separates the nominal model from the measurement).
-SERIES_SHARE = 0.5
-#: The structural gap counts when its systematic part exceeds this many noise RMS.
-NONE_SIGMAS = 0.8
-#: A candidate explains the gap when the systematic part left is at most this share.
-EXPLAINED_SHARE = 0.35
-#: A greedy addition must remove at least this share of the systematic gap left (squared).
-GREEDY_GAIN = 0.3
-#: Two explaining candidates tie when the systematic gap the second leaves is within the
-#: noise threshold or at most this factor of the best one's.
-TIE_FACTOR = 2.0
-#: A tied candidate is separated (the best is called) when its held-out mean squared
-#: standardised residual is at least this factor of the best one's, the best wins on at least
-#: SEPARATION_WINS of the held-out runs, and its in-sample BIC is lower by SEPARATION_BIC.
-SEPARATION_RATIO = 1.5
-SEPARATION_WINS = 0.75
-SEPARATION_BIC = 10.0
-#: With enough held-out runs a smaller but consistent difference separates too: the ratio at
-#: least SEPARATION_RATIO_CONSISTENT and a one-sided sign test over the held-out runs at
-#: SEPARATION_P.
-SEPARATION_RATIO_CONSISTENT = 1.1
-SEPARATION_P = 0.05
-#: Bearing clearance adds free play (seed 000 eqs. 3 + 7) that contact stiffening does not:
-#: a calibrated play above the nominal by at least PLAY_PRESENT of the inspected clearances'
-#: play calls bearing clearance, by at most PLAY_ABSENT of it calls stiffening.
-PLAY_PRESENT = 0.5
-PLAY_ABSENT = 0.25
-#: Stiffness deviation from seed 004 eq. (8) taken as a finding (relative).
-STIFFNESS_TOLERANCE = 0.10
-MAX_FOLDS = 5
-#: Second effects: at most this many added under ``also``, each chosen among this many
-#: candidates (by in-sample BIC) fitted jointly with what is already there.
-MAX_ALSO = 2
-ALSO_TRIALS = 3
-#: Candidates cross-validated after screening, and the in-sample BIC gain they need.
-SCREEN_KEEP = 3
-SCREEN_DELTA_BIC = -10.0
+# The thresholds live in DecisionPolicy (analysis.diagnosis.policy); these names stay
+# importable for callers of the earlier module constants (the same values, read-only copies).
+ALPHA = POLICY.alpha
+MATERIAL_SHRINK = POLICY.material_shrink
+FRICTION_ALLOWANCE = POLICY.friction_allowance
+ZERO_ALLOWANCE = POLICY.zero_allowance
+SERIES_SHARE = POLICY.series_share
+NONE_SIGMAS = POLICY.none_sigmas
+EXPLAINED_SHARE = POLICY.explained_share
+GREEDY_GAIN = POLICY.greedy_gain
+TIE_FACTOR = POLICY.tie_factor
+SEPARATION_RATIO = POLICY.separation_ratio
+SEPARATION_WINS = POLICY.separation_wins
+SEPARATION_BIC = POLICY.separation_bic
+SEPARATION_RATIO_CONSISTENT = POLICY.separation_ratio_consistent
+SEPARATION_P = POLICY.separation_p
+PLAY_PRESENT = POLICY.play_present
+PLAY_ABSENT = POLICY.play_absent
+STIFFNESS_TOLERANCE = POLICY.stiffness_tolerance
+MAX_FOLDS = POLICY.max_folds
+MAX_ALSO = POLICY.max_also
+ALSO_TRIALS = POLICY.also_trials
+SCREEN_KEEP = POLICY.screen_keep
+SCREEN_DELTA_BIC = POLICY.screen_delta_bic
+TEMPERATURE_SPAN_K = POLICY.temperature_span_K
+TEMPERATURE_GAP_K = POLICY.temperature_gap_K
+ORDER2_POSITIONS = POLICY.order2_positions
+TAKE_UP_COMPLETE = POLICY.take_up_complete
 
 NEXT_EXPERIMENT = {
     frozenset({"shaft_compliance", "mesh_stiffness"}):
@@ -173,7 +148,8 @@ class Diagnosis:
 # ------------------------------------------------------------------------------- design
 
 
-def conditions_of(stack: Stack) -> tuple[dict[str, tuple], list[str]]:
+def conditions_of(stack: Stack, policy: DecisionPolicy = POLICY
+                  ) -> tuple[dict[str, tuple], list[str]]:
     """Each run's condition (levels of the factors the campaign varies) and those factors."""
     runs = stack.runs
     levels: dict[str, list[Any]] = {}
@@ -181,38 +157,35 @@ def conditions_of(stack: Stack) -> tuple[dict[str, tuple], list[str]]:
     temps = [r.mean_temperature_C for r in runs]
     amps = [r.amplitude_Nm for r in runs]
     levels["position"] = pos
-    levels["temperature"] = temperature_levels(temps)
-    levels["amplitude"] = [round(a / (0.05 * stack.rated_Nm)) for a in amps]
+    levels["temperature"] = temperature_levels(temps, policy)
+    levels["amplitude"] = [round(a / (policy.amplitude_step * stack.rated_Nm)) for a in amps]
     varied = [k for k, v in levels.items() if len(set(v)) > 1]
     cond = {r.run_id: tuple(levels[k][i] for k in varied) for i, r in enumerate(runs)}
     return cond, varied
 
 
-TEMPERATURE_SPAN_K = 2.0
-"""Housing temperatures that span less than this are one condition (the rule of
-:func:`testable` for thermal expansion: below it the campaign does not vary temperature)."""
-TEMPERATURE_GAP_K = 1.5
-"""Mean run temperatures closer than this (after sorting) are the same temperature level."""
 
 
-def temperature_levels(temps: Sequence[float | None]) -> list[int | None]:
+def temperature_levels(temps: Sequence[float | None], policy: DecisionPolicy = POLICY
+                       ) -> list[int | None]:
     """Each run's temperature level: 0 for all when the campaign does not vary temperature
     (span below TEMPERATURE_SPAN_K: room drift of a few tenths is no factor), else levels
     split where sorted mean temperatures leave a gap of TEMPERATURE_GAP_K. Rounding to a grid
     split 20.12 and 20.66 deg C into two conditions, and a tooth-pair repeat was lost."""
     known = sorted(t for t in temps if t is not None)
-    if not known or known[-1] - known[0] < TEMPERATURE_SPAN_K:
+    if not known or known[-1] - known[0] < policy.temperature_span_K:
         return [None if t is None else 0 for t in temps]
     level_of: dict[float, int] = {}
     level = 0
     for a, b in zip([known[0], *known], known, strict=False):
-        if b - a >= TEMPERATURE_GAP_K:
+        if b - a >= policy.temperature_gap_K:
             level += 1
         level_of[b] = level
     return [None if t is None else level_of[t] for t in temps]
 
 
-def folds_by_condition(stack: Stack, cond: dict[str, tuple]) -> list[list[int]]:
+def folds_by_condition(stack: Stack, cond: dict[str, tuple], policy: DecisionPolicy = POLICY
+                       ) -> list[list[int]]:
     """Held-out sets: whole conditions (all repeats together), at most MAX_FOLDS folds; with a
     single condition, one run at a time."""
     keys = list(dict.fromkeys(cond[r.run_id] for r in stack.runs))
@@ -222,7 +195,7 @@ def folds_by_condition(stack: Stack, cond: dict[str, tuple]) -> list[list[int]]:
         groups = [[i for i, r in enumerate(stack.runs) if cond[r.run_id] == k] for k in keys]
     if len(groups) < 2:
         return []
-    n = min(MAX_FOLDS, len(groups))
+    n = min(policy.max_folds, len(groups))
     folds = [[] for _ in range(n)]
     for j, g in enumerate(groups):
         folds[j % n].extend(g)
@@ -230,7 +203,7 @@ def folds_by_condition(stack: Stack, cond: dict[str, tuple]) -> list[list[int]]:
 
 
 def folds_by_repeat(stack: Stack, cond: dict[str, tuple],
-                    varied: Sequence[str] = ()) -> list[list[int]]:
+                    varied: Sequence[str] = (), policy: DecisionPolicy = POLICY) -> list[list[int]]:
     """Held-out sets of repeats: fold r leaves out the r-th run of every repeated condition.
     A repeat is the same tooth pair meshing at the same other conditions: the position enters
     as its tooth-pair phase (analysis.effects.tooth_pair_phase), so positions one repeat
@@ -246,11 +219,12 @@ def folds_by_repeat(stack: Stack, cond: dict[str, tuple],
     reps = [v for v in by.values() if len(v) >= 2]
     if not reps:
         return []
-    depth = min(MAX_FOLDS, max(len(v) for v in reps))
+    depth = min(policy.max_folds, max(len(v) for v in reps))
     return [[v[k] for v in reps if k < len(v)] for k in range(depth)]
 
 
-def testable(stack: Stack, cond: dict[str, tuple], varied: list[str]) -> dict[str, str]:
+def testable(stack: Stack, cond: dict[str, tuple], varied: list[str],
+             policy: DecisionPolicy = POLICY) -> dict[str, str]:
     """Candidates the design can test -> '' ; others -> why not."""
     why: dict[str, str] = {}
     n_pos = len({round(r.input_angle_deg, 1) for r in stack.runs
@@ -259,16 +233,18 @@ def testable(stack: Stack, cond: dict[str, tuple], varied: list[str]) -> dict[st
         why[name] = ""
     if name_missing := (not positions_known(stack)):
         why["runout"] = why["tooth_spacing_error"] = "input_angle_deg unknown"
-    if not name_missing and n_pos < 3:
-        why["runout"] = f"only {n_pos} locking position(s): runout needs 3 or more"
+    if not name_missing and n_pos < policy.runout_positions:
+        why["runout"] = (f"only {n_pos} locking position(s): runout needs "
+                         f"{policy.runout_positions} or more")
     if not name_missing and len(teeth_of(stack)) < 2:
         why["tooth_spacing_error"] = "one tooth pair only"
     temps = [r.mean_temperature_C for r in stack.runs if r.mean_temperature_C is not None]
     spread = 0.0
     if temperatures_known(stack):
         spread = max(float(np.ptp(np.concatenate([r.temperature_C for r in stack.runs]))), 0.0)
-    if not temps or spread < 2.0:
-        why["thermal_expansion"] = "temperature does not vary by 2 K or more"
+    if not temps or spread < policy.temperature_span_K:
+        why["thermal_expansion"] = (f"temperature does not vary by "
+                                    f"{policy.temperature_span_K:g} K or more")
     why["shaft_compliance"] = ("a series compliance changes only the slope: from loops alone it "
                                "is the stiffness parameter (see parameter_error)")
     if stack.physics is not None:
@@ -277,14 +253,11 @@ def testable(stack: Stack, cond: dict[str, tuple], varied: list[str]) -> dict[st
     return why
 
 
-ORDER2_POSITIONS = 7
-"""Distinct locking positions needed before the runout's twice-per-turn harmonic is fitted:
-the play and the six coefficients of orders 1, (2 z_ext - z_int) / z_ext and 2 must be
-determined by the positions themselves, not by the priors."""
 
 
 def choose_family_members(stack: Stack, cond: dict[str, tuple], varied: Sequence[str],
-                          why_not: dict[str, str], folds: list[list[int]]) -> Stack:
+                          why_not: dict[str, str], folds: list[list[int]],
+                          policy: DecisionPolicy = POLICY) -> Stack:
     """The members of the runout, thermal and bearing families the campaign supports. A play
     that changes with the crank angle is a periodic function of it: eq. (4) gives orders 1 and
     (2 z_ext - z_int) / z_ext, an oval (two-lobed) ring, bore or bearing seat order 2
@@ -305,7 +278,7 @@ def choose_family_members(stack: Stack, cond: dict[str, tuple], varied: Sequence
         richer = replace(stack, cache={}, **{flag: True})
         first = fit(stack, ("backlash", effect))
         second = fit(richer, ("backlash", effect))
-        if _bic(second) > _bic(first) - SEPARATION_BIC:
+        if _bic(second) > _bic(first) - policy.separation_bic:
             return False
         if not folds:
             return False
@@ -314,23 +287,23 @@ def choose_family_members(stack: Stack, cond: dict[str, tuple], varied: Sequence
             h, lm, nh, resid = _heldout(st, (effect,), folds, f)
             cands.append(Candidate((effect,), f, h, lm, nh, "leave-one-condition-out",
                                    delta_bic=_bic(f), heldout_resid=resid))
-        return separated(stack, cands[1], cands[0])
+        return separated(stack, cands[1], cands[0], policy)
 
     n_pos = len({round(r.input_angle_deg, 1) for r in stack.runs
                  if r.input_angle_deg is not None})
-    if not why_not.get("runout") and n_pos >= ORDER2_POSITIONS and earns("runout",
+    if not why_not.get("runout") and n_pos >= policy.order2_positions and earns("runout",
                                                                            "runout_order2"):
         changes["runout_order2"] = True
     levels = {c[list(varied).index("temperature")] for c in cond.values()} \
         if "temperature" in varied else set()
-    if (not why_not.get("thermal_expansion") and len(levels) >= 3
+    if (not why_not.get("thermal_expansion") and len(levels) >= policy.thermal_levels
             and earns("thermal_expansion", "thermal_quadratic")):
         changes["thermal_quadratic"] = True
     if not why_not.get("bearing_clearance"):
         first = fit_profile(stack, ("backlash", "bearing_clearance"))
         second = fit_profile(replace(stack, bearing_smooth=True, cache={}),
                              ("backlash", "bearing_clearance"))
-        if _bic(second) <= _bic(first) - SEPARATION_BIC:
+        if _bic(second) <= _bic(first) - policy.separation_bic:
             changes["bearing_smooth"] = True
     return replace(stack, cache={}, **changes) if changes else stack
 
@@ -400,8 +373,8 @@ def _ci(f: LinearFit, name: str, sigma_scale: float) -> float | None:
     return float(1.96 * math.sqrt(v) * sigma_scale) if v >= 0 and math.isfinite(v) else None
 
 
-def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple[dict[str, Any],
-                                                                                 bool, list[str]]:
+def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit,
+                    policy: DecisionPolicy = POLICY) -> tuple[dict[str, Any], bool, list[str]]:
     """Physical parameters of a fit (units in names), 95 % intervals where linear, and the
     plausibility check against the unit's tolerance budget."""
     out: dict[str, Any] = {}
@@ -414,13 +387,14 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
     for e in effects:
         if e == "friction":
             out["friction_Nm"] = f.nl.get("friction_Nm", 0.0)
-            if out["friction_Nm"] > 0.15 * rated:
+            if out["friction_Nm"] > policy.friction_max_share * rated:
                 ok = False
-                notes.append("friction above 15 % of rated torque")
-            if out["friction_Nm"] <= FRICTION_ALLOWANCE * rated:
+                notes.append(f"friction above {policy.friction_max_share * 100:g} % of "
+                             "rated torque")
+            if out["friction_Nm"] <= policy.friction_allowance * rated:
                 ok = False
                 notes.append(f"friction {out['friction_Nm']:.3g} N*m within the ordinary "
-                             f"friction of every unit and rig ({FRICTION_ALLOWANCE:.0%} of "
+                             f"friction of every unit and rig ({policy.friction_allowance:.0%} of "
                              "rated): part of the null model, not a finding")
         elif e == "torque_sensor_offset":
             out["offset_Nm"] = f.nl.get("torque_offset_Nm", 0.0)
@@ -429,9 +403,10 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             if "torque_offset_low_Nm" in f.nl:
                 out["offset_interval_Nm"] = [f.nl["torque_offset_low_Nm"],
                                              f.nl["torque_offset_high_Nm"]]
-            if abs(nearest) > 0.08 * rated:
+            if abs(nearest) > policy.offset_max_share * rated:
                 ok = False
-                notes.append("torque offset above 8 % of rated torque")
+                notes.append(f"torque offset above {policy.offset_max_share * 100:g} % of "
+                             "rated torque")
             if stack.offset_veto:
                 ok = False
                 notes.append(stack.offset_veto)
@@ -456,7 +431,7 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             take_up = cb * (f.nl.get("bearing_stage_torque_Nm") or 0.0)
             out["take_up_twist_arcmin"] = take_up
             top = NONLINEAR["bearing_clearance"][2] * rated
-            if (f.nl.get("bearing_stage_torque_Nm") or 0.0) >= 0.99 * top:
+            if (f.nl.get("bearing_stage_torque_Nm") or 0.0) >= policy.bearing_stage_bound * top:
                 # the best soft stage would end beyond the range searched: no take-up that
                 # closes inside the loaded range, a slope change over all of it
                 ok = False
@@ -468,7 +443,7 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
                 if stack.physics.bearing_budget_arcmin is not None:
                     out["budget_extra_play_arcmin"] = stack.physics.bearing_budget_arcmin
                     budget = stack.physics.bearing_budget_arcmin
-                    if budget > 0 and take_up > 2.0 * budget:
+                    if budget > 0 and take_up > policy.budget_factor * budget:
                         ok = False
                         notes.append(f"soft stage takes up {take_up:.3f} arcmin, above twice "
                                      f"the inspected bearing clearances' play ({budget:.3f} "
@@ -479,7 +454,7 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
                 # the soft stage takes up the clearance: the twist it adds on a flank is
                 # bounded by the play the inspected clearances give (seed 000 eqs. 3 + 7),
                 # with the same factor two as the runout's
-                if budget > 0 and take_up > 2.0 * budget:
+                if budget > 0 and take_up > policy.budget_factor * budget:
                     ok = False
                     notes.append(f"soft stage takes up {take_up:.3f} arcmin, above twice the "
                                  f"inspected bearing clearances' play ({budget:.3f} arcmin)")
@@ -508,7 +483,7 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
                 out["external_um"] = stack.physics.eccentricity_um(amp_ext)
             out["beta_deg"] = math.degrees(math.atan2(-c[3], -c[2]))
             out["amplitude_um"] = out["internal_um"] + out["external_um"]
-            budget = 2.0 * stack.runout_budget_arcmin
+            budget = policy.budget_factor * stack.runout_budget_arcmin
             if out["amplitude_arcmin"] > budget:
                 ok = False
                 notes.append(f"runout play change {out['amplitude_arcmin']:.3f} arcmin above "
@@ -529,7 +504,8 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
                 ends = [min(temps) - stack.reference_C, max(temps) - stack.reference_C]
                 slope = max(abs(out["coefficient_um_per_K"] + 2.0 * out["quadratic_um_per_K2"]
                                 * d) for d in ends)
-            limit = 3.0 if stack.physics is None else stack.physics.thermal_limit_um_per_K
+            limit = (policy.thermal_limit_um_per_K if stack.physics is None
+                     else stack.physics.thermal_limit_um_per_K)
             if slope > limit:
                 ok = False
                 notes.append(f"thermal play change above {limit:g} um/K")
@@ -540,7 +516,8 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit) -> tuple
             out["play_change_arcmin_rms"] = float(np.std(vals))
             out["play_change_um_rms"] = float(_um(stack, np.std(vals)))
             out["per_tooth_arcmin"] = {k.split("_")[1]: v for k, v in teeth.items()}
-            limit = 12.0 if stack.physics is None else stack.physics.spacing_limit_um
+            limit = (policy.spacing_limit_um if stack.physics is None
+                     else stack.physics.spacing_limit_um)
             if out["play_change_um_rms"] > limit:
                 ok = False
                 notes.append(f"tooth-to-tooth play change above {limit:g} um rms")
@@ -575,25 +552,25 @@ def _sys(h: float, noise: float) -> float:
     return math.sqrt(max(h * h - noise * noise, 0.0))
 
 
-def nuisance_friction(stack: Stack) -> float:
+def nuisance_friction(stack: Stack, policy: DecisionPolicy = POLICY) -> float:
     """The ordinary friction every unit and rig has (N*m): the null model's best Coulomb
     friction between 0 and FRICTION_ALLOWANCE of rated torque (a few grid points). Carried
     by every candidate as the measuring system's nuisance; only friction beyond it is an
     effect."""
-    return _nuisance_friction(stack)[1]
+    return _nuisance_friction(stack, policy)[1]
 
 
-def _nuisance_friction(stack: Stack) -> tuple[float, float]:
+def _nuisance_friction(stack: Stack, policy: DecisionPolicy = POLICY) -> tuple[float, float]:
     """(objective, friction N*m) of the null with the best ordinary friction."""
-    top = FRICTION_ALLOWANCE * stack.rated_Nm
+    top = policy.friction_allowance * stack.rated_Nm
     grid = np.concatenate([[0.0], np.geomspace(top / 100.0, top, 7)])
     trials = [(fit(stack, ("backlash",), nl={"friction_Nm": float(v)}).objective, float(v))
               for v in grid]
     return min(trials)
 
 
-def lag_if_it_helps(runs: Sequence[RunInput], prepared: list[PreparedRun], tp: int
-                    ) -> list[PreparedRun]:
+def lag_if_it_helps(runs: Sequence[RunInput], prepared: list[PreparedRun], tp: int,
+                    policy: DecisionPolicy = POLICY) -> list[PreparedRun]:
     """The runs with their torque-channel lag taken out where that improves the run's part
     of the null model's objective by more than it costs (BIC: log n per run). The lag is read
     on the loaded flanks alone; a slow change of the unit (a drift, creep) can pass for one
@@ -604,8 +581,8 @@ def lag_if_it_helps(runs: Sequence[RunInput], prepared: list[PreparedRun], tp: i
     plain = list(prepared)
     for i in lagged:
         plain[i] = prepare_run(runs[i], tp, correct_lag=False)
-    with_lag = _run_objectives(build_stack(prepared))
-    without = _run_objectives(build_stack(plain))
+    with_lag = _run_objectives(build_stack(prepared), policy)
+    without = _run_objectives(build_stack(plain), policy)
     n = sum(r.twist_arcmin.size for r in prepared)
     out = list(plain)
     for i in lagged:
@@ -615,10 +592,10 @@ def lag_if_it_helps(runs: Sequence[RunInput], prepared: list[PreparedRun], tp: i
     return out
 
 
-def _run_objectives(stack: Stack) -> dict[str, float]:
+def _run_objectives(stack: Stack, policy: DecisionPolicy = POLICY) -> dict[str, float]:
     """Each run's share of the null model's robust objective (Huber, noise units), with the
     best ordinary friction."""
-    f0 = _nuisance_friction(stack)[1]
+    f0 = _nuisance_friction(stack, policy)[1]
     # a run's own friction may be lower than the campaign's one (fit.run_chain), as in the
     # null model the diagnosis goes on with: without it a lag that moves a play crossing's
     # torque past the campaign's friction costs that crossing a whole play, and the lag
@@ -632,8 +609,8 @@ def _run_objectives(stack: Stack) -> dict[str, float]:
     return out
 
 
-def with_measurement_nuisance(prepared: list[PreparedRun], alpha: float
-                              ) -> tuple[Stack, dict[str, Any]]:
+def with_measurement_nuisance(prepared: list[PreparedRun], alpha: float,
+                              policy: DecisionPolicy = POLICY) -> tuple[Stack, dict[str, Any]]:
     """The stack the diagnosis fits: the ordinary friction carried as a nuisance
     (:func:`nuisance_friction`), and each run's torque zero read at its play crossings taken
     out (analysis.diagnosis.data.remove_torque_zero) when that improves the null model by more
@@ -641,58 +618,69 @@ def with_measurement_nuisance(prepared: list[PreparedRun], alpha: float
     contact or a take-up near zero torque is no torque zero: such a reading worsens the null
     and is not used."""
     plain = build_stack(prepared)
-    obj_plain, f_plain = _nuisance_friction(plain)
+    obj_plain, f_plain = _nuisance_friction(plain, policy)
     zeroed_runs, zero_report = remove_torque_zero(prepared, alpha,
-                                                  ZERO_ALLOWANCE * plain.rated_Nm)
+                                                  policy.zero_allowance * plain.rated_Nm)
     used = False
     stack, f0 = plain, f_plain
     if zero_report.get("runs_read"):
         zeroed = build_stack(zeroed_runs)
-        obj_zero, f_zero = _nuisance_friction(zeroed)
+        obj_zero, f_zero = _nuisance_friction(zeroed, policy)
         n = sum(r.twist_arcmin.size for r in prepared)
         if 2.0 * (obj_plain - obj_zero) >= zero_report["runs_read"] * math.log(max(n, 2)):
             stack, f0, used = zeroed, f_zero, True
     zero_report["used"] = used
-    if f0 >= FRICTION_ALLOWANCE * stack.rated_Nm * (1.0 - 1e-9):
+    if f0 >= policy.friction_allowance * stack.rated_Nm * (1.0 - 1e-9):
         # the null wants all the allowance and more: the unit's friction is beyond the
         # ordinary, a candidate's to find; held at the cap in every other candidate it would
         # bend their comparison (a runout against per-tooth plays)
         f0 = 0.0
     veto = ""
     p_common = zero_report.get("common_false_alarm_probability")
-    if zero_report.get("runs_read", 0) >= 3 and p_common is not None and p_common > alpha:
+    if (zero_report.get("runs_read", 0) >= policy.zero_veto_runs and p_common is not None
+            and p_common > alpha):
         # a sensor offset is the same in every run and moves every play crossing by it
         veto = (f"the play crossings of {zero_report['runs_read']} runs put the torque zero "
                 f"at {zero_report['common_Nm']:+.4f} N*m, within their own scatter "
                 f"({zero_report['scatter_Nm']:.4f} N*m): no common sensor offset")
     elif (read := smallest_zero_reading(prepared)) is not None and \
-            abs(read[0]) <= ZERO_ALLOWANCE * plain.rated_Nm:
+            abs(read[0]) <= policy.zero_allowance * plain.rated_Nm:
         # the rig read its torque channel at zero command: a constant sensor offset is in
         # every such reading, and one within the re-tare allowance rules it out
         veto = (f"the rig read the torque channel at {read[0]:+.4f} N*m at zero command "
-                f"(run {read[1]}), within what a re-tare leaves ({ZERO_ALLOWANCE:.2%} of "
+                f"(run {read[1]}), within what a re-tare leaves ({policy.zero_allowance:.2%} of "
                 "rated): a constant sensor offset would show in every zero reading")
-    elif (zero_report.get("runs_read", 0) >= 3 and used
-          and abs(zero_report["common_Nm"]) <= ZERO_ALLOWANCE * plain.rated_Nm):
+    elif (zero_report.get("runs_read", 0) >= policy.zero_veto_runs and used
+          and abs(zero_report["common_Nm"]) <= policy.zero_allowance * plain.rated_Nm):
         veto = (f"the play crossings put the common torque zero at "
                 f"{zero_report['common_Nm']:+.4f} N*m, within what a re-tare and the zero's "
-                f"drift leave ({ZERO_ALLOWANCE:.2%} of rated): no sensor offset")
+                f"drift leave ({policy.zero_allowance:.2%} of rated): no sensor offset")
     if not used and zero_report.get("runs_read"):
         zero_report["treated_as"] = ("not taken out: the crossings' zeros do not improve the "
                                      "null model by more than they cost")
     return replace(stack, nuisance_nl={"friction_Nm": f0, "friction_spread_Nm": f0}, cache={},
                    offset_veto=veto,
-                   nuisance_friction_max_Nm=FRICTION_ALLOWANCE * stack.rated_Nm), zero_report
+                   nuisance_friction_max_Nm=policy.friction_allowance * stack.rated_Nm), zero_report
 
 
 def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
-             alpha: float = ALPHA, replicates: int = REPLICATES, seed: int = 0) -> Diagnosis:
+             alpha: float | None = None, replicates: int = REPLICATES, seed: int = 0,
+             policy: DecisionPolicy | None = None) -> Diagnosis:
     """Diagnose a campaign (see the module docstring); raises AnalysisError on bad input.
     ``alpha``: the level at which an effect is called (each candidate's false-alarm
     probability, :mod:`analysis.diagnosis.calibration`); ``replicates``, ``seed``: of the
-    block bootstrap that calibrates it."""
+    block bootstrap that calibrates it; ``policy``: the thresholds of every decision
+    (:class:`analysis.diagnosis.policy.DecisionPolicy`, :data:`POLICY` when not given;
+    ``alpha``, when given, replaces its level). The report records the policy used under
+    ``decision_policy``."""
     if not runs:
         raise AnalysisError("a diagnosis needs at least one run")
+    policy = POLICY if policy is None else policy
+    if alpha is not None and alpha != policy.alpha:
+        if not 0.0 < alpha < 1.0:
+            raise AnalysisError(f"alpha must be between 0 and 1, got {alpha!r}")
+        policy = replace(policy, alpha=float(alpha))
+    alpha = policy.alpha
     if not 0.0 < alpha < 1.0:
         raise AnalysisError(f"alpha must be between 0 and 1, got {alpha!r}")
     tp = TARGET_POINTS if target_points is None else target_points
@@ -700,15 +688,15 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
     if any(r.nominal is None for r in prepared):
         raise AnalysisError("the reference nominal model needs each run's unit data "
                             "(run.json 'unit'); a run has none usable")
-    prepared = lag_if_it_helps(runs, prepared, tp)
-    stack, zero_report = with_measurement_nuisance(prepared, alpha)
+    prepared = lag_if_it_helps(runs, prepared, tp, policy)
+    stack, zero_report = with_measurement_nuisance(prepared, alpha, policy)
     stack = with_kind_play_reference(stack)  # the unit kind's nominal shape (kind_physics)
     prepared = list(stack.runs)
-    cond, varied = conditions_of(stack)
-    cfolds = folds_by_condition(stack, cond)
-    rfolds = folds_by_repeat(stack, cond, varied)
-    why_not = testable(stack, cond, varied)
-    stack = choose_family_members(stack, cond, varied, why_not, cfolds)
+    cond, varied = conditions_of(stack, policy)
+    cfolds = folds_by_condition(stack, cond, policy)
+    rfolds = folds_by_repeat(stack, cond, varied, policy)
+    why_not = testable(stack, cond, varied, policy)
+    stack = choose_family_members(stack, cond, varied, why_not, cfolds, policy)
 
     noise = math.sqrt(float(np.mean(np.concatenate(
         [np.full(r.twist_arcmin.size, r.sigma_arcmin**2) for r in prepared]))))
@@ -716,7 +704,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
     # analysis.diagnosis.data.resolution_of) and the campaign design: the systematic part of
     # a held-out RMS over N points is known to about noise * (2 / N)^(1/4)
     n_points = sum(r.twist_arcmin.size for r in prepared)
-    threshold = max(NONE_SIGMAS, (2.0 / max(n_points, 1)) ** 0.25) * noise
+    threshold = max(policy.none_sigmas, (2.0 / max(n_points, 1)) ** 0.25) * noise
 
     amplitude = float(np.median([r.amplitude_Nm for r in prepared]))
 
@@ -743,7 +731,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
             (h, lm), nh, scheme = _insample(stack, full), 0, "in-sample (no held-out design)"
         cand = Candidate(effects, full, h, lm, nh, scheme, delta_bic=_bic(full) - _bic(base),
                          heldout_resid=resid)
-        cand.params, cand.plausible, cand.notes = describe_params(stack, effects, full)
+        cand.params, cand.plausible, cand.notes = describe_params(stack, effects, full, policy)
         return cand
 
     base_c = evaluate(())
@@ -769,14 +757,14 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
     order = sorted(screened, key=lambda n: _bic(screened[n]))
     for rank, name in enumerate(order):
         dbic = _bic(screened[name]) - base_bic
-        if rank < SCREEN_KEEP and dbic < SCREEN_DELTA_BIC:
+        if rank < policy.screen_keep and dbic < policy.screen_delta_bic:
             models[name] = evaluate((name,), screened[name])
         else:
             f = screened[name]
             h, lm = _insample(stack, f)
             cand = Candidate((name,), f, h, lm, 0, "screened out (in-sample fit only)",
                              delta_bic=dbic, screened_out=True)
-            cand.params, cand.plausible, cand.notes = describe_params(stack, (name,), f)
+            cand.params, cand.plausible, cand.notes = describe_params(stack, (name,), f, policy)
             models[name] = cand
 
     def shrink(c: Candidate) -> float:
@@ -836,7 +824,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
     # to few points, the offset at the crossings of a continuous loading, is small in an RMS
     # over the whole loop)
     material = any(fap.get(n, 1.0) <= alpha and c.heldout_runs > 0 and not c.screened_out
-                   and c.plausible and shrink(c) >= MATERIAL_SHRINK
+                   and c.plausible and shrink(c) >= policy.material_shrink
                    for n, c in models.items())
     # a candidate's evidence counts for "there is a gap" only when the candidate also closes
     # MATERIAL_SHRINK of it (plausible or not: which effect is a later question): a
@@ -844,15 +832,15 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
     # of the rig's own dynamics the campaign happens to resolve, not the unit's gap (an
     # over-the-wire null: clearance "significant" at 8e-7, shrink 0.02, lack of fit p = 0.02)
     any_effect = any(fap.get(n, 1.0) <= alpha and c.heldout_runs > 0 and not c.screened_out
-                     and shrink(c) >= MATERIAL_SHRINK for n, c in models.items())
+                     and shrink(c) >= policy.material_shrink for n, c in models.items())
     # the encoder's own quantisation error follows the twist (it lines up with the loading),
     # so a systematic gap under one reading's quantisation RMS (q / sqrt 12) is the encoder's,
     # not the unit's, unless a candidate with evidence closes a material part of it
     floor = max(threshold, quantisation_floor_arcmin(prepared))
     attribute = not ((sys0 <= floor and not material) or not (any_effect or systematic))
     flanks = flank_asymmetry(stack, base)
-    if not attribute and flanks is not None and flanks.finding(alpha, STIFFNESS_TOLERANCE,
-                                                                threshold):
+    if not attribute and flanks is not None and flanks.finding(alpha, policy.stiffness_tolerance,
+                                                                threshold, policy.flank_runs):
         # the two flanks' loaded slopes differ beyond chance across the runs and beyond the
         # stiffness tolerance: no effect of the vocabulary makes a flank-dependent slope
         # (analysis.diagnosis.flanks), so this is a real gap, not the model within the noise
@@ -866,7 +854,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
                   "(a torque channel whose gain depends on the sign, or flanks of unequal "
                   "contact)")
     elif not attribute:
-        if stiff_dev < -STIFFNESS_TOLERANCE:
+        if stiff_dev < -policy.stiffness_tolerance:
             # the loaded stiffness is below seed 004 eq. (8) beyond its tolerance: a compliance
             # in series with the mesh (the shaft, a coupling) is the unmodelled effect; a
             # softer mesh than the model would look the same in loops (the alternative)
@@ -887,7 +875,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
             before, nom.play_arcmin, k_nom, fap=fap, alpha=alpha, evidence_of=evidence_of)
         share = param_error.get("share_of_predictive_gap", 0.0)
         if (verdict == "unexplained" and not material and not systematic
-                and stiff_dev < -STIFFNESS_TOLERANCE and share >= SERIES_SHARE):
+                and stiff_dev < -policy.stiffness_tolerance and share >= policy.series_share):
             # no candidate closes the structural gap and its lack of fit is within what the
             # campaign's own errors give by chance, while most of the gap between the nominal
             # model and the measurement is a loaded slope below seed 004 eq. (8): the series
@@ -916,10 +904,11 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
                                             / max(_sys(b_rms, noise), 1e-12)) ** 2, 4)
             if _sys(b_rms, noise) > 0 else 0.0,
             "params": _clean(c.params), "plausible": c.plausible, "notes": c.notes,
-            "false_alarm_probability": _nn(fap.get(c.effects[0], math.nan)),
+            "false_alarm_probability": floored(_nn(fap.get(c.effects[0], math.nan)),
+                                               replicates),
             "evidence": {"delta_bic": round(c.delta_bic, 1), "heldout_runs": c.heldout_runs,
                          "cv": c.scheme,
-                         **({"calibrated": _clean(cal[c.effects[0]].to_dict())}
+                         **({"calibrated": _clean(cal[c.effects[0]].to_dict(replicates))}
                             if c.effects[0] in cal else {})},
         })
     if "shaft_compliance" in candidates and math.isfinite(k_nom) and k_fit < k_nom:
@@ -941,7 +930,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
             reason += f"; {largest} is the larger term of the joint fit"
             chosen = [models[largest], *[c for c in chosen[1:]]]
             chosen[0] = models[largest]
-    curv_name, _ = curvature_effect(models, k_nom, amplitude, stack.bearing_smooth)
+    curv_name, _ = curvature_effect(models, k_nom, amplitude, stack.bearing_smooth, policy)
     take_up_pair = ("bearing_clearance", "stiffness_nonlinearity")
     if curv_name is not None and verdict in take_up_pair and verdict != curv_name:
         verdict = curv_name  # one take-up family: the loaded slope names it
@@ -990,7 +979,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
                 if e in sizes:
                     also[-1]["size_arcsec"] = sizes[e] * ARCSEC
             prev = c
-        series = series_compliance(chosen[-1].fit, k_nom)
+        series = series_compliance(chosen[-1].fit, k_nom, policy)
         if series is not None:
             # in-sample shrink of the series compliance: the final model with the loaded
             # compliance held at the nominal 1 / K against the fitted one
@@ -1057,8 +1046,14 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
         "method": "moving-block bootstrap of the null model's residuals, run by run; "
                   "scaled chi-square tail; any-candidate correction by the effective number "
                   "of tests (analysis.diagnosis.calibration)",
-        "lack_of_fit": _clean(omni.to_dict()) if omni is not None else None,
+        "lack_of_fit": _clean(omni.to_dict(replicates)) if omni is not None else None,
+        "draws": replicates,
+        "false_alarm_resolution": resolution(replicates),
+        "false_alarm_floor": "every false_alarm_probability reported is at least "
+                             "1 / (draws + 1): below it the scaled chi-square tail is "
+                             "extrapolated beyond what the bootstrap draws observed",
     }
+    report["decision_policy"] = policy.to_dict()
     report["measurement"] = _clean(measurement_report(runs, prepared, stack, base, zero_report,
                                                       tp, alpha))
     if stack.physics is not None:
@@ -1078,7 +1073,8 @@ def quantisation_floor_arcmin(runs: Sequence[PreparedRun]) -> float:
     return float(np.median(qs)) / ARCSEC / math.sqrt(12.0) if qs else 0.0
 
 
-def series_compliance(f: LinearFit, k_nom: float) -> dict[str, Any] | None:
+def series_compliance(f: LinearFit, k_nom: float, policy: DecisionPolicy = POLICY
+                      ) -> dict[str, Any] | None:
     """A series compliance left once the effects are fitted: the loaded stiffness of the final
     model more than the tolerance (STIFFNESS_TOLERANCE or two standard errors) below seed 004
     eq. (8). From loops it cannot be told from a softer mesh, so it is only ever listed beside
@@ -1092,7 +1088,7 @@ def series_compliance(f: LinearFit, k_nom: float) -> dict[str, Any] | None:
         j = f.names.index("compliance")
         scale = math.sqrt(max(2.0 * f.objective / max(f.n - len(f.beta), 1), 1.0))
         rel_se = math.sqrt(max(f.cov[j, j], 0.0)) * scale / comp
-    tol = max(STIFFNESS_TOLERANCE, 2.0 * rel_se)
+    tol = max(policy.stiffness_tolerance, policy.stiffness_se_factor * rel_se)
     if k_load >= k_nom * (1.0 - tol):
         return None
     return {"effect": "shaft_compliance", "shrink": 0.0, "shrink_in_sample": True,
@@ -1118,8 +1114,8 @@ def series_size_arcmin(stack: Stack, f: LinearFit, effects: Sequence[str], k_nom
 
 
 def curvature_effect(models: dict[str, Candidate], k_nom: float,
-                     amplitude_Nm: float | None = None, smooth: bool = False
-                     ) -> tuple[str | None, str]:
+                     amplitude_Nm: float | None = None, smooth: bool = False,
+                     policy: DecisionPolicy = POLICY) -> tuple[str | None, str]:
     """Name the flank curvature by what physically differs: a bearing clearance being taken
     up adds compliance only below its closing torque and leaves the mesh's nominal slope at
     load (seed 004 eq. 8); Hertzian contact stiffening makes the contact itself stiffer as the
@@ -1150,7 +1146,7 @@ def curvature_effect(models: dict[str, Candidate], k_nom: float,
         j = c.fit.names.index("compliance")
         scale = math.sqrt(max(2.0 * c.fit.objective / max(c.fit.n - len(c.fit.beta), 1), 1.0))
         rel_se = math.sqrt(max(c.fit.cov[j, j], 0.0)) * scale / comp
-    tol = max(STIFFNESS_TOLERANCE, 2.0 * rel_se)
+    tol = max(policy.stiffness_tolerance, policy.stiffness_se_factor * rel_se)
     dev = k_load / k_nom - 1.0
     text = (f"stiffness at load {k_load:.3g} N*m/arcmin once the small-torque take-up is "
             f"fitted, nominal {k_nom:.3g} (seed 004 eq. 8)")
@@ -1160,7 +1156,7 @@ def curvature_effect(models: dict[str, Candidate], k_nom: float,
         k_end = tangent_stiffness_at_amplitude(c, amplitude_Nm, smooth)
         done = take_up_completion(c, amplitude_Nm, smooth)
         if (k_end is not None and k_end < k_nom * (1.0 - tol)
-                and done < TAKE_UP_COMPLETE):
+                and done < policy.take_up_complete):
             return "stiffness_nonlinearity", text + (
                 f", but at the largest torque the take-up is only {done:.0%} complete and the "
                 f"tangent stiffness still {k_end:.3g}: the flank goes on hardening up to the "
@@ -1169,10 +1165,6 @@ def curvature_effect(models: dict[str, Candidate], k_nom: float,
     return None, ""
 
 
-TAKE_UP_COMPLETE = 0.95
-"""A take-up this far complete at the amplitude (three torque scales of the saturating
-curve) has closed inside the loaded range: a clearance. Less, and the flank is still
-hardening at the largest torque the campaign reaches: a contact."""
 
 
 def take_up_completion(c: Candidate, amplitude_Nm: float | None, smooth: bool = False
@@ -1216,18 +1208,20 @@ def tangent_stiffness_at_amplitude(c: Candidate, amplitude_Nm: float | None,
 
 
 def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_play,
-               k_nom=math.nan, fap=None, alpha=ALPHA, evidence_of=None):
+               k_nom=math.nan, fap=None, alpha=None, evidence_of=None, policy=POLICY):
     """Pick the verdict among candidates, greedily adding effects (see module docstring).
     ``fap``: each candidate's calibrated false-alarm probability; one above ``alpha`` does
     not enter the pool. ``evidence_of(current, name)``: the calibrated false-alarm
     probability of adding ``name`` to the model ``current`` (a second effect needs it at
     most ``alpha`` too)."""
     fap = fap or {}
+    alpha = policy.alpha if alpha is None else alpha
+
     def sysh(c: Candidate) -> float:
         return _sys(c.heldout_rms_arcmin, noise)
 
     def explains(c: Candidate, ref: float) -> bool:
-        return sysh(c) <= max(EXPLAINED_SHARE * ref, threshold)
+        return sysh(c) <= max(policy.explained_share * ref, threshold)
 
     pool = [c for c in models.values()
             if c.plausible and c.heldout_runs > 0 and not c.screened_out
@@ -1239,7 +1233,7 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
         removes GREEDY_GAIN of the systematic held-out gap still left."""
         chosen = list(chosen)
         current = chosen[-1]
-        for _ in range(MAX_ALSO):
+        for _ in range(policy.max_also):
             have = set(current.effects)
             if have & pair:
                 have |= pair  # one flank-curvature family at a time
@@ -1250,14 +1244,14 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
                     continue
                 jf = _full_fit(stack, (*current.effects, name))
                 gain = _bic(jf) - _bic(current.fit)
-                if gain < SCREEN_DELTA_BIC:
+                if gain < policy.screen_delta_bic:
                     joint.append((gain, name, jf))
             joint.sort(key=lambda g: g[0])
             trials = [evaluate((*current.effects, name), jf)
-                      for _, name, jf in joint[:ALSO_TRIALS]]
+                      for _, name, jf in joint[:policy.also_trials]]
             earned = [t for t in trials if t.plausible and t.heldout_runs > 0
-                      and sysh(t) ** 2 <= (1.0 - GREEDY_GAIN) * sysh(current) ** 2
-                      and separated(stack, t, current)
+                      and sysh(t) ** 2 <= (1.0 - policy.greedy_gain) * sysh(current) ** 2
+                      and separated(stack, t, current, policy)
                       and (evidence_of is None or evidence_of(current, t.effects[-1]) <= alpha)]
             if not earned:
                 break
@@ -1266,7 +1260,7 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
         return chosen
 
     curv, curv_why = curvature_effect(models, k_nom, float(np.median(
-        [r.amplitude_Nm for r in stack.runs])), stack.bearing_smooth)
+        [r.amplitude_Nm for r in stack.runs])), stack.bearing_smooth, policy)
     pair = {"bearing_clearance", "stiffness_nonlinearity"}
     in_pool = [c for c in pool if c.effects[0] in pair]
     if curv is not None and in_pool and models.get(curv) in pool:
@@ -1292,16 +1286,16 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
             # parameters, is preferred unless the per-tooth model beats it on the same
             # held-out repeats
             smooth_rep = evaluate(("runout",), smooth.fit, by_repeat=True)
-            if not separated(stack, best, smooth_rep):
+            if not separated(stack, best, smooth_rep, policy):
                 explaining = [smooth] + [c for c in explaining if c is not smooth
                                          and c is not best]
                 best = smooth
         ties = [c for c in explaining[1:]
-                if sysh(c) <= max(threshold, TIE_FACTOR * sysh(best))
-                and c.scheme == best.scheme and not separated(stack, best, c)]
+                if sysh(c) <= max(threshold, policy.tie_factor * sysh(best))
+                and c.scheme == best.scheme and not separated(stack, best, c, policy)]
         if ties:
             names = [best.effects[0]] + [c.effects[0] for c in ties]
-            winner, why = play_tiebreak(names, models, nominal_play)
+            winner, why = play_tiebreak(names, models, nominal_play, policy)
             if winner is not None:
                 return (winner, [], None, additions([models[winner]]),
                         "held-out fits tie; decided by the free play: " + why)
@@ -1313,21 +1307,21 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
     chosen: list[Candidate] = []
     current_sys = sys0
     current: Candidate | None = None
-    for _ in range(3):
+    for _ in range(policy.greedy_max_effects):
         options = pool if current is None else [
-            evaluate((*current.effects, c.effects[0])) for c in pool[:4]
+            evaluate((*current.effects, c.effects[0])) for c in pool[:policy.greedy_options]
             if c.effects[0] not in current.effects]
         options = [c for c in options if c.plausible]
         if not options:
             break
         best = min(options, key=lambda c: c.heldout_rms_arcmin)
-        if sysh(best) ** 2 > (1.0 - GREEDY_GAIN) * current_sys**2:
+        if sysh(best) ** 2 > (1.0 - policy.greedy_gain) * current_sys**2:
             break
         chosen.append(best)
         current, current_sys = best, sysh(best)
-        if current_sys <= max(EXPLAINED_SHARE * sys0, threshold):
+        if current_sys <= max(policy.explained_share * sys0, threshold):
             break
-    if chosen and current_sys <= max(EXPLAINED_SHARE * sys0, threshold):
+    if chosen and current_sys <= max(policy.explained_share * sys0, threshold):
         return (chosen[0].effects[0], [], None, additions(chosen),
                 "effects added greedily explain the held-out gap")
     names = [c.effects[-1] for c in chosen] or [c.effects[0] for c in pool[:2]]
@@ -1335,8 +1329,8 @@ def _attribute(stack, models, sys0, threshold, noise, evaluate, before, nominal_
         best_in = min(insample_only, key=lambda c: c.fit.objective)
         # no in-sample evidence against it (BIC within SEPARATION_BIC of the best held-out
         # candidate's): the design cannot tell, so the verdict is ambiguous, not unexplained
-        if best_in.delta_bic < SCREEN_DELTA_BIC and best_in.delta_bic <= min(
-                (c.delta_bic for c in pool), default=math.inf) + SEPARATION_BIC:
+        if best_in.delta_bic < policy.screen_delta_bic and best_in.delta_bic <= min(
+                (c.delta_bic for c in pool), default=math.inf) + policy.separation_bic:
             names = [best_in.effects[0], *names]
             return ("ambiguous", names[:3], _next(names[:2]), chosen,
                     f"{best_in.effects[0]} fits best in-sample but the design holds out no "
@@ -1359,24 +1353,26 @@ def heldout_separation(stack: Stack, a: Candidate, b: Candidate) -> tuple[float,
     return ratio, float(np.mean(za < zb))
 
 
-def separated(stack: Stack, best: Candidate, other: Candidate) -> bool:
+def separated(stack: Stack, best: Candidate, other: Candidate,
+              policy: DecisionPolicy = POLICY) -> bool:
     """True when ``best`` is clearly better than ``other`` on held-out data (ratio of mean
     squared standardised residuals >= SEPARATION_RATIO, consistently over the held-out runs)
     and on the information criterion (BIC lower by SEPARATION_BIC): then the design separates
     them and the verdict is ``best``, not ``ambiguous``."""
     ratio, wins = heldout_separation(stack, best, other)
-    if other.delta_bic - best.delta_bic < SEPARATION_BIC:
+    if other.delta_bic - best.delta_bic < policy.separation_bic:
         return False
     n = len([k for k in best.heldout_resid if k in other.heldout_resid])
-    if ratio >= SEPARATION_RATIO and wins >= SEPARATION_WINS:
+    if ratio >= policy.separation_ratio and wins >= policy.separation_wins:
         return True
     k = int(round(wins * n))
-    return (n > 0 and ratio >= SEPARATION_RATIO_CONSISTENT
-            and binomtest(k, n, 0.5, alternative="greater").pvalue <= SEPARATION_P)
+    return (n > 0 and ratio >= policy.separation_ratio_consistent
+            and binomtest(k, n, 0.5, alternative="greater").pvalue <= policy.separation_p)
 
 
 def play_tiebreak(names: Sequence[str], models: dict[str, Candidate],
-                  nominal_play_arcmin: float) -> tuple[str | None, str]:
+                  nominal_play_arcmin: float, policy: DecisionPolicy = POLICY
+                  ) -> tuple[str | None, str]:
     """Settle a bearing_clearance / stiffness_nonlinearity tie by the free play: the bearings'
     radial clearances add play (seed 000 eqs. 3 + 7, budget from the inspected
     ``bearing_clearance_mm``), contact stiffening adds none. Returns (effect or None, why)."""
@@ -1388,11 +1384,11 @@ def play_tiebreak(names: Sequence[str], models: dict[str, Candidate],
     if not budget or budget <= 0:
         return None, ""
     excess = [models[n].fit.coef("play") - nominal_play_arcmin for n in pair]
-    if min(excess) >= PLAY_PRESENT * budget:
+    if min(excess) >= policy.play_present * budget:
         return "bearing_clearance", (
             f"calibrated free play {min(excess):+.3f} arcmin above the nominal, as the inspected "
             f"bearing clearances add ({budget:.3f} arcmin, seed 000 eqs. 3 + 7)")
-    if max(excess) <= PLAY_ABSENT * budget:
+    if max(excess) <= policy.play_absent * budget:
         return "stiffness_nonlinearity", (
             f"calibrated free play within {max(excess):+.3f} arcmin of the nominal: no extra "
             f"play of bearing clearances ({budget:.3f} arcmin expected)")

@@ -62,10 +62,32 @@ class Calibrated:
     scale: float
     dof: float
 
-    def to_dict(self) -> dict[str, float]:
+    def to_dict(self, replicates: int | None = None) -> dict[str, float]:
+        """The evidence as the report states it; with ``replicates``, the false-alarm
+        probability floored at the calibration's resolution (:func:`floored`)."""
+        fap = self.false_alarm_probability
         return {"statistic": self.statistic, "p_value": self.p_value,
-                "false_alarm_probability": self.false_alarm_probability,
+                "false_alarm_probability": fap if replicates is None
+                else floored(fap, replicates),
                 "null_scale": self.scale, "null_dof": self.dof}
+
+
+def resolution(replicates: int) -> float:
+    """The smallest false-alarm probability a calibration on ``replicates`` bootstrap draws
+    can state, ``1 / (replicates + 1)``: the scaled chi-square tail is matched to the draws'
+    mean and variance, so a probability below the draws' own reach is the tail's
+    extrapolation, not something the draws observed. A report never states less."""
+    return 1.0 / (max(int(replicates), 0) + 1.0)
+
+
+def floored(p: float | None, replicates: int) -> float | None:
+    """A false-alarm probability as the report states it: at least :func:`resolution`
+    (``None`` and NaN pass unchanged). The decisions compare the unfloored value with
+    ``alpha``; at the default ``alpha`` (0.01) and ``REPLICATES`` (199, resolution 0.005)
+    the two give the same decisions."""
+    if p is None or not math.isfinite(p):
+        return p
+    return max(float(p), resolution(replicates))
 
 
 def block_length(z: np.ndarray) -> int:

@@ -279,21 +279,7 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
     ``correct_lag`` / ``exclude_transients``: take the torque channel's lag out and leave the
     transients after impacts out (the report's ``measurement`` compares the null model with
     and without each); ``with_lost_motion``: measure each run's lost motion too."""
-    t = np.asarray(run.t_s, dtype=float)
-    torque = np.asarray(run.torque_Nm, dtype=float)
-    twist = np.asarray(run.twist_arcmin, dtype=float)
-    if not (t.shape == torque.shape == twist.shape) or t.ndim != 1:
-        raise AnalysisError(f"run {run.run_id!r}: t, torque and twist must be 1-D, same length")
-    if t.size < 20:
-        raise AnalysisError(f"run {run.run_id!r}: {t.size} samples, at least 20 needed")
-    if not (np.all(np.isfinite(torque)) and np.all(np.isfinite(twist))):
-        raise AnalysisError(f"run {run.run_id!r}: torque or twist has missing values")
-    if not run.rated_torque_Nm > 0:
-        raise AnalysisError(f"run {run.run_id!r}: rated torque must be > 0 N*m")
-    temp = None if run.temperature_C is None else np.asarray(run.temperature_C, dtype=float)
-    if temp is not None and not np.all(np.isfinite(temp)):
-        finite = np.isfinite(temp)
-        temp = None if not finite.any() else np.where(finite, temp, np.nanmean(temp))
+    t, torque, twist, temp = _checked(run)
     nominal: LoopModel | None
     try:
         # the nominal model of the unit's kind (seed 000 reference model, seed 002 cycloid,
@@ -349,38 +335,8 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
     yb = _block_means(twist, segments, block)
     seg = _segment_ids(segments, block)
     sigma_tb = sigma_t / math.sqrt(block)
-    # honest block-mean noise: consecutive blocks of a segment standing still (a dwell)
-    still = (np.diff(seg) == 0) & (np.abs(np.diff(tb)) < 3.0 * sigma_tb + 1e-4 * amplitude)
-    pairs = np.diff(yb)[still]
-    if pairs.size >= 20:
-        sigma_b = 1.4826 * float(np.median(np.abs(pairs - np.median(pairs)))) / math.sqrt(2.0)
-        sigma_b = max(sigma_b, 0.5 * sigma / math.sqrt(block))
-    else:
-        sigma_b = sigma / math.sqrt(block)
-    # noise that is correlated over a block (a zero that wanders, vibration the torque
-    # channel does not see) does not average down as 1/sqrt(block): the second differences
-    # of consecutive block means of a segment measure what a block mean really scatters by.
-    # What the measured torque explains is taken out first (the twist follows the torque
-    # through the flank's compliance: ramps, steps and drive ripple are no error), so only
-    # where the flank curves (the play crossing, a take-up) is the difference not noise,
-    # and the median ignores those few
-    comp = (1.0 / nominal.stiffness_Nm_per_arcmin if nominal is not None
-            and math.isfinite(nominal.stiffness_Nm_per_arcmin)
-            and nominal.stiffness_Nm_per_arcmin > 0 else 0.0)
-    u = yb - comp * tb
-    same = (seg[2:] == seg[1:-1]) & (seg[1:-1] == seg[:-2])
-    d2b = (u[2:] - 2.0 * u[1:-1] + u[:-2])[same]
-    if d2b.size >= 20:
-        sigma_b = max(sigma_b, 1.4826 * float(np.median(np.abs(d2b))) / math.sqrt(6.0))
-    # without dither (noise below a count) averaging does not shrink the quantisation error
-    # of a block mean standing still: it stays up to half a count, uniform -> q / sqrt(12).
-    # A block over which the twist sweeps m counts averages the sawtooth of its errors down
-    # by about sqrt(m) (continuous loading moves through many counts per block)
-    if white_noise_std(twist) < q_twist:
-        same1 = seg[1:] == seg[:-1]
-        swept = np.abs(np.diff(yb))[same1] / q_twist if same1.any() else np.zeros(1)
-        m = max(1.0, float(np.median(swept)))
-        sigma_b = max(sigma_b, q_twist / math.sqrt(12.0 * m))
+    sigma_b = _block_noise(tb, yb, seg, block, sigma, sigma_tb, amplitude, nominal, twist,
+                           q_twist)
     play = nominal.play_arcmin if nominal is not None else math.nan
     events = crossing_events(t, torque, twist, jump, direction, amplitude, play)
     zero = crossing_zero(events)
@@ -426,6 +382,68 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
         time_unsure=_block_means(unsure.astype(float), segments, block)[held] > 0,
     )
 
+
+
+def _block_noise(tb: np.ndarray, yb: np.ndarray, seg: np.ndarray, block: int, sigma: float,
+                 sigma_tb: float, amplitude: float, nominal: LoopModel | None,
+                 twist: np.ndarray, q_twist: float) -> float:
+    """The noise of one block mean of the twist (arcmin): from consecutive block means
+    standing still, no less than what the second differences of the block means scatter
+    by, and no less than the quantisation a block mean keeps without dither."""
+    # honest block-mean noise: consecutive blocks of a segment standing still (a dwell)
+    still = (np.diff(seg) == 0) & (np.abs(np.diff(tb)) < 3.0 * sigma_tb + 1e-4 * amplitude)
+    pairs = np.diff(yb)[still]
+    if pairs.size >= 20:
+        sigma_b = 1.4826 * float(np.median(np.abs(pairs - np.median(pairs)))) / math.sqrt(2.0)
+        sigma_b = max(sigma_b, 0.5 * sigma / math.sqrt(block))
+    else:
+        sigma_b = sigma / math.sqrt(block)
+    # noise that is correlated over a block (a zero that wanders, vibration the torque
+    # channel does not see) does not average down as 1/sqrt(block): the second differences
+    # of consecutive block means of a segment measure what a block mean really scatters by.
+    # What the measured torque explains is taken out first (the twist follows the torque
+    # through the flank's compliance: ramps, steps and drive ripple are no error), so only
+    # where the flank curves (the play crossing, a take-up) is the difference not noise,
+    # and the median ignores those few
+    comp = (1.0 / nominal.stiffness_Nm_per_arcmin if nominal is not None
+            and math.isfinite(nominal.stiffness_Nm_per_arcmin)
+            and nominal.stiffness_Nm_per_arcmin > 0 else 0.0)
+    u = yb - comp * tb
+    same = (seg[2:] == seg[1:-1]) & (seg[1:-1] == seg[:-2])
+    d2b = (u[2:] - 2.0 * u[1:-1] + u[:-2])[same]
+    if d2b.size >= 20:
+        sigma_b = max(sigma_b, 1.4826 * float(np.median(np.abs(d2b))) / math.sqrt(6.0))
+    # without dither (noise below a count) averaging does not shrink the quantisation error
+    # of a block mean standing still: it stays up to half a count, uniform -> q / sqrt(12).
+    # A block over which the twist sweeps m counts averages the sawtooth of its errors down
+    # by about sqrt(m) (continuous loading moves through many counts per block)
+    if white_noise_std(twist) < q_twist:
+        same1 = seg[1:] == seg[:-1]
+        swept = np.abs(np.diff(yb))[same1] / q_twist if same1.any() else np.zeros(1)
+        m = max(1.0, float(np.median(swept)))
+        sigma_b = max(sigma_b, q_twist / math.sqrt(12.0 * m))
+    return sigma_b
+
+
+def _checked(run: RunInput) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """A run's samples as arrays, checked (AnalysisError on unusable input); missing
+    temperatures filled with the run's mean."""
+    t = np.asarray(run.t_s, dtype=float)
+    torque = np.asarray(run.torque_Nm, dtype=float)
+    twist = np.asarray(run.twist_arcmin, dtype=float)
+    if not (t.shape == torque.shape == twist.shape) or t.ndim != 1:
+        raise AnalysisError(f"run {run.run_id!r}: t, torque and twist must be 1-D, same length")
+    if t.size < 20:
+        raise AnalysisError(f"run {run.run_id!r}: {t.size} samples, at least 20 needed")
+    if not (np.all(np.isfinite(torque)) and np.all(np.isfinite(twist))):
+        raise AnalysisError(f"run {run.run_id!r}: torque or twist has missing values")
+    if not run.rated_torque_Nm > 0:
+        raise AnalysisError(f"run {run.run_id!r}: rated torque must be > 0 N*m")
+    temp = None if run.temperature_C is None else np.asarray(run.temperature_C, dtype=float)
+    if temp is not None and not np.all(np.isfinite(temp)):
+        finite = np.isfinite(temp)
+        temp = None if not finite.any() else np.where(finite, temp, np.nanmean(temp))
+    return t, torque, twist, temp
 
 def smallest_zero_reading(runs: Sequence[PreparedRun]) -> tuple[float, str] | None:
     """The zero reading (N*m) nearest zero among the runs' readings at zero command

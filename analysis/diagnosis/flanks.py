@@ -45,9 +45,11 @@ class FlankAsymmetry:
     stiffness_positive_Nm_per_arcmin: float
     stiffness_negative_Nm_per_arcmin: float
 
-    def finding(self, alpha: float, tolerance: float, floor_arcmin: float) -> bool:
-        """Beyond chance at ``alpha``, above ``tolerance`` (relative) and ``floor_arcmin``."""
-        return (self.runs >= 3 and self.p_value <= alpha and abs(self.relative) > tolerance
+    def finding(self, alpha: float, tolerance: float, floor_arcmin: float,
+                min_runs: int = 3) -> bool:
+        """Beyond chance at ``alpha`` over at least ``min_runs`` runs, above ``tolerance``
+        (relative) and ``floor_arcmin``."""
+        return (self.runs >= min_runs and self.p_value <= alpha and abs(self.relative) > tolerance
                 and self.size_arcmin > floor_arcmin)
 
     def to_dict(self) -> dict[str, Any]:

@@ -28,7 +28,9 @@ from rig.store import Store
 from rig.store.synthetic_runs import write_campaign
 from tests.support.browser import (
     ARTIFACTS,
+    DESKTOP,
     NEEDS_CHROMIUM,
+    PHONE,
     launch_browser,
     start_run,
 )
@@ -36,8 +38,6 @@ from tests.support.serve import get_json, rig_serve
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(300)]
 
-DESKTOP = {"width": 1440, "height": 900}
-PHONE = {"width": 390, "height": 844}
 CAMPAIGN = """name = "two-positions"
 description = "two input positions, the shortest loop"
 [unit]

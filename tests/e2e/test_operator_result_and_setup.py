@@ -27,7 +27,9 @@ from rig.store import Store
 from rig.store.synthetic_runs import write_campaign
 from tests.support.browser import (
     ARTIFACTS,
+    DESKTOP,
     NEEDS_CHROMIUM,
+    PHONE,
     confirm_lock,
     fill_identity,
     launch_browser,
@@ -37,8 +39,6 @@ from tests.support.serve import get_json, rig_serve
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
 
-DESKTOP = {"width": 1440, "height": 900}
-PHONE = {"width": 390, "height": 844}
 HOSTILE = "<img src=x onerror=alert(1)>"
 UPLOAD = f"""name = "upload-2pos"
 description = "{HOSTILE} two positions"

@@ -18,11 +18,10 @@ from pathlib import Path
 import pytest
 from playwright.sync_api import sync_playwright
 
-from tests.support.browser import NEEDS_CHROMIUM, launch_browser
+from tests.support.browser import NEEDS_CHROMIUM, PHONE, launch_browser
 from tests.support.paths import REPO
 
 pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(300)]
-PHONE = {"width": 390, "height": 844}
 UNIT = json.loads((REPO / "rig/examples/units/seed000-pair1.json").read_text())
 SENSORS = {"encoder_counts_per_rev": 8388608, "torque_full_scale_Nm": 20.0,
            "output_encoder": "RESOLUTE-RA26BTA absolute, 26 bit"}

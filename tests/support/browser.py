@@ -17,6 +17,10 @@ CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--no-first-run", "--disable-sync"]
 ARTIFACTS = REPO / "artifacts" / "e2e"
+DESKTOP = {"width": 1440, "height": 900}
+"""The operator's desktop viewport (issue 33: every page item is checked at both widths)."""
+PHONE = {"width": 390, "height": 844}
+"""A phone's viewport."""
 """Screenshots of the page tests."""
 NEEDS_CHROMIUM = pytest.mark.skipif(
     not CHROMIUM.exists(),

@@ -16,6 +16,7 @@ TE panel, the loop run clicked the loop panel again."""
 from __future__ import annotations
 
 import contextlib
+import re
 from pathlib import Path
 
 import pytest
@@ -183,7 +184,9 @@ def test_operator_measures_the_transmission_error(tmp_path: Path):
         # run its loop
         for p in (page, phone):
             p.click(f"#runs a[data-run='{run_id}']")
-            expect(p.locator("#te-title")).to_contain_text(f"stored: {run_id}", timeout=30_000)
+            # one name for a run everywhere: its label with its id (issue 33 item 16)
+            expect(p.locator("#te-title")).to_contain_text(
+                re.compile(rf"stored: te-\S+ \({re.escape(run_id)}\)"), timeout=30_000)
             te_shown_not_loop(p, no_loop_yet=False)
             assert p.evaluate("window.rigStats.te_points") > 300
             expect(p.locator("#te-pp")).to_have_text(f"{shown:.1f}")

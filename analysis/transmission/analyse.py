@@ -178,36 +178,12 @@ def _u_quant_arcsec(counts_out: float | None, counts_in: float | None, ratio: fl
     return math.sqrt((q_out**2 + q_in**2) / 12.0)
 
 
-def analyse_te(
-    output_angle_deg: np.ndarray,
-    input_angle_deg: np.ndarray,
-    direction: np.ndarray | None,
-    kinematics: Kinematics,
-    *,
-    output_counts_per_rev: float | None = None,
-    input_counts_per_rev: float | None = None,
-    encoder_eccentricity: EncoderEccentricity | None = None,
-    eccentricity_bound_arcsec: float | None = None,
-    n_grid: int | None = None,
-    harmonics: int = 2,
-) -> TEResult:
-    """TE metrics of a run (docs/run-format.md): curves per direction, GB/T 35089
-    peak-to-peak, ISO 1328-1:2013 F_is per flank and f_is, the project's f'_i, hysteresis,
-    orders, uncertainties (issue 32: :mod:`analysis.transmission.evaluate`).
-
-    ``encoder_eccentricity``: a calibrated encoder term, subtracted from TE before anything
-    else; ``eccentricity_bound_arcsec``: when none is given, a declared bound of the encoder's
-    once-per-turn error, carried as an uncertainty; ``n_grid``: evaluation points per output
-    revolution (default :func:`analysis.transmission.evaluate.eval_points_per_rev`)."""
-    ratio = float(kinematics.ratio)
-    out = np.asarray(output_angle_deg, dtype=float)
-    inp = np.asarray(input_angle_deg, dtype=float)
-    if out.shape != inp.shape:
-        raise AnalysisError("output and input angle columns differ in length")
-    d = directions_from_input(inp) if direction is None else np.nan_to_num(
-        np.asarray(direction, dtype=float)).astype(int)
-    te = te_arcsec(out, inp, ratio)
-    notes = list(kinematics.notes)
+def _encoder_term(te: np.ndarray, out: np.ndarray,
+                  encoder_eccentricity: EncoderEccentricity | None,
+                  eccentricity_bound_arcsec: float | None,
+                  notes: list[str]) -> tuple[np.ndarray, float, dict[str, Any]]:
+    """The output encoder's once-per-turn term: subtracted when calibrated, else carried as
+    an uncertainty from its declared bound (uniform: bound/sqrt 3); (TE, u arcsec, record)."""
     ecc_record: dict[str, Any]
     u_ecc = 0.0
     if encoder_eccentricity is not None:
@@ -225,85 +201,79 @@ def analyse_te(
         else:
             notes.append("encoder mounting eccentricity neither calibrated nor bounded: not "
                          "in the uncertainty")
-    u_q = _u_quant_arcsec(output_counts_per_rev, input_counts_per_rev, ratio)
+    return te, u_ecc, ecc_record
 
-    teeth = kinematics.output_teeth
-    mesh_per_input = kinematics.mesh_per_input
-    if not mesh_per_input and teeth:
-        # the output gear's teeth pass the mesh once each per output revolution
-        mesh_per_input = float(teeth) / abs(ratio)
-        notes.append(f"tooth mesh: the output's {teeth} teeth, {teeth} per output revolution "
-                     "(orders per mesh)")
-    orders = standard_orders(ratio, crank_per_input=kinematics.crank_per_input,
-                             mesh_per_input=mesh_per_input, harmonics=harmonics,
-                             extra=kinematics.extra_orders)
-    highest = max(abs(o.frequency) for o in orders)
-    shortest_deg = 360.0 / highest
-    n = n_grid or eval_points_per_rev(highest, teeth)
-    step = 360.0 / n
-    rows_all = np.arange(out.size)
-    errors: dict[str, str] = {}
-    curves: dict[int, DirectionCurve] = {}
-    evaluated: dict[int, Evaluated] = {}
-    fitted: list[tuple[int, OrderFit]] = []
-    dropped_total = 0
-    for code in (1, -1):
-        mask = d == code
-        name = DIRECTIONS[code]
-        if mask.sum() < 2:
-            raise AnalysisError(f"no {name} samples (direction {code}): a TE run "
-                                "turns the input both ways")
-        rows = rows_all[mask]
-        valid = np.isfinite(out[mask]) & np.isfinite(inp[mask]) & np.isfinite(te[mask])
-        dropped, holes = find_holes(rows, out[mask], valid, shortest_deg)
-        dropped_total += dropped
-        if dropped:
-            notes.append(f"{name}: {dropped} rows without a finite output or input angle "
-                         "dropped (never interpolated)")
-        th, ip, y = out[mask][valid], inp[mask][valid], te[mask][valid]
-        if th.size < 2:
-            raise AnalysisError(f"{name}: fewer than 2 finite samples")
-        for h in holes:
-            notes.append(f"{name}: {h.text()}, longer than the shortest kept period "
-                         f"{shortest_deg:.3f} deg: not bridged")
-        start, revs, span_notes = revolutions_between_holes(th, holes, step, n)
-        notes.extend(f"{name}: {t}" for t in span_notes)
-        if revs < 1:
-            if holes:
-                raise AnalysisError(
-                    f"{name}: no whole output revolution without a hole: "
-                    + "; ".join(h.text() for h in holes)
-                    + f" (longer than the shortest kept period {shortest_deg:.3f} deg; a "
-                    "hole is never interpolated)")
+
+def _direction(code: int, mask: np.ndarray, rows_all: np.ndarray, out: np.ndarray,
+               inp: np.ndarray, te: np.ndarray, shortest_deg: float, step: float, n: int,
+               orders: list, ratio: float, crank_per_input: float | None,
+               mesh_per_input: float | None, teeth: int | None, u_ecc: float,
+               notes: list[str]) -> tuple[DirectionCurve, Evaluated, list[OrderFit], int]:
+    """One direction's whole revolutions between holes: the named orders fitted jointly, the
+    curve evaluated on ``n`` points a revolution; (curve, evaluation, order fits, rows
+    dropped). Holes and stalls are noted in ``notes``, never bridged."""
+    name = DIRECTIONS[code]
+    kept: list[OrderFit] = []
+    if mask.sum() < 2:
+        raise AnalysisError(f"no {name} samples (direction {code}): a TE run "
+                            "turns the input both ways")
+    rows = rows_all[mask]
+    valid = np.isfinite(out[mask]) & np.isfinite(inp[mask]) & np.isfinite(te[mask])
+    dropped, holes = find_holes(rows, out[mask], valid, shortest_deg)
+    if dropped:
+        notes.append(f"{name}: {dropped} rows without a finite output or input angle "
+                     "dropped (never interpolated)")
+    th, ip, y = out[mask][valid], inp[mask][valid], te[mask][valid]
+    if th.size < 2:
+        raise AnalysisError(f"{name}: fewer than 2 finite samples")
+    for h in holes:
+        notes.append(f"{name}: {h.text()}, longer than the shortest kept period "
+                     f"{shortest_deg:.3f} deg: not bridged")
+    start, revs, span_notes = revolutions_between_holes(th, holes, step, n)
+    notes.extend(f"{name}: {t}" for t in span_notes)
+    if revs < 1:
+        if holes:
             raise AnalysisError(
-                f"{name}: the output turned {np.ptp(th):.1f} deg; a TE run needs "
-                "at least one full output revolution in each direction")
-        hi = start + revs * 360.0
-        m = (th >= start) & (th < hi)
-        fits, model = _fit_all_orders(th, ip, y, m, orders, ratio, kinematics.crank_per_input,
-                                      mesh_per_input)
-        for f in fits:
-            if f.order.per == "output_rev" and f.order.order == 1 and u_ecc:
-                f = OrderFit(f.order, f.amplitude_arcsec, f.phase_deg,
-                             math.hypot(f.amplitude_u_arcsec, u_ecc),
-                             min(180.0, math.degrees(math.hypot(f.amplitude_u_arcsec, u_ecc)
-                                                     / max(f.amplitude_arcsec, 1e-12))))
-            fitted.append((code, f))
-        ev = evaluate(th, ip, y, model, start, revs, n, teeth)
-        evaluated[code] = ev
-        if ev.longest_empty_deg > shortest_deg:
-            notes.append(f"{name}: a stretch of {ev.longest_empty_deg:.2f} deg of output angle "
-                         "without samples (the sampling stalled): there the curve is the "
-                         "fitted orders plus the residual interpolated from its ends")
-        offset = float(ev.values.mean())
-        grid, mean = ev.folded(ev.values - offset)
-        shift = int(round(start / step)) % n
-        curves[code] = DirectionCurve(
-            direction=code, grid_deg=grid, mean_arcsec=mean,
-            revs_arcsec=np.roll(ev.values - offset, shift, axis=1), offset_arcsec=offset,
-            residual_std_arcsec=ev.residual_std_arcsec, samples_per_bin=ev.samples_per_bin,
-            revolutions=revs, n_samples=ev.n_samples, span_deg=(start, hi))
+                f"{name}: no whole output revolution without a hole: "
+                + "; ".join(h.text() for h in holes)
+                + f" (longer than the shortest kept period {shortest_deg:.3f} deg; a "
+                "hole is never interpolated)")
+        raise AnalysisError(
+            f"{name}: the output turned {np.ptp(th):.1f} deg; a TE run needs "
+            "at least one full output revolution in each direction")
+    hi = start + revs * 360.0
+    m = (th >= start) & (th < hi)
+    fits, model = _fit_all_orders(th, ip, y, m, orders, ratio, crank_per_input,
+                                  mesh_per_input)
+    for f in fits:
+        if f.order.per == "output_rev" and f.order.order == 1 and u_ecc:
+            f = OrderFit(f.order, f.amplitude_arcsec, f.phase_deg,
+                         math.hypot(f.amplitude_u_arcsec, u_ecc),
+                         min(180.0, math.degrees(math.hypot(f.amplitude_u_arcsec, u_ecc)
+                                                 / max(f.amplitude_arcsec, 1e-12))))
+        kept.append(f)
+    ev = evaluate(th, ip, y, model, start, revs, n, teeth)
+    if ev.longest_empty_deg > shortest_deg:
+        notes.append(f"{name}: a stretch of {ev.longest_empty_deg:.2f} deg of output angle "
+                     "without samples (the sampling stalled): there the curve is the "
+                     "fitted orders plus the residual interpolated from its ends")
+    offset = float(ev.values.mean())
+    grid, mean = ev.folded(ev.values - offset)
+    shift = int(round(start / step)) % n
+    curve = DirectionCurve(
+        direction=code, grid_deg=grid, mean_arcsec=mean,
+        revs_arcsec=np.roll(ev.values - offset, shift, axis=1), offset_arcsec=offset,
+        residual_std_arcsec=ev.residual_std_arcsec, samples_per_bin=ev.samples_per_bin,
+        revolutions=revs, n_samples=ev.n_samples, span_deg=(start, hi))
+    return curve, ev, kept, dropped
 
+
+def _figures(evaluated: dict[int, Evaluated], teeth: int | None, u_q: float, u_ecc: float,
+             errors: dict[str, str]) -> tuple[dict[str, float | None], dict[str, float | None],
+                                              dict[str, float | None], dict[str, float | None]]:
+    """The figures of both flanks with their uncertainties, the method's bias and the noise
+    bias removed (arcsec): (metrics, uncertainty, method bias, noise correction). A figure
+    that needs the tooth count is None when it is unknown, its reason in ``errors``."""
     def u_point(ev: Evaluated) -> float:
         # one value of one revolution: the residual averaged in a bin, the encoders
         return math.sqrt(ev.residual_std_arcsec**2 / max(ev.samples_per_bin, 1.0) + u_q**2)
@@ -360,6 +330,72 @@ def analyse_te(
         for key in ("te_tooth_fi_arcsec", "te_tooth_fi_short_wave_arcsec"):
             metrics[key] = unc[key] = None
             errors[key] = "the output's tooth count is unknown (unit data)"
+    return metrics, unc, bias, noise_corr
+
+
+def analyse_te(
+    output_angle_deg: np.ndarray,
+    input_angle_deg: np.ndarray,
+    direction: np.ndarray | None,
+    kinematics: Kinematics,
+    *,
+    output_counts_per_rev: float | None = None,
+    input_counts_per_rev: float | None = None,
+    encoder_eccentricity: EncoderEccentricity | None = None,
+    eccentricity_bound_arcsec: float | None = None,
+    n_grid: int | None = None,
+    harmonics: int = 2,
+) -> TEResult:
+    """TE metrics of a run (docs/run-format.md): curves per direction, GB/T 35089
+    peak-to-peak, ISO 1328-1:2013 F_is per flank and f_is, the project's f'_i, hysteresis,
+    orders, uncertainties (issue 32: :mod:`analysis.transmission.evaluate`).
+
+    ``encoder_eccentricity``: a calibrated encoder term, subtracted from TE before anything
+    else; ``eccentricity_bound_arcsec``: when none is given, a declared bound of the encoder's
+    once-per-turn error, carried as an uncertainty; ``n_grid``: evaluation points per output
+    revolution (default :func:`analysis.transmission.evaluate.eval_points_per_rev`)."""
+    ratio = float(kinematics.ratio)
+    out = np.asarray(output_angle_deg, dtype=float)
+    inp = np.asarray(input_angle_deg, dtype=float)
+    if out.shape != inp.shape:
+        raise AnalysisError("output and input angle columns differ in length")
+    d = directions_from_input(inp) if direction is None else np.nan_to_num(
+        np.asarray(direction, dtype=float)).astype(int)
+    te = te_arcsec(out, inp, ratio)
+    notes = list(kinematics.notes)
+    te, u_ecc, ecc_record = _encoder_term(te, out, encoder_eccentricity,
+                                          eccentricity_bound_arcsec, notes)
+    u_q = _u_quant_arcsec(output_counts_per_rev, input_counts_per_rev, ratio)
+
+    teeth = kinematics.output_teeth
+    mesh_per_input = kinematics.mesh_per_input
+    if not mesh_per_input and teeth:
+        # the output gear's teeth pass the mesh once each per output revolution
+        mesh_per_input = float(teeth) / abs(ratio)
+        notes.append(f"tooth mesh: the output's {teeth} teeth, {teeth} per output revolution "
+                     "(orders per mesh)")
+    orders = standard_orders(ratio, crank_per_input=kinematics.crank_per_input,
+                             mesh_per_input=mesh_per_input, harmonics=harmonics,
+                             extra=kinematics.extra_orders)
+    highest = max(abs(o.frequency) for o in orders)
+    shortest_deg = 360.0 / highest
+    n = n_grid or eval_points_per_rev(highest, teeth)
+    step = 360.0 / n
+    rows_all = np.arange(out.size)
+    errors: dict[str, str] = {}
+    curves: dict[int, DirectionCurve] = {}
+    evaluated: dict[int, Evaluated] = {}
+    fitted: list[tuple[int, OrderFit]] = []
+    dropped_total = 0
+    for code in (1, -1):
+        curve, ev, fits, dropped = _direction(
+            code, d == code, rows_all, out, inp, te, shortest_deg, step, n, orders, ratio,
+            kinematics.crank_per_input, mesh_per_input, teeth, u_ecc, notes)
+        curves[code], evaluated[code] = curve, ev
+        fitted.extend((code, f) for f in fits)
+        dropped_total += dropped
+
+    metrics, unc, bias, noise_corr = _figures(evaluated, teeth, u_q, u_ecc, errors)
     metrics["te_hysteresis_arcmin"] = hysteresis_arcmin(curves[1], curves[-1])
     u_off = [math.sqrt(c.residual_std_arcsec**2 / max(c.n_samples, 1)
                        + u_q**2 / (c.revolutions * n)) for c in curves.values()]

@@ -465,4 +465,5 @@ def test_rig_rotor_command_writes_json(tmp_path) -> None:
     bad = subprocess.run([sys.executable, "-m", "rig", "rotor", "--gear-at", "1.5"],
                          capture_output=True, text=True, timeout=300)
     assert bad.returncode == 2
-    assert "--gear-at must be between 0 and 1" in bad.stderr
+    assert ("Invalid value for '--gear-at': expected from 0 to 1 of the shaft's length "
+            "(got 1.5)") in bad.stderr

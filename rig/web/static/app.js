@@ -667,7 +667,7 @@ function connectLive() {
 // ---------------------------------------------------------------- set-up form
 let units = [];
 // Each unit kind's fields on the form (rig/web/models.py: UnitData, CycloidUnitData,
-// BeveloidUnitData), and its keys the form has no field for (kept from the example or the
+// BeveloidUnitData, PlanetaryUnitData), and its keys the form has no field for (kept from the example or the
 // campaign file the unit came from, sent with it)
 const UNIT_KIND_FIELDS = {
   internal_involute: ["z_internal", "z_external", "module_mm", "pressure_angle_deg", "addendum_coeff",
@@ -679,12 +679,15 @@ const UNIT_KIND_FIELDS = {
   beveloid: ["z_pinion", "z_gear", "module_mm", "pressure_angle_deg", "helix_angle_deg", "cone_angle_deg",
     "face_width_mm", "addendum_coeff", "center_distance_mm", "axial_shift_mm",
     "runout_internal_mm", "runout_external_mm"],
+  planetary: ["ratio", "planets", "backlash_um", "face_width_mm"],
 };
 const UNIT_KIND_EXTRA = {
   internal_involute: ["clearance_coeff", "pin_diameter_mm", "bearing_clearance_mm"],
   cycloid: ["pitch_deviation_mm", "bearing_clearance_mm"],
   beveloid: ["runout_pinion_mm", "runout_gear_mm", "bearing_clearance_mm"],
+  planetary: ["design", "reference_torque_Nm"],
 };
+const LIST_FIELDS = ["m_value_internal_mm", "m_value_external_mm", "backlash_um"];   // comma separated
 const UNIT_FIELDS = [...new Set(Object.values(UNIT_KIND_FIELDS).flat())];
 const unitKindOf = (u) => (u && UNIT_KIND_FIELDS[u.kind || "internal_involute"] ? u.kind || "internal_involute" : null);
 
@@ -717,7 +720,7 @@ function request() {
   const unit = { kind: unitKind, serial: f.serial.value || null };
   for (const k of UNIT_KIND_FIELDS[unitKind]) {
     const v = f[k].value;
-    unit[k] = k.startsWith("m_value") ? list(v) : num(v);
+    unit[k] = LIST_FIELDS.includes(k) ? list(v) : num(v);
   }
   for (const k of UNIT_KIND_EXTRA[unitKind]) if (live.unitExtra) unit[k] = live.unitExtra[k];
   for (const k of Object.keys(unit)) if (unit[k] === null || unit[k] === undefined) delete unit[k];
@@ -906,6 +909,7 @@ const FIELD_NAMES = {
   rotation_modification_mm: "rotation modification Δ2", reference_torque_Nm: "reference torque",
   z_pinion: "teeth of the pinion (z pinion)", z_gear: "teeth of the gear (z gear)",
   helix_angle_deg: "helix angle", cone_angle_deg: "cone angle", axial_shift_mm: "axial shift",
+  ratio: "ratio", planets: "planets per stage", backlash_um: "backlash of the stages",
   rated_torque_Nm: "rated torque", amplitude_pct: "amplitude", rate_Nm_per_s: "loading rate",
   cycles: "cycles", pre_cycles: "pre-cycles", steps_per_quarter: "steps per quarter",
   dwell_s: "dwell", extra_levels_pct: "extra levels", zero_band_Nm: "slow band",
@@ -977,6 +981,17 @@ const UNIT_KIND_RULES = {
     face_width_mm: rule("gt", 0), addendum_coeff: (v) => rule("ge", 0, 1.5)(v, true),
     center_distance_mm: (v) => rule("gt", 0)(v, true), axial_shift_mm: (v) => rule("ge", -100, 100)(v, true),
   },
+  planetary: {   // seed 003's paper train: ratio 320 only, one backlash per stage
+    ratio: (v) => rule("ge")(v) || (Number(v) === 320 ? null : "must be 320 (seed 003's paper train)"),
+    planets: (v) => rule("int", 1, 12)(v, true), face_width_mm: (v) => rule("gt", 0)(v) || rule("ge", 0, 10000)(v),
+    backlash_um: (v) => {
+      if (v.trim() === "") return "is needed";
+      const xs = numbersIn(v);
+      if (xs.some((t) => !isNum(t))) return "must be numbers separated by commas";
+      if (xs.length !== 3) return `must be 3 values, one per stage (${xs.length} given)`;
+      return xs.every((t) => Number(t) >= 0 && Number(t) <= 1000) ? null : "must each be 0 to 1000 µm";
+    },
+  },
 };
 let formProblems = 0;
 
@@ -1015,7 +1030,7 @@ function validateForm() {
     if (why) problems++;
   }
   // between fields: the ring has more teeth than the pinion (an internal pair, a cycloid)
-  if (unitKind !== "beveloid" && !RULES.z_internal(f.z_internal.value) && !RULES.z_external(f.z_external.value) &&
+  if (["internal_involute", "cycloid"].includes(unitKind) && !RULES.z_internal(f.z_internal.value) && !RULES.z_external(f.z_external.value) &&
       Number(f.z_internal.value) <= Number(f.z_external.value)) {
     setFieldError(f.z_internal, `teeth of the ring gear must exceed the pinion's (${f.z_external.value})`);
     problems++;

@@ -66,8 +66,9 @@ def test_each_kind_is_previewed_with_its_model_and_band(client: TestClient, unit
      "Input should be greater than or equal to 5"),
     ({**BEVELOID, "z_internal": 40}, ["body", "unit", "z_internal"],
      "Extra inputs are not permitted"),
-    ({**CYCLOID, "kind": "planetary"}, ["body", "unit"],
-     "unit kind must be one of internal_involute, cycloid, beveloid (absent: internal_involute)"),
+    ({**CYCLOID, "kind": "harmonic"}, ["body", "unit"],
+     "unit kind must be one of internal_involute, cycloid, beveloid, planetary (absent: "
+     "internal_involute)"),
 ])
 def test_a_wrong_unit_field_is_named_for_every_kind(client: TestClient, unit: dict,  # noqa: F811
                                                     loc: list, msg: str):
@@ -87,7 +88,7 @@ def test_a_beveloid_unit_is_accepted_at_start(client: TestClient):  # noqa: F811
 def test_the_example_units_and_campaigns_of_every_kind(client: TestClient):  # noqa: F811
     listed = client.get("/api/units").json()
     assert listed[0]["name"] == "seed000-pair1"  # the page's default unit stays the first
-    assert [u["unit"].get("kind") for u in listed][-2:] == ["cycloid", "beveloid"]
+    assert [u["unit"].get("kind") for u in listed][-3:] == ["cycloid", "beveloid", "planetary"]
     kinds = {u["name"]: u["unit"].get("kind") for u in listed}
     assert kinds["cycloid-seed002"] == "cycloid" and kinds["beveloid-seed001"] == "beveloid"
     assert kinds["seed000-pair1"] == "internal_involute"

@@ -52,7 +52,8 @@ def test_the_seed003_unit_measured_on_the_simulated_rig_is_inside_its_band(
         truth = plant.true_transmission_error(
             RATED_NM * BRAKE, output_window_deg=item.result.curves[code].span_deg)[name]
         got = result[f"te_pp_{name}_arcsec"]
-        assert abs(got - truth["pp_arcsec"]) <= max(0.05 * truth["pp_arcsec"], 2.0), \
+        # issue 32: within 1 % of its truth (measured 0.05 % apart on 2026-11-29)
+        assert abs(got - truth["pp_arcsec"]) <= max(0.01 * truth["pp_arcsec"], 2.0), \
             (name, got, truth["pp_arcsec"])
     verdict = result["comparison"]["metrics"]["te_pp_arcsec"]
     low, high = result["model"]["band"]["te_pp_arcsec"]

@@ -117,12 +117,7 @@ def beveloid_advice(unit: Mapping[str, Any], budget: Seed001InstallationBudget |
     advised = beveloid_batch(unit, budget, rated_torque_Nm=rated_torque_Nm,
                              lost_motion_pct=lost_motion_pct, samples=samples,
                              axial_shift_mm=advised_shift)
-    low, high = advised.band_arcmin(0.95)
-    return {
-        "axial_shift_mm": advised_shift,
-        "band_95_arcmin": [low, high],
-        "binding_fraction": advised.interference_fraction,
-        "what": (f"axial position of the gear for at most {100 * binding:g} % of units binding "
-                 f"at their tightest position ({slope:.1f} um of play per mm, seed 001's "
-                 "closed-form backlash)"),
-    }
+    return advised.advice(
+        f"axial position of the gear for at most {100 * binding:g} % of units binding at their "
+        f"tightest position ({slope:.1f} um of play per mm, seed 001's closed-form backlash)",
+        axial_shift_mm=advised_shift)

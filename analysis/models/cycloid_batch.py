@@ -174,13 +174,9 @@ def cycloid_advice(unit: Mapping[str, Any], tolerances: Seed002Tolerances | None
     advised = cycloid_batch(unit, tolerances, rated_torque_Nm=rated_torque_Nm,
                             lost_motion_pct=lost_motion_pct, samples=samples,
                             rotation_mm=rotation)
-    low, high = advised.band_arcmin(0.95)
-    return {
-        "rotation_modification_mm": rotation,
-        "shift_modification_mm": float(unit.get("shift_modification_mm") or 0.0),
-        "band_95_arcmin": [low, high],
-        "binding_fraction": advised.interference_fraction,
-        "what": (f"rotation modification Delta2 for at most {100 * binding:g} % of units "
-                 "binding at their tightest crank position (seed 002 eqs. 11-12: -4 um of "
-                 "play per um), shift kept at Delta1"),
-    }
+    return advised.advice(
+        f"rotation modification Delta2 for at most {100 * binding:g} % of units binding at "
+        "their tightest crank position (seed 002 eqs. 11-12: -4 um of play per um), shift kept "
+        "at Delta1",
+        rotation_modification_mm=rotation,
+        shift_modification_mm=float(unit.get("shift_modification_mm") or 0.0))

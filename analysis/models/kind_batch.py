@@ -6,6 +6,7 @@ lost motion at one random position."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -44,3 +45,10 @@ class KindBatch:
     def interference_fraction(self) -> float:
         """Share of the units that bind somewhere (smallest play below zero)."""
         return float(np.mean(self.least_play_arcmin < 0.0))
+
+    def advice(self, what: str, **settings: float) -> dict[str, Any]:
+        """The advice this batch, drawn at the advised ``settings`` (mm), stands for: the
+        settings, its 95 % band, the share of units that bind, and ``what`` was advised."""
+        low, high = self.band_arcmin(0.95)
+        return {**settings, "band_95_arcmin": [low, high],
+                "binding_fraction": self.interference_fraction, "what": what}

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from fractions import Fraction
 
 import numpy as np
@@ -78,15 +78,9 @@ class MaxErrorStats:
     samples: int
 
     def as_dict(self) -> dict[str, float | int]:
-        """``{mean, std, min, max, q9973, samples}`` in arcsec, as the CLI writes it."""
-        return {
-            "mean": self.mean_arcsec,
-            "std": self.std_arcsec,
-            "min": self.min_arcsec,
-            "max": self.max_arcsec,
-            "q9973": self.q9973_arcsec,
-            "samples": self.samples,
-        }
+        """``{mean, std, min, max, q9973, samples}`` in arcsec, as the CLI writes it: each field
+        under its name without ``_arcsec``."""
+        return {f.name.removesuffix("_arcsec"): getattr(self, f.name) for f in fields(self)}
 
 
 def stats_of(max_abs_arcsec: np.ndarray) -> MaxErrorStats:
@@ -316,15 +310,9 @@ class SourceInfluence:
     mean_reduction_arcsec: float
 
     def as_dict(self) -> dict[str, float | str]:
-        return {
-            "source": self.name,
-            "description": self.description,
-            "frequency_per_rev": self.frequency_per_rev,
-            "sensitivity_arcsec_per_um": self.sensitivity_arcsec_per_um,
-            "amplitude_at_bound_arcsec": self.amplitude_at_bound_arcsec,
-            "mean_amplitude_arcsec": self.mean_amplitude_arcsec,
-            "mean_reduction_arcsec": self.mean_reduction_arcsec,
-        }
+        """Every field under its own name, but ``name`` under ``source``."""
+        return {("source" if f.name == "name" else f.name): getattr(self, f.name)
+                for f in fields(self)}
 
 
 def sensitivity_ranking(

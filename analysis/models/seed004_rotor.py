@@ -150,19 +150,19 @@ def _rotor_matrices(rotor: Rotor) -> tuple[np.ndarray, ...]:
         g[idx, idx] += el.gyroscopic
     for disc in rotor.discs:
         base = DOF_PER_NODE * rotor.node_of(disc.position_m)
-        m[base + X, base + X] += disc.mass_kg
-        m[base + Y, base + Y] += disc.mass_kg
-        m[base + THETA_X, base + THETA_X] += disc.diametral_inertia_kgm2
-        m[base + THETA_Y, base + THETA_Y] += disc.diametral_inertia_kgm2
-        m[base + PHI, base + PHI] += disc.polar_inertia_kgm2
+        for dof, value in ((X, disc.mass_kg), (Y, disc.mass_kg),
+                           (THETA_X, disc.diametral_inertia_kgm2),
+                           (THETA_Y, disc.diametral_inertia_kgm2),
+                           (PHI, disc.polar_inertia_kgm2)):
+            m[base + dof, base + dof] += value
         g[base + THETA_X, base + THETA_Y] += disc.polar_inertia_kgm2
         g[base + THETA_Y, base + THETA_X] -= disc.polar_inertia_kgm2
     for brg in rotor.bearings:
         base = DOF_PER_NODE * rotor.node_of(brg.position_m)
-        k[base + X, base + X] += brg.stiffness_xx_N_per_m
-        k[base + Y, base + Y] += brg.stiffness_yy_N_per_m
-        c[base + X, base + X] += brg.damping_xx_Ns_per_m
-        c[base + Y, base + Y] += brg.damping_yy_Ns_per_m
+        for dof, stiffness, damping in ((X, brg.stiffness_xx_N_per_m, brg.damping_xx_Ns_per_m),
+                                        (Y, brg.stiffness_yy_N_per_m, brg.damping_yy_Ns_per_m)):
+            k[base + dof, base + dof] += stiffness
+            c[base + dof, base + dof] += damping
     return m, k, c, g, nodes
 
 

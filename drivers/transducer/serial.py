@@ -341,18 +341,13 @@ class SerialTorqueTransducer(OpenedOnEnter):
         if not self._streaming:
             return self.stats
         self._write("STOP")
-        deadline = time.monotonic() + self.config.timeout_s
         try:
-            while True:
-                raw, t_came = self._read_line(
-                    deadline, f"'OK' to 'STOP' within {self.config.timeout_s:g} s"
-                )
-                try:
-                    line = parse_line(raw, self.device)
-                except DeviceProtocolError:
+            for raw, line, t_came in self._lines_within_timeout(
+                f"'OK' to 'STOP' within {self.config.timeout_s:g} s"
+            ):
+                if line is None:
                     self.stats.bad_lines += 1
-                    continue
-                if isinstance(line, Measurement) and line.tag == "ST":
+                elif isinstance(line, Measurement) and line.tag == "ST":
                     self._pending.append((line, t_came))
                 elif isinstance(line, Reply) and line.keyword == "OK":
                     break
@@ -436,21 +431,31 @@ class SerialTorqueTransducer(OpenedOnEnter):
         """On open: stop a stream a previous session left running, skip stale lines."""
         self._discard_stale_input()
         self._write("STOP")
-        deadline = time.monotonic() + self.config.timeout_s
-        while True:
-            raw, _ = self._read_line(
-                deadline, f"'OK' to 'STOP' (sent on open) within {self.config.timeout_s:g} s"
-            )
-            try:
-                line = parse_line(raw, self.device)
-            except DeviceProtocolError:
-                continue  # a partial line left over from before we opened
+        for _, line, _ in self._lines_within_timeout(
+            f"'OK' to 'STOP' (sent on open) within {self.config.timeout_s:g} s"
+        ):
+            # None: a partial line left over from before we opened
             if isinstance(line, ErrorReply):
                 raise DeviceFault(
                     self.device, "'OK' to 'STOP' (sent on open)", f"'ERR {line.code} {line.text}'"
                 )
             if isinstance(line, Reply) and line.keyword == "OK":
                 return
+
+    def _lines_within_timeout(
+        self, expected: str
+    ) -> Iterator[tuple[bytes, DeviceLine | None, float]]:
+        """The lines that come within ``config.timeout_s`` from now (then DeviceTimeout naming
+        ``expected``): each raw, parsed (None: not a line of the protocol) and the host time
+        it came."""
+        deadline = time.monotonic() + self.config.timeout_s
+        while True:
+            raw, t_came = self._read_line(deadline, expected)
+            try:
+                line = parse_line(raw, self.device)
+            except DeviceProtocolError:
+                line = None
+            yield raw, line, t_came
 
     def _port_or_raise(self) -> serial.SerialBase:
         if self._port is None:

@@ -160,15 +160,11 @@ class SimulatedRig(RunsWhileEntered):
             self.stderr_final = self.stderr_text()
             self._stderr.close()
             self._stderr = None
-        if self.transducer_sim is not None:
-            self.transducer_sim.stop()
-            self.transducer_sim = None
-        if self.modbus_server is not None:
-            self.modbus_server.stop()
-            self.modbus_server = None
-        if self.slcan_adapter is not None:
-            self.slcan_adapter.stop()
-            self.slcan_adapter = None
+        for face in ("transducer_sim", "modbus_server", "slcan_adapter"):
+            server = getattr(self, face)
+            if server is not None:
+                server.stop()
+                setattr(self, face, None)
         for node in self.encoder_nodes.values():
             node.stop()
         self.encoder_nodes = {}

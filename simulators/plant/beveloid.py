@@ -106,13 +106,7 @@ class BeveloidGeometry(MeshGeometry):
                 te = te + ref * abs(angle) / TE_REFERENCE_DEG
         p, g = pair.pinion, pair.gear
         r2 = g.pitch_radius_mm
-        nominal = NominalMesh(
-            play_um=model.play_um, play_arcmin=model.play_arcmin,
-            mesh_stiffness_N_per_um=model.mesh_stiffness_N_per_um,
-            stiffness_Nm_per_arcmin=model.stiffness_Nm_per_arcmin,
-            contact_ratio=model.contact_ratio,
-            working_pressure_angle_deg=model.working_pressure_angle_deg,
-        )
+        nominal = NominalMesh.of(model)
         sensitivity = math.tan(p.alpha_n) * math.cos(p.delta) / math.cos(p.beta)
         injected = {
             "axial_shift_error_mm": bv.axial_shift_error_mm,

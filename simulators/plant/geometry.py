@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, Protocol
 
 import numpy as np
 
-from analysis.models.nominal import reference_nominal_model
+from analysis.models.nominal import NominalModel, reference_nominal_model
 
 
 class UnitAndEffects(Protocol):
@@ -53,6 +53,11 @@ class NominalMesh:
     contact_ratio: float
     working_pressure_angle_deg: float
 
+    @classmethod
+    def of(cls, model: NominalModel) -> NominalMesh:
+        """The numbers of an analysis nominal model (each field from the model's own)."""
+        return cls(**{f.name: getattr(model, f.name) for f in fields(cls)})
+
 
 def reference_nominal(unit: Mapping[str, Any]) -> NominalMesh:
     """The reference nominal model of run-format.md for a run.json ``unit`` mapping.
@@ -65,14 +70,7 @@ def reference_nominal(unit: Mapping[str, Any]) -> NominalMesh:
     model = reference_nominal_model(unit)
     if not math.isfinite(model.stiffness_Nm_per_arcmin):
         raise ValueError("key unit.face_width_mm: missing (the plant needs the mesh stiffness)")
-    return NominalMesh(
-        play_um=model.play_um,
-        play_arcmin=model.play_arcmin,
-        mesh_stiffness_N_per_um=model.mesh_stiffness_N_per_um,
-        stiffness_Nm_per_arcmin=model.stiffness_Nm_per_arcmin,
-        contact_ratio=model.contact_ratio,
-        working_pressure_angle_deg=model.working_pressure_angle_deg,
-    )
+    return NominalMesh.of(model)
 
 
 class UnitView:

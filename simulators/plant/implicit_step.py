@@ -211,14 +211,15 @@ def flank_torque(step: FrictionStep, base: float, side: float, compliance: Compl
                  f_max: float, chain_prev_Nm: float) -> float:
     """The flank torque tau >= 0 (N*m) on a stiffening flank (the general compliance), from
     a predictor along the compliance's tangent at the previous chain torque."""
-    drive_Nm, mass, phi_pred, phi0, level, b0, k, r1, r2 = step
+    drive_Nm, phi_pred = step.drive_Nm, step.phi_pred
+    free = step.residual()
     c_lin, soft, scale = compliance.c_lin, compliance.soft_rad, compliance.soft_scale_Nm
     c_b, t_b = compliance.bearing_c, compliance.bearing_torque_Nm
     stages = compliance.stages
     exp = math.exp
 
     def contact(tau: float) -> tuple[float, float]:
-        # compliance(tau) and free(phi), inlined: this is the hot loop of the slow paths
+        # compliance(tau) inlined (this is the hot loop of the slow paths), then free(phi)
         h, dh = tau * c_lin, c_lin
         if soft:
             e = exp(-tau / scale)
@@ -234,20 +235,8 @@ def flank_torque(step: FrictionStep, base: float, side: float, compliance: Compl
             if tau > t_j:
                 h -= d_j * (tau - t_j)
                 dh -= d_j
-        phi = base + side * h
-        d = phi - phi0
-        if k == 0.0:
-            b, db = 0.0, 0.0
-        elif d >= 0.0:
-            e = exp(-k * d)
-            b = level - (level - b0) * e
-            db = k * (level - b0) * e
-        else:
-            e = exp(k * d)
-            b = -level + (level + b0) * e
-            db = k * (level + b0) * e
-        r = mass * (phi - phi_pred) + b + r1 * (b - b0) + r2 * d - drive_Nm
-        return side * r + tau, (mass + db * (1.0 + r1) + r2) * dh + 1.0
+        r, dr, _ = free(base + side * h)
+        return side * r + tau, dr * dh + 1.0
 
     hi = 2.0 * abs(drive_Nm) + 4.0 * f_max + 1.0
     while contact(hi)[0] < 0.0:

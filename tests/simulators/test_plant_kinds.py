@@ -62,26 +62,30 @@ def measured_and_true(config, angle: float) -> tuple[float, float, dict]:
             plant.true_lost_motion_arcmin(RATED_NM, 3.0), plant.true_parameters())
 
 
+def common_effects(teeth_internal: int, teeth_external: int) -> dict:
+    """The effects both kinds take the same way: runout, bearing clearance and a tooth
+    thickness ramp of -5..5 um over each gear's teeth."""
+    return {
+        "runout": ("runout", {"beta_deg": 40.0}),
+        "bearing_clearance": ("bearing_clearance", {}),
+        "tooth_spacing_error": ("tooth_spacing_error", {
+            "thickness_internal_um": np.linspace(-5.0, 5.0, teeth_internal).tolist(),
+            "thickness_external_um": np.linspace(-5.0, 5.0, teeth_external).tolist()}),
+    }
+
+
 CYCLOID_EFFECTS = {
     "eccentricity_error": ("cycloid", {"eccentricity_error_um": -3.0}),
     "shift_error": ("cycloid", {"shift_error_mm": 0.004}),
     "rotation_error": ("cycloid", {"rotation_error_mm": -0.001}),
     "equidistant_modification": ("cycloid", {"equidistant_modification_mm": 0.003}),
-    "runout": ("runout", {"beta_deg": 40.0}),
-    "bearing_clearance": ("bearing_clearance", {}),
-    "tooth_spacing_error": ("tooth_spacing_error", {
-        "thickness_internal_um": np.linspace(-5.0, 5.0, 40).tolist(),
-        "thickness_external_um": np.linspace(-5.0, 5.0, 39).tolist()}),
+    **common_effects(40, 39),
 }
 BEVELOID_EFFECTS = {
     "axial_shift_error": ("beveloid", {"axial_shift_error_mm": -0.03}),
     "center_distance_error": ("beveloid", {"center_distance_error_mm": 0.01}),
     "lateral_offset": ("beveloid", {"lateral_offset_mm": 0.5}),
-    "runout": ("runout", {"beta_deg": 40.0}),
-    "bearing_clearance": ("bearing_clearance", {}),
-    "tooth_spacing_error": ("tooth_spacing_error", {
-        "thickness_internal_um": np.linspace(-5.0, 5.0, 20).tolist(),
-        "thickness_external_um": np.linspace(-5.0, 5.0, 20).tolist()}),
+    **common_effects(20, 20),
 }
 
 

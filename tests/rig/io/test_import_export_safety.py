@@ -300,22 +300,24 @@ def _set_column(rows: list[list[str]], k: int, index: int, value: str) -> list[l
     return rows
 
 
+def _with_temperature_column(tmp_path: Path, index: int, value: str) -> tuple[Path, Path]:
+    """The data with a temperature column 'T' (``value`` in row ``index``, 20 elsewhere) and
+    the map that reads it as temperature_C."""
+    rows = [r + [value if i == index else "20"] for i, r in enumerate(_rows())]
+    return (_write_csv(tmp_path, rows, ["Time [s]", "Torque [N*m]", "Angle [arcsec]", "T"]),
+            _map(tmp_path, lambda s: s.replace("[columns]", '[columns]\ntemperature_C = "T"')))
+
+
 CASES = {
     "torque and angle on one column": (
         lambda t: (_write_csv(t, _rows()), _map(t, lambda s: s.replace(
             '{ column = "Angle [arcsec]", unit = "arcsec" }', '"Torque [N*m]"'))),
         ["m.toml", "columns", "torque_Nm and output_angle_deg", "'Torque [N*m]'"]),
     "temperature inf": (
-        lambda t: (_write_csv(t, [r + ["inf" if i == 5 else "20"] for i, r in
-                                  enumerate(_rows())], ["Time [s]", "Torque [N*m]",
-                                                        "Angle [arcsec]", "T"]),
-                   _map(t, lambda s: s.replace("[columns]", '[columns]\ntemperature_C = "T"'))),
+        lambda t: _with_temperature_column(t, 5, "inf"),
         ["d.csv:7:4", "'T' (temperature_C)", "inf"]),
     "temperature -653 C": (
-        lambda t: (_write_csv(t, [r + ["-653" if i == 9 else "20"] for i, r in
-                                  enumerate(_rows())], ["Time [s]", "Torque [N*m]",
-                                                        "Angle [arcsec]", "T"]),
-                   _map(t, lambda s: s.replace("[columns]", '[columns]\ntemperature_C = "T"'))),
+        lambda t: _with_temperature_column(t, 9, "-653"),
         ["d.csv:11:4", "-653.0 °C", "-273.15"]),
     "test temperature -653 C": (
         lambda t: (_write_csv(t, _rows()), _map(t, lambda s: s + "temperature_C = -653.0\n")),
@@ -338,10 +340,7 @@ CASES = {
         ["d.csv:5:3", "column 'Angle [arcsec]'", "output_angle_deg 2.77", "e+296 is no reading",
          "from -1e+09 to 1e+09 deg"]),
     "temperature -200 C": (
-        lambda t: (_write_csv(t, [r + ["-200" if i == 9 else "20"] for i, r in
-                                  enumerate(_rows())], ["Time [s]", "Torque [N*m]",
-                                                        "Angle [arcsec]", "T"]),
-                   _map(t, lambda s: s.replace("[columns]", '[columns]\ntemperature_C = "T"'))),
+        lambda t: _with_temperature_column(t, 9, "-200"),
         ["d.csv:11:4", "temperature_C -200.0 is no reading", "from -100 to 300 °C"]),
     "test input angle 1e300": (
         lambda t: (_write_csv(t, _rows()), _map(t, lambda s: s + "input_angle_deg = 1e300\n")),

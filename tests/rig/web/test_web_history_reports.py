@@ -11,16 +11,13 @@ from __future__ import annotations
 
 import json
 import re
-from pathlib import Path
 
 import numpy as np
-import pytest
 from fastapi.testclient import TestClient
 
 from rig.runformat import read_run
 from rig.store import Store
-from rig.web import create_app
-from rig.web.settings import TOKEN_ENV, resolve_settings
+from tests.rig.web.test_web_api import client, store  # noqa: F401 (the API's fixtures)
 from tests.support.paths import REPO
 
 EXAMPLE_RUN = REPO / "rig" / "examples" / "runs" / "pair1-pos000"
@@ -29,20 +26,7 @@ ESTOP = "E-STOP pressed on the control page"
 ABSOLUTE_PATH = re.compile(r"(?<![\w.:/~-])/(?:[^\s/'\"<>`]+/)+")
 
 
-@pytest.fixture
-def store(tmp_path: Path) -> Store:
-    return Store(tmp_path / "store")
-
-
-@pytest.fixture
-def client(store: Store, monkeypatch: pytest.MonkeyPatch):
-    monkeypatch.delenv(TOKEN_ENV, raising=False)
-    settings = resolve_settings(store_root=store.root, token="history-reports-token")
-    with TestClient(create_app(settings, store=store)) as c:
-        yield c
-
-
-def record_run(store: Store, campaign_id: str | None, n: int | None = None,
+def record_run(store: Store, campaign_id: str | None, n: int | None = None,  # noqa: F811
                status: str = "completed", label: str = "pos000-a100-r0") -> str:
     """The example run (its first ``n`` samples) recorded through the store's API, as the
     engine records one (with the plan's label); its run id."""
@@ -63,13 +47,13 @@ def record_run(store: Store, campaign_id: str | None, n: int | None = None,
     return rec.run_id
 
 
-def no_server_path(text: str, store: Store) -> None:
+def no_server_path(text: str, store: Store) -> None:  # noqa: F811
     assert str(store.root) not in text and str(store.root.resolve()) not in text, text
     assert not ABSOLUTE_PATH.search(text), text
 
 
 def test_a_campaign_aborted_in_its_first_run_says_why_it_has_no_diagnosis(
-        client: TestClient, store: Store):
+        client: TestClient, store: Store):  # noqa: F811
     cid = store.create_campaign("estopped", meta={"unit": UNIT})
     record_run(store, cid, n=300, status="aborted")
     store.finish_campaign(cid, "aborted", summary={
@@ -87,7 +71,7 @@ def test_a_campaign_aborted_in_its_first_run_says_why_it_has_no_diagnosis(
         no_server_path(answer.text, store)
 
 
-def test_a_completed_campaign_offers_its_diagnosis(client: TestClient, store: Store):
+def test_a_completed_campaign_offers_its_diagnosis(client: TestClient, store: Store):  # noqa: F811
     cid = store.create_campaign("done", meta={"unit": UNIT})
     record_run(store, cid)
     store.finish_campaign(cid, "completed", summary={"passed": True, "failures": []})
@@ -97,7 +81,7 @@ def test_a_completed_campaign_offers_its_diagnosis(client: TestClient, store: St
         "no diagnosis yet: the campaign is still running")
 
 
-def test_no_api_error_shows_a_folder_of_the_server(client: TestClient, store: Store):
+def test_no_api_error_shows_a_folder_of_the_server(client: TestClient, store: Store):  # noqa: F811
     """An unreadable run's answers name the file by its name, not by where it lies."""
     run_id = record_run(store, None)
     folder = store.get_run(run_id).path
@@ -114,8 +98,8 @@ def test_no_api_error_shows_a_folder_of_the_server(client: TestClient, store: St
     no_server_path(answer.text, store)
 
 
-def test_runs_are_listed_with_the_label_the_live_panel_shows(client: TestClient,
-                                                             store: Store):
+def test_runs_are_listed_with_the_label_the_live_panel_shows(client: TestClient,  # noqa: F811
+                                                             store: Store):  # noqa: F811
     run_id = record_run(store, None, label="pos090-a100-r0")
     runs = client.get("/api/runs").json()
     assert [(r["run_id"], r["label"]) for r in runs] == [(run_id, "pos090-a100-r0")]

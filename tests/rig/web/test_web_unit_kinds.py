@@ -46,16 +46,10 @@ def test_each_kind_is_previewed_with_its_model_and_band(client: TestClient, unit
 
 @pytest.mark.parametrize("unit,loc,msg", [
     # the seed 000 pair's words, then the same mistakes in the other kinds
-    ({**INVOLUTE, "module_mm": 0}, ["body", "unit", "module_mm"],
-     "Input should be greater than or equal to 0.01"),
-    ({**CYCLOID, "module_mm": 0}, ["body", "unit", "module_mm"],
-     "Input should be greater than or equal to 0.01"),
-    ({**BEVELOID, "module_mm": 0}, ["body", "unit", "module_mm"],
-     "Input should be greater than or equal to 0.01"),
-    ({**INVOLUTE, "z_internal": 39, "z_external": 40}, ["body", "unit"],
-     "Value error, z_internal (39) must exceed z_external (40)"),
-    ({**CYCLOID, "z_internal": 39, "z_external": 40}, ["body", "unit"],
-     "Value error, z_internal (39) must exceed z_external (40)"),
+    *[({**unit, "module_mm": 0}, ["body", "unit", "module_mm"],
+       "Input should be greater than or equal to 0.01") for unit in (INVOLUTE, CYCLOID, BEVELOID)],
+    *[({**unit, "z_internal": 39, "z_external": 40}, ["body", "unit"],
+       "Value error, z_internal (39) must exceed z_external (40)") for unit in (INVOLUTE, CYCLOID)],
     ({**CYCLOID, "height_coeff": 0}, ["body", "unit", "height_coeff"],
      "Input should be greater than 0"),
     ({k: v for k, v in CYCLOID.items() if k != "shape_coeff"}, ["body", "unit", "shape_coeff"],

@@ -25,8 +25,9 @@ from simulators.plant.config import load_plant_config
 from tests.support.browser import (
     ARTIFACTS,
     NEEDS_CHROMIUM,
+    desktop_and_phone,
     launch_browser,
-    open_page,
+    no_sideways_scroll,
     start_run,
 )
 from tests.support.paths import REPO
@@ -35,7 +36,6 @@ from tests.support.serve import get_json, rig_serve
 pytestmark = [pytest.mark.realtime, pytest.mark.alone, NEEDS_CHROMIUM, pytest.mark.timeout(300)]
 
 PLANETARY_PLANT = REPO / "simulators" / "planetary_plant.toml"
-PHONE = (390, 844)
 OTHER_KINDS_FIELDS = ("z_internal", "z_external", "z_pinion", "module_mm", "height_coeff",
                       "cone_angle_deg", "m_value_internal_mm", "runout_internal_mm")
 
@@ -54,23 +54,13 @@ def choose_planetary(page) -> None:
         expect(form.locator(f"input[name={hidden}]")).to_be_hidden()
 
 
-def no_sideways_scroll(page) -> None:
-    wide = page.evaluate("""() => [...document.querySelectorAll('body *')].filter(
-        (e) => e.getBoundingClientRect().right > innerWidth + 0.5).slice(0, 5).map(
-        (e) => e.tagName + '#' + e.id + '.' + e.className)""")
-    assert page.evaluate("document.scrollingElement.scrollWidth <= innerWidth"), wide
-
-
 def test_operator_measures_the_te_of_a_planetary_unit(tmp_path):
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     with rig_serve(tmp_path / "store", "--plant", str(PLANETARY_PLANT)) as (url, link), \
             sync_playwright() as pw:
         browser = launch_browser(pw)
-        page, errors = open_page(browser, link, 1440, 900)
-        phone, phone_errors = open_page(browser, link, *PHONE)
+        page, errors, phone, phone_errors = desktop_and_phone(browser, link)
         for p in (page, phone):
-            expect(p.locator("#role")).to_have_text("operator", timeout=60_000)
-            expect(p.locator("#state")).to_have_text("idle", timeout=90_000)
             choose_planetary(p)
         no_sideways_scroll(phone)
         phone.screenshot(path=str(ARTIFACTS / "planetary-setup-phone.png"), full_page=True)

@@ -29,9 +29,10 @@ from simulators.plant.config import load_plant_config
 from tests.support.browser import (
     ARTIFACTS,
     NEEDS_CHROMIUM,
+    desktop_and_phone,
     fill_identity,
     launch_browser,
-    open_page,
+    no_sideways_scroll,
     start_run,
 )
 from tests.support.serve import TOKEN, get_json, served
@@ -49,7 +50,6 @@ def serve_rig(rig_toml: Path, store: Path):
         yield lines["control page"], lines["operator link"]
 
 
-PHONE = (390, 844)
 
 
 def te_shown_not_loop(page, no_loop_yet: bool = True) -> None:
@@ -64,10 +64,7 @@ def te_shown_not_loop(page, no_loop_yet: bool = True) -> None:
 def fits_the_width(page) -> None:
     """Nothing scrolls sideways; the TE plot is inside the viewport and shows the whole
     output turn (0-360 deg)."""
-    wide = page.evaluate("""() => [...document.querySelectorAll('body *')].filter(
-        (e) => e.getBoundingClientRect().right > innerWidth + 0.5).slice(0, 5).map(
-        (e) => e.tagName + '#' + e.id + '.' + e.className)""")
-    assert page.evaluate("document.scrollingElement.scrollWidth <= innerWidth"), wide
+    no_sideways_scroll(page)
     box = page.locator("#te-plot canvas").bounding_box()
     assert box is not None and box["x"] >= 0 and box["x"] + box["width"] <= page.viewport_size[
         "width"], box
@@ -87,11 +84,8 @@ def test_operator_measures_the_transmission_error(tmp_path: Path):
             serve_rig(sim.rig_config_path, tmp_path / "store") as (url, link), \
             sync_playwright() as pw:
         browser = launch_browser(pw)
-        page, errors = open_page(browser, link, 1440, 900)
-        phone, phone_errors = open_page(browser, link, *PHONE)
+        page, errors, phone, phone_errors = desktop_and_phone(browser, link)
         for p in (page, phone):
-            expect(p.locator("#role")).to_have_text("operator", timeout=60_000)
-            expect(p.locator("#state")).to_have_text("idle", timeout=90_000)
             expect(p.locator("#te-panel")).to_be_hidden()
             expect(p.locator("#loop-panel")).to_be_visible()
 

@@ -45,6 +45,26 @@ def open_page(browser: Any, link: str, width: int, height: int) -> tuple[Any, li
     return page, errors
 
 
+def desktop_and_phone(browser: Any, link: str) -> tuple[Any, list[str], Any, list[str]]:
+    """The operator page at both widths (:data:`DESKTOP`, :data:`PHONE`), each signed in as
+    the operator and idle: (desktop page, its errors, phone page, its errors)."""
+    page, errors = open_page(browser, link, DESKTOP["width"], DESKTOP["height"])
+    phone, phone_errors = open_page(browser, link, PHONE["width"], PHONE["height"])
+    for p in (page, phone):
+        expect(p.locator("#role")).to_have_text("operator", timeout=60_000)
+        expect(p.locator("#state")).to_have_text("idle", timeout=90_000)
+    return page, errors, phone, phone_errors
+
+
+def no_sideways_scroll(page: Any) -> None:
+    """Nothing on ``page`` reaches past the viewport's right edge (the first five that do are
+    named)."""
+    wide = page.evaluate("""() => [...document.querySelectorAll('body *')].filter(
+        (e) => e.getBoundingClientRect().right > innerWidth + 0.5).slice(0, 5).map(
+        (e) => e.tagName + '#' + e.id + '.' + e.className)""")
+    assert page.evaluate("document.scrollingElement.scrollWidth <= innerWidth"), wide
+
+
 def confirm_lock(page: Any) -> None:
     """Confirm the input lock on the page and wait (30 s at most) until it says so (the
     request answers at once; the input may still be moving: "moving to ... (not confirmed

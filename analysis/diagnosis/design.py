@@ -21,7 +21,6 @@ from analysis.diagnosis.fit import (
     fit,
     fit_profile,
     positions_known,
-    teeth_of,
     temperatures_known,
 )
 from analysis.diagnosis.policy import POLICY, DecisionPolicy
@@ -103,31 +102,46 @@ def folds_by_repeat(stack: Stack, cond: dict[str, tuple],
 
 def testable(stack: Stack, cond: dict[str, tuple], varied: list[str],
              policy: DecisionPolicy = POLICY) -> dict[str, str]:
-    """Candidates the design can test -> '' ; others -> why not."""
-    why: dict[str, str] = {}
-    n_pos = len({round(r.input_angle_deg, 1) for r in stack.runs
-                 if r.input_angle_deg is not None})
-    for name in CANDIDATES:
-        why[name] = ""
-    if name_missing := (not positions_known(stack)):
-        why["runout"] = why["tooth_spacing_error"] = "input_angle_deg unknown"
-    if not name_missing and n_pos < policy.runout_positions:
-        why["runout"] = (f"only {n_pos} locking position(s): runout needs "
-                         f"{policy.runout_positions} or more")
-    if not name_missing and len(teeth_of(stack)) < 2:
-        why["tooth_spacing_error"] = "one tooth pair only"
+    """Candidates the design can test -> '' ; others -> why not (:func:`untestable` of the
+    runs' locking positions and measured temperatures)."""
+    positions = [r.input_angle_deg for r in stack.runs] if positions_known(stack) else [None]
     temps = [r.mean_temperature_C for r in stack.runs if r.mean_temperature_C is not None]
-    spread = 0.0
-    if temperatures_known(stack):
-        spread = max(float(np.ptp(np.concatenate([r.temperature_C for r in stack.runs]))), 0.0)
-    if not temps or spread < policy.temperature_span_K:
+    span: float | None = None
+    if temps:
+        span = max(float(np.ptp(np.concatenate([r.temperature_C for r in stack.runs]))), 0.0) \
+            if temperatures_known(stack) else 0.0
+    kind = stack.physics.not_testable if stack.physics is not None else {}
+    return untestable(positions, stack.z_internal, stack.z_external, span, kind, policy)
+
+
+def untestable(positions_deg: Sequence[float | None], z_input: int, z_mate: int,
+               temperature_span_K: float | None, kind_not_testable: dict[str, str],
+               policy: DecisionPolicy = POLICY) -> dict[str, str]:
+    """Each candidate effect -> '' when a campaign of these runs can test it, else why not.
+
+    ``positions_deg``: the runs' input locking angles (deg; None: not known);
+    ``z_input``, ``z_mate``: the tooth counts that set which tooth pair a position engages
+    (:func:`analysis.effects.tooth_pair_phase`); ``temperature_span_K``: how far the housing
+    temperature varies over the campaign (None: not recorded); ``kind_not_testable``: the
+    unit kind's effects without a meaning of their own. The same rules decide before a
+    campaign is measured (its plan) and after (its runs)."""
+    why = {name: "" for name in CANDIDATES}
+    if any(p is None for p in positions_deg):
+        why["runout"] = why["tooth_spacing_error"] = "input_angle_deg unknown"
+    else:
+        known = [float(p) for p in positions_deg if p is not None]
+        n_pos = len({round(p, 1) for p in known})
+        if n_pos < policy.runout_positions:
+            why["runout"] = (f"only {n_pos} locking position(s): runout needs "
+                             f"{policy.runout_positions} or more")
+        if len({int(tooth_pair_phase(p, z_input, z_mate)) for p in known}) < 2:
+            why["tooth_spacing_error"] = "one tooth pair only"
+    if temperature_span_K is None or temperature_span_K < policy.temperature_span_K:
         why["thermal_expansion"] = (f"temperature does not vary by "
                                     f"{policy.temperature_span_K:g} K or more")
     why["shaft_compliance"] = ("a series compliance changes only the slope: from loops alone it "
                                "is the stiffness parameter (see parameter_error)")
-    if stack.physics is not None:
-        # effects without a meaning of their own in the unit kind's geometry
-        why.update(stack.physics.not_testable)
+    why.update(kind_not_testable)
     return why
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from scipy.optimize import lsq_linear, minimize_scalar
@@ -89,6 +90,15 @@ def _num(unit: dict, key: str, default: float) -> float:
     return float(value)
 
 
+def unit_teeth(unit: dict[str, Any], physics: KindPhysics | None) -> tuple[int, int]:
+    """The tooth counts that say which tooth pair a locking position engages: the kind's
+    mesh steps per input turn and its mate's (``physics``), else seed 000's ``z_internal``
+    and ``z_external`` (45 and 40 when the unit data has none)."""
+    if physics is not None:
+        return physics.z_input, physics.z_mate
+    return int(_num(unit, "z_internal", 45)), int(_num(unit, "z_external", 40))
+
+
 def build_stack(runs: Sequence[PreparedRun]) -> Stack:
     """Stack prepared runs; the unit geometry comes from the first run's unit data."""
     if not runs:
@@ -109,7 +119,7 @@ def build_stack(runs: Sequence[PreparedRun]) -> Stack:
     if physics is not None:
         # the kind's own geometry (analysis.diagnosis.kind_physics): mesh steps per input
         # turn and the mate's tooth count, its inspected tolerances' play
-        z1, z2 = physics.z_input, physics.z_mate
+        z1, z2 = unit_teeth(unit, physics)
         runout_budget = physics.runout_budget_arcmin
         spacing_budget = physics.spacing_prior_arcmin
     return Stack(

@@ -80,6 +80,7 @@ def register(app: typer.Typer) -> None:
         from rig.core.errors import RigError
         from rig.measurement.service import open_session, plant_config_for, run_campaign
         from rig.plans.campaign_file import load_campaign
+        from rig.plans.diagnosability import design_effects
         from rig.plans.estimate import check_duration, estimate
         from rig.store import Store
 
@@ -89,21 +90,28 @@ def register(app: typer.Typer) -> None:
         est = estimate(plan.steps())
         check_duration(est, confirmed=confirm_long or camp.confirm_long,
                        how=f"--confirm-long (or confirm_long = true in {camp.source})")
+        effects = design_effects(camp)  # what the diagnosis can test, said before measuring
         if preview:
             for line in plan.listing():
                 out.print(line, highlight=False)
             out.print(f"{est.n_steps} steps, {est.n_runs} runs, about {est.total_s:.1f} s "
                       f"({est.dwell_s:.1f} s dwelling)")
+            for line in effects.lines() if effects else []:
+                out.print(line, highlight=False, markup=False, soft_wrap=True)
             return
         plant_cfg = plant_config_for(camp.unit_data(), camp.simulation, camp.source) \
             if simulated else None
         st = Store(store, samples=samples)
         st.check_writable("a campaign")  # said before the rig starts
         out.print(f"campaign {camp.name}: {est.n_runs} runs, about {est.total_s:.0f} s")
+        for line in effects.lines() if effects else []:
+            out.print(line, highlight=False, markup=False, soft_wrap=True)
         with open_session(rig=rig, simulated=simulated, plant=plant_cfg) as session, \
                 progress_bar(out, est.total_s) as on_event, \
                 exit_2_on_ctrl_c(out, "the runs are kept"):
             result = run_campaign(camp, session, st, progress=on_event)
+        if effects is not None:
+            result["diagnosis_design"] = effects.to_dict()
         write_json(json_file, result)
         out.print(_summary_table(result))
         lm = result["lost_motion_arcmin"]

@@ -162,6 +162,13 @@ def compute_preview(req: RunRequest, facts: dict[str, Any]) -> dict[str, Any]:
         batch = batch_band(req.unit.mapping(), req.plan.rated_torque_Nm,
                            model["lost_motion_pct"])
     listing = [line.strip() for line in plan.listing()[:PREVIEW_LINES]]
+    effects = None
+    if req.kind == "campaign" and req.test != TE_KIND:
+        from rig.plans.diagnosability import effects_of_design
+
+        # what the gap diagnosis of these runs can and cannot test (issue 31 item 7)
+        effects = effects_of_design(req.unit.mapping(), req.plan.rated_torque_Nm,
+                                    req.axes.axes()).to_dict()
     return json_safe({
         "name": plan.name, "n_steps": len(steps), "n_runs": est.n_runs,
         "estimated_s": est.total_s, "dwell_s": est.dwell_s, "steps": listing,
@@ -169,7 +176,7 @@ def compute_preview(req: RunRequest, facts: dict[str, Any]) -> dict[str, Any]:
         "amplitude_Nm": (req.te_params().brake_torque_Nm if req.test == TE_KIND
                          else req.plan.loop_params().amplitude_Nm),
         "fits": not problems, "problems": problems, "assumptions": assumptions,
-        "model": model, "batch": batch,
+        "model": model, "batch": batch, "diagnosis_design": effects,
     })
 
 

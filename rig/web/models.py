@@ -379,6 +379,10 @@ class PlanPreview(BaseModel):
     """Where a production batch of this design lies (95 % band, from the unit kind's
     tolerances: seed 000 Table 1, seed 002's modification budget, seed 001's installation
     error budget)."""
+    diagnosis_design: dict[str, Any] | None = None
+    """A loop campaign: the candidate effects the gap diagnosis can test on its runs
+    (``testable``) and the others with why not (``untestable``: effect -> reason); None for a
+    single run or a TE campaign (rig/plans/diagnosability.py)."""
 
 
 class Message(BaseModel):

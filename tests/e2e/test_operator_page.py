@@ -184,6 +184,13 @@ def test_operator_page(tmp_path: Path):
         expect(page.locator(f("override"))).to_be_checked()
         expect(page.locator(f("override_reason"))).to_have_value(REASON)
         expect(page.locator("#start-why")).not_to_contain_text("calibration")
+        # issue 31 item 7: before anything is measured, what the diagnosis of this design
+        # (two positions, no temperature) can and cannot test, and why
+        page.click("#preview")
+        design = page.locator("#preview-design")
+        expect(design).to_contain_text("diagnosis of this design: can test friction")
+        expect(design).to_contain_text("runout (only 2 locking position(s): runout needs 3")
+        expect(design).to_contain_text("thermal_expansion (temperature does not vary")
 
         # 8: the twist is the twist: locked at 180 deg the output turned by 180/ratio deg,
         # the twist counts from the lock (nearly zero at zero torque)

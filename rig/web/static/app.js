@@ -788,6 +788,11 @@ async function previewPlan() {
   if (p.batch && p.batch.band_95_arcmin) html += `; production batch of this design (95 %` +
     `${p.model && p.model.band_source ? ", " + esc(p.model.band_source) : ""}): ` +
     `${fmt(p.batch.band_95_arcmin[0])} .. ${fmt(p.batch.band_95_arcmin[1])} arcmin`;
+  const dd = p.diagnosis_design;
+  if (dd) html += `<div id="preview-design">diagnosis of this design: can test ` +
+    `${esc(dd.testable.join(", ") || "no effect")}` +
+    (Object.keys(dd.untestable).length ? "; cannot test " + Object.entries(dd.untestable)
+      .map(([k, why]) => `${esc(k)} (${esc(why)})`).join("; ") : "") + "</div>";
   html += `<details><summary>steps</summary><pre>${esc(p.steps.join("\n"))}` +
     `${p.truncated ? "\n…" : ""}</pre></details>`;
   $("preview-out").innerHTML = html;

@@ -37,7 +37,11 @@ from tests.support.browser import (
 )
 from tests.support.serve import get_json, rig_serve
 
-pytestmark = [pytest.mark.realtime, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
+# alone (tests/conftest.py): the run's verdict is asserted, and beside the other worker's
+# CPU-bound tests the torque channel came 12-16 ms late against the twist (the lag check's
+# 10 ms: INCOMPLETE, honestly) in both tries of the fresh-clone CI run of 2026-11-29 (and
+# under load on 2026-11-28); alone it passes
+pytestmark = [pytest.mark.realtime, pytest.mark.alone, NEEDS_CHROMIUM, pytest.mark.timeout(240)]
 
 HOSTILE = "<img src=x onerror=alert(1)>"
 UPLOAD = f"""name = "upload-2pos"

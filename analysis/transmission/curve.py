@@ -41,7 +41,9 @@ class DirectionCurve:
     ``mean_arcsec``: the revolution-averaged TE at ``grid_deg`` (centred: zero mean);
     ``revs_arcsec``: each complete revolution's TE (revolutions x grid, centred by the same
     ``c_d``); ``offset_arcsec``: ``c_d`` (the uncentred mean, for the hysteresis);
-    ``residual_std_arcsec``: spread of the samples about their bin means;
+    ``residual_std_arcsec``: the noise of one sample (arcsec; a run's analysis: from the
+    samples' and the bins' pseudo-residuals, :func:`analysis.transmission.evaluate.noise_std`;
+    the plain binned curve below: the spread of the samples about their bin means);
     ``samples_per_bin``: mean count of samples per bin; ``revolutions``: complete revolutions.
     """
 

@@ -1122,9 +1122,15 @@ function onKey(e) {
 }
 
 // ---------------------------------------------------------------- history
+// The tables are rebuilt only when what the server lists has changed: a refresh that finds
+// the same runs leaves every row (and a link under the operator's finger) where it was
+let historyShown = null;
 async function refreshHistory() {
   try {
     const [runs, camps] = await Promise.all([api("GET", "/api/runs?limit=50"), api("GET", "/api/campaigns")]);
+    const listed = JSON.stringify([runs, camps]);
+    if (listed === historyShown) return;
+    historyShown = listed;
     const tb = $("runs").querySelector("tbody");
     tb.innerHTML = "";
     for (const r of runs) {

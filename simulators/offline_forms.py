@@ -122,3 +122,36 @@ def path_profile(loading: str, rated_Nm: float, n: int, precycles: int = 0,
     i = np.minimum(k.astype(int), lv.size - 2)
     frac = np.clip((k - i) / ramp_share, 0.0, 1.0)
     return lv[i] + (lv[i + 1] - lv[i]) * frac
+
+
+def thermal_lag_C(sensor_C: list[float], lag_runs: float) -> list[float]:
+    """The mesh temperature (deg C) at each run when it follows the housing sensor's
+    ``sensor_C`` through a first-order lag ``tau dT_m/dt = T_s - T_m`` with ``tau`` in units
+    of the time between runs (``lag_runs``), the sensor held at each run's value since the
+    run before and the mesh soaked at the first run's temperature:
+    ``T_m,k = T_s,k + (T_m,k-1 - T_s,k) exp(-1 / lag_runs)``."""
+    decay = math.exp(-1.0 / lag_runs)
+    mesh = [float(sensor_C[0])]
+    for t in sensor_C[1:]:
+        mesh.append(float(t + (mesh[-1] - t) * decay))
+    return mesh
+
+
+def parallel_spring_torque_Nm(angle_deg: np.ndarray, stiffness_Nm_per_arcmin: float
+                              ) -> np.ndarray:
+    """The torque (N*m) a spring in parallel with the gear adds to the measured torque at
+    the output angle ``angle_deg``: ``k_p (theta - theta_0)``, its neutral angle ``theta_0``
+    in the middle of the run's travel (the middle of the free play in a symmetric loop). The
+    recorded (torque, twist) pairs of a quasi-static loop are then those of the gear and the
+    spring together: a slope ``k_p`` inside the play that no gear effect gives."""
+    theta = np.asarray(angle_deg, dtype=float) * 60.0
+    theta0 = 0.5 * (float(theta.max()) + float(theta.min()))
+    return stiffness_Nm_per_arcmin * (theta - theta0)
+
+
+def drifting_zero_Nm(t_s: np.ndarray, drift_Nm: float) -> np.ndarray:
+    """A torque zero drifting linearly by ``drift_Nm`` (N*m) from the run's first sample to
+    its last (a sensor warming between tares)."""
+    t = np.asarray(t_s, dtype=float)
+    span = float(t[-1] - t[0]) if t.size > 1 else 1.0
+    return drift_Nm * (t - t[0]) / (span or 1.0)

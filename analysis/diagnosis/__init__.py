@@ -41,6 +41,7 @@ from analysis.diagnosis.candidates import (
     Trials,
     _ci,
     _insample,
+    compliance_rel_se,
     describe_params,
     heldout_separation,
     kind_runout_swing_arcmin,
@@ -49,6 +50,7 @@ from analysis.diagnosis.candidates import (
     separated,
     series_compliance,
     series_size_arcmin,
+    stiffness_gap_tolerance,
     take_up_completion,
     tangent_stiffness_at_amplitude,
 )
@@ -235,6 +237,12 @@ def _gaps(stack: Any, prepared: list[PreparedRun], design: Design, policy: Decis
         "stiffness_Nm_per_arcmin": {"nominal": k_nom if math.isfinite(k_nom) else None,
                                     "calibrated": k_fit if math.isfinite(k_fit) else None},
     }
+    if math.isfinite(k_nom) and k_nom > 0 and math.isfinite(k_fit):
+        # the departure is a finding in itself (issue 31 item 2): its ratio and standard error
+        rel_se = compliance_rel_se(base)
+        param_error["stiffness_Nm_per_arcmin"].update(
+            ratio=k_fit / k_nom, relative_se=rel_se,
+            gap_tolerance=stiffness_gap_tolerance(policy, rel_se))
     if pred_rms > 0:
         param_error["share_of_predictive_gap"] = max(0.0, 1.0 - (base_rms / pred_rms) ** 2)
     return trials, Gaps(pred_rms, pred_lm, base_rms, base_lm, h0, k_nom, k_fit, param_error)

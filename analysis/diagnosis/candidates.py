@@ -351,6 +351,26 @@ def separated(stack: Stack, best: Candidate, other: Candidate,
             and binomtest(k, n, 0.5, alternative="greater").pvalue <= policy.separation_p)
 
 
+def compliance_rel_se(f: LinearFit) -> float:
+    """Relative standard error of a fit's loaded compliance (the same of its stiffness to
+    first order), scaled by the fit's reduced chi-square when above 1; 0 when the fit has no
+    covariance."""
+    comp = f.coef("compliance")
+    if f.cov is None or "compliance" not in f.names or comp <= 0:
+        return 0.0
+    j = f.names.index("compliance")
+    scale = math.sqrt(max(2.0 * f.objective / max(f.n - len(f.beta), 1), 1.0))
+    return math.sqrt(max(f.cov[j, j], 0.0)) * scale / comp
+
+
+def stiffness_gap_tolerance(policy: DecisionPolicy, rel_se: float) -> float:
+    """The relative departure of the calibrated stiffness from seed 004 eq. (8) that is a gap
+    when nothing else is wrong: ``stiffness_gap``, or ``stiffness_se_factor`` standard errors
+    (``rel_se``, relative) of the calibrated compliance when the loops measure it less
+    well."""
+    return max(policy.stiffness_gap, policy.stiffness_se_factor * rel_se)
+
+
 def series_compliance(f: LinearFit, k_nom: float, policy: DecisionPolicy = POLICY
                       ) -> dict[str, Any] | None:
     """A series compliance left once the effects are fitted: the loaded stiffness of the final
@@ -361,11 +381,7 @@ def series_compliance(f: LinearFit, k_nom: float, policy: DecisionPolicy = POLIC
     if comp <= 0 or not math.isfinite(k_nom) or k_nom <= 0:
         return None
     k_load = 1.0 / comp
-    rel_se = 0.0
-    if f.cov is not None and "compliance" in f.names:
-        j = f.names.index("compliance")
-        scale = math.sqrt(max(2.0 * f.objective / max(f.n - len(f.beta), 1), 1.0))
-        rel_se = math.sqrt(max(f.cov[j, j], 0.0)) * scale / comp
+    rel_se = compliance_rel_se(f)
     tol = max(policy.stiffness_tolerance, policy.stiffness_se_factor * rel_se)
     if k_load >= k_nom * (1.0 - tol):
         return None
@@ -419,11 +435,7 @@ def curvature_effect(models: dict[str, Candidate], k_nom: float,
     if comp <= 0:
         return "stiffness_nonlinearity", "the flank is rigid at load: the contact stiffens"
     k_load = 1.0 / comp
-    rel_se = 0.0
-    if c.fit.cov is not None and "compliance" in c.fit.names:
-        j = c.fit.names.index("compliance")
-        scale = math.sqrt(max(2.0 * c.fit.objective / max(c.fit.n - len(c.fit.beta), 1), 1.0))
-        rel_se = math.sqrt(max(c.fit.cov[j, j], 0.0)) * scale / comp
+    rel_se = compliance_rel_se(c.fit)
     tol = max(policy.stiffness_tolerance, policy.stiffness_se_factor * rel_se)
     dev = k_load / k_nom - 1.0
     text = (f"stiffness at load {k_load:.3g} N*m/arcmin once the small-torque take-up is "

@@ -81,6 +81,12 @@ class DecisionPolicy:
     stiffness_tolerance: float = _p(0.10, "relative departure of the loaded stiffness from seed "
                                     "004 eq. (8) taken as a finding (a series compliance, a "
                                     "curvature's slope at load)")
+    stiffness_gap: float = _p(0.02, "relative departure of the calibrated loaded stiffness "
+                              "from seed 004 eq. (8) reported as a gap when nothing else is "
+                              "wrong (issue 31 item 2): our generators' and the development "
+                              "sets' null campaigns stay within 1 %; 5 of 5 series springs "
+                              "3-8 % softer and 3 of 5 parallel springs 1-4 % of the mesh "
+                              "came out 'none' at the 10 % of stiffness_tolerance")
     stiffness_se_factor: float = _p(2.0, "standard errors of the fitted compliance that widen "
                                     "the stiffness tolerance (about 95 %)")
     series_share: float = _p(0.5, "a loaded slope below eq. (8) names the verdict when no "

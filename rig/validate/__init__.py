@@ -2,8 +2,8 @@
 
 The generator (this module) makes each case a campaign of one unit (varied unit data) with
 the time-domain plant (simulators/) and one effect switched on, none (null cases), or one
-outside the vocabulary (creep, direction-dependent torque gain). Widened (issue 10) so that it
-is not one simulator's forms:
+outside the vocabulary (creep, direction-dependent torque gain, a parallel spring). Widened
+(issue 10) so that it is not one simulator's forms:
 
 - more than one functional form per effect (:data:`FORMS`): friction Coulomb, Dahl or
   Stribeck-like (LuGre); stiffening exponential (still hardening at rated) or a Hertzian
@@ -11,7 +11,11 @@ is not one simulator's forms:
   a two-stage stiffness or a smooth take-up; thermal play linear or quadratic in temperature;
   torque offset on the reading, or with the drive regulating on the offset reading; tooth
   spacing as tooth-to-tooth thickness and pitch scatter or a smooth thickness pattern of
-  order 2-4 around each gear;
+  order 2-4 around each gear; and (issue 31 item 8) the forms a real unit shows that the
+  candidates do not fit exactly: runout with an ovality on top (orders 1 and 2 of a crank
+  turn), a thermal play that follows the mesh temperature lagging the housing sensor, a
+  torque offset that also drifts during each run, a stiffness only 3-8 % below the model's,
+  and out of the vocabulary a spring in parallel with the gear;
 - loading profiles (:data:`LOADINGS`): stepped with dwells, constant-rate ramps, sinusoid;
 - sensor artifacts: a coarse encoder (2^19..2^23 counts per revolution), a lag of the torque
   channel behind the angles, ringing after the impact at the play crossing
@@ -59,32 +63,36 @@ from simulators.offline import quantise_deg, simulate_run
 from simulators.offline_forms import (
     center_distance_change_mm,
     delayed,
+    drifting_zero_Nm,
     impact_ringing_arcsec,
+    parallel_spring_torque_Nm,
     path_profile,
     power_law_twist_arcmin,
     ramp_profile,
     sine_profile,
     smooth_takeup_twist_arcmin,
+    thermal_lag_C,
 )
 from simulators.offline_rig import RigArtifacts, draw_artifacts, measure_run
 from simulators.plant.config import PlantConfig, load_plant_config
+from simulators.plant.geometry import reference_nominal
 
 IN_VOCABULARY = ("friction", "stiffness_nonlinearity", "runout", "bearing_clearance",
                  "thermal_expansion", "torque_sensor_offset", "shaft_compliance",
                  "tooth_spacing_error")
-OUT_OF_VOCABULARY = ("creep", "direction_gain")
+OUT_OF_VOCABULARY = ("creep", "direction_gain", "parallel_spring")
 KINDS = (*IN_VOCABULARY, "none", *OUT_OF_VOCABULARY)
 #: Functional forms the widened generator draws for each kind (the first is the plant's own).
 FORMS: dict[str, tuple[str, ...]] = {
     "friction": ("coulomb", "dahl", "stribeck"),
     "stiffness_nonlinearity": ("exponential", "hertz"),
-    "runout": ("1x", "2x"),
+    "runout": ("1x", "2x", "ovality"),
     "bearing_clearance": ("two_stage", "smooth"),
-    "thermal_expansion": ("linear", "quadratic"),
-    "torque_sensor_offset": ("reading", "regulated"),
-    "shaft_compliance": ("linear",),
+    "thermal_expansion": ("linear", "quadratic", "lagged"),
+    "torque_sensor_offset": ("reading", "regulated", "drifting"),
+    "shaft_compliance": ("linear", "mild"),
     "tooth_spacing_error": ("thickness_pitch", "harmonic"),
-    "none": ("-",), "creep": ("-",), "direction_gain": ("-",),
+    "none": ("-",), "creep": ("-",), "direction_gain": ("-",), "parallel_spring": ("-",),
 }
 #: Loading profiles: stepped with dwells, constant-rate ramps, sinusoid.
 LOADINGS = ("stepped", "ramp", "sine")
@@ -143,6 +151,9 @@ class Case:
     play_change_um: list[float] = field(default_factory=list)
     #: The loading drive regulates on the measured torque: its command is offset by -this.
     command_offset_Nm: float = 0.0
+    #: The torque reading's zero drifts linearly during each run by this much (N*m, start to
+    #: end) on top of the plant's constant offset: a sensor warming up between tares.
+    offset_drift_Nm: float = 0.0
     #: A real rig's measuring system (issue 20), None: the plant's columns as they are.
     artifacts: RigArtifacts | None = None
     #: Seed of the per-run draws of the measuring system (zero residual, ripple phase, ...).
@@ -260,9 +271,16 @@ def make_case(index: int, kind: str, rng: np.random.Generator,
                  "time_constant_s": float(rng.uniform(0.15, 0.6))}
     elif kind == "direction_gain":
         truth = {"gain_positive": 1.0, "gain_negative": float(rng.uniform(0.6, 0.8))}
+    elif kind == "parallel_spring":
+        # a spring beside the gear (a cable carrier, a seal, a fixture bearing preloaded on the
+        # output) carries torque inside the free play: 1-4 % of the mesh stiffness
+        share = float(rng.uniform(0.01, 0.04))
+        k_mesh = reference_nominal(config.unit).stiffness_Nm_per_arcmin
+        post = {"parallel_spring": {"stiffness_Nm_per_arcmin": share * k_mesh}}
+        truth = {**post["parallel_spring"], "share_of_mesh_stiffness": share}
     elif kind != "none":
         raise ValueError(f"unknown case kind {kind!r}; known: {', '.join(KINDS)}")
-    if kind != "none" and not post:
+    if kind not in ("none", "parallel_spring") and not post:
         config = config.with_effect(kind, **{k: v for k, v in truth.items() if k != "law"})
     case = Case(index, kind, config, positions, temps, truth or dict(post), post,
                 form=_classic_form(kind, truth, post))
@@ -283,7 +301,8 @@ def with_artifacts(case: Case, rng: np.random.Generator) -> Case:
     return Case(case.index, case.kind, config, case.positions_deg, case.temperatures_C, truth,
                 case.post, form=case.form, loading=case.loading, lag_s=0.0, impact={},
                 play_change_um=case.play_change_um, command_offset_Nm=case.command_offset_Nm,
-                artifacts=art, artifact_seed=int(rng.integers(2 ** 31)))
+                offset_drift_Nm=case.offset_drift_Nm, artifacts=art,
+                artifact_seed=int(rng.integers(2 ** 31)))
 
 
 def _classic_form(kind: str, truth: dict[str, Any], post: dict[str, Any]) -> str:
@@ -300,6 +319,7 @@ def widen(case: Case, rng: np.random.Generator) -> Case:
     revolution), a torque-channel lag (a third, 2-20 ms) and impact ringing at the play
     crossing (a third, 0.5-3 arcsec at 20-60 Hz decaying in 10-50 ms)."""
     kind, config = case.kind, case.config
+    temps = list(case.temperatures_C)
     forms = FORMS[kind]
     form = case.form if kind == "friction" else str(forms[int(rng.integers(len(forms)))])
     truth, post = dict(case.truth), dict(case.post)
@@ -338,6 +358,37 @@ def widen(case: Case, rng: np.random.Generator) -> Case:
     elif kind == "torque_sensor_offset" and form == "regulated":
         offset = float(truth["offset_Nm"])
         truth = {**truth, "drive_regulates_on_measured_torque": True}
+    elif kind == "runout" and form == "ovality":
+        # the eccentricities of eq. 4 (kept) and an oval ring or bearing seat on top: a play
+        # change twice per crank turn of 2-5 um
+        amp, phase = float(rng.uniform(2.0, 5.0)), float(rng.uniform(-180.0, 180.0))
+        truth = {**truth, "ovality_play_amplitude_um": amp, "ovality_phase_deg": phase}
+        play = [amp * math.cos(math.radians(2.0 * p + phase)) for p in case.positions_deg]
+    elif kind == "thermal_expansion" and form == "lagged":
+        # the play follows the mesh temperature, which lags the housing sensor by the unit's
+        # thermal time constant (0.5-2 times the time between runs); heated then cooled
+        # half the time, so the lag shows as a hysteresis in the sensor's temperature
+        coeff = float(rng.choice([-1, 1]) * rng.uniform(0.2, 0.6))
+        ratio = float(rng.uniform(0.5, 2.0))
+        if rng.random() < 0.5:
+            temps = [12.0, 24.0, 36.0, 48.0, 48.0, 36.0, 24.0, 12.0]
+        mesh = thermal_lag_C(temps, ratio)
+        truth = {"um_per_K": coeff, "lag_runs": ratio, "reference_C": 20.0,
+                 "mesh_temperature_C": mesh}
+        play = [coeff * (t - 20.0) for t in mesh]
+        config = config.with_effect(kind, enabled=False)
+    elif kind == "torque_sensor_offset" and form == "drifting":
+        drift = float(rng.choice([-1, 1]) * rng.uniform(0.03, 0.12))
+        truth = {**truth, "drift_per_run_Nm": drift}
+    elif kind == "shaft_compliance" and form == "mild":
+        # a loaded stiffness only 3-8 % below the model's (a coupling, or a mesh a little
+        # softer than seed 004 eq. 8): a series spring k_s = K (1 - d) / d
+        deficit = float(rng.uniform(0.03, 0.08))
+        k_mesh = reference_nominal(config.unit).stiffness_Nm_per_arcmin
+        truth = {"stiffness_Nm_per_arcmin": k_mesh * (1.0 - deficit) / deficit,
+                 "stiffness_deficit": deficit}
+        config = config.with_effect(kind, **{k: v for k, v in truth.items()
+                                             if k == "stiffness_Nm_per_arcmin"})
     elif kind == "tooth_spacing_error" and form == "harmonic":
         # a smooth thickness pattern around each gear (order 2-4, like an accumulated
         # cutting error) instead of tooth-to-tooth scatter; pitch errors alone would only
@@ -362,9 +413,10 @@ def widen(case: Case, rng: np.random.Generator) -> Case:
     truth = {**truth, "form": form, "loading": loading,
              "encoder_counts_per_rev": config.rig.encoder_counts_per_rev,
              "torque_lag_s": lag, "impact": impact}
-    return Case(case.index, kind, config, case.positions_deg, case.temperatures_C, truth, post,
+    return Case(case.index, kind, config, case.positions_deg, temps, truth, post,
                 form=form, loading=loading, lag_s=lag, impact=impact, play_change_um=play,
-                command_offset_Nm=offset)
+                command_offset_Nm=offset, offset_drift_Nm=float(truth.get("drift_per_run_Nm",
+                                                                           0.0)))
 
 
 def loading_profile(loading: str, rated_Nm: float, n: int) -> np.ndarray:
@@ -457,6 +509,17 @@ def simulate_campaign(case: Case, samples: int = int(DURATION_S * RATE_HZ)) -> C
         else:
             cols, generator["measuring_system_run"] = _measured_columns(case, k, config, pos,
                                                                         temp)
+        spring = case.post.get("parallel_spring")
+        if spring is not None:
+            cols["torque_Nm"] = cols["torque_Nm"] + parallel_spring_torque_Nm(
+                cols["output_angle_deg"], spring["stiffness_Nm_per_arcmin"])
+        if case.offset_drift_Nm:
+            cols["torque_Nm"] = cols["torque_Nm"] + drifting_zero_Nm(cols["t_s"],
+                                                                     case.offset_drift_Nm)
+        if art is not None and (spring is not None or case.offset_drift_Nm):
+            # both act on the sensor's analog signal, before its ADC: back on the ADC's grid
+            step = art.adc_step_Nm
+            cols["torque_Nm"] = np.round(cols["torque_Nm"] / step) * step
         run_id = f"case{case.index:03d}-run{k:02d}"
         plan = {"stepped": "cycle-steps", "ramp": "cycle-ramp", "sine": "cycle-sine"}[case.loading]
         test = {"rated_torque_Nm": RATED_NM, "input_angle_deg": pos, "temperature_C": temp,

@@ -174,6 +174,9 @@ def describe_params(stack: Stack, effects: Sequence[str], f: LinearFit,
             out["coefficient_arcmin_per_K"] = c
             out["coefficient_arcmin_per_K_ci95"] = _ci(f, "thermal", scale)
             out["coefficient_um_per_K"] = float(_um(stack, c))
+            if stack.thermal_lag_s > 0.0:
+                # the play follows the mesh temperature, lagging the housing sensor
+                out["mesh_lag_s"] = stack.thermal_lag_s
             slope = abs(out["coefficient_um_per_K"])
             if "thermal2" in f.names:
                 c2 = f.coef("thermal2")

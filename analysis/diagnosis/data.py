@@ -63,6 +63,9 @@ class RunInput:
     #: The torque the rig read at zero command before and after the loop (N*m; the run's
     #: ``result.torque_zero``): the torque channel's zero as measured, when the rig read it.
     zero_readings_Nm: tuple[float, ...] = ()
+    #: When the run started (s on any one clock for the whole campaign, run.json
+    #: ``started_at``): the campaign's time axis (None: unknown).
+    started_s: float | None = None
 
 
 @dataclass(frozen=True, eq=False)

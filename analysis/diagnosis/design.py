@@ -9,11 +9,13 @@ only when the design supports them and they earn their place.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 from analysis.diagnosis.candidates import Candidate, _bic, _heldout, separated
 from analysis.diagnosis.fit import (
@@ -24,6 +26,7 @@ from analysis.diagnosis.fit import (
     temperatures_known,
 )
 from analysis.diagnosis.policy import POLICY, DecisionPolicy
+from analysis.diagnosis.thermal_lag import campaign_times, lag_grid_s, with_mesh_temperature
 from analysis.effects import CANDIDATES, tooth_pair_phase
 
 
@@ -145,6 +148,49 @@ def untestable(positions_deg: Sequence[float | None], z_input: int, z_mate: int,
     return why
 
 
+def lagged_thermal_member(stack: Stack, folds: list[list[int]],
+                          policy: DecisionPolicy = POLICY) -> Stack | None:
+    """The stack with the runs' temperatures replaced by the mesh temperature lagging the
+    housing sensor (analysis.diagnosis.thermal_lag), at the time constant that fits the
+    thermal play best, when that member earns its place as an added effect does: an in-sample
+    BIC lower by separation_bic (the time constant is one more parameter) and a consistently
+    smaller residual on the held-out conditions (:func:`separated`). None: the campaign's
+    time axis is unknown, the campaign has fewer than thermal_lag_runs runs, or the lag does
+    not earn it."""
+    times = campaign_times(stack.runs)
+    if times is None or not folds or stack.n_runs < policy.thermal_lag_runs:
+        return None
+    effects = ("backlash", "thermal_expansion")
+    plain = fit(stack, effects)
+
+    def member(tau: float) -> tuple[float, Stack, Any]:
+        lagged = replace(stack, runs=with_mesh_temperature(stack.runs, times, tau),
+                         thermal_lag_s=tau, cache={})
+        f = fit(lagged, effects)
+        return _bic(f), lagged, f
+
+    grid = lag_grid_s(times)
+    tried = [member(float(tau)) for tau in grid]
+    best = min(tried, key=lambda m: m[0]) if tried else None
+    if best is not None:
+        # the time constant between the grid's neighbours of the best (log scale)
+        k = next(i for i, m in enumerate(tried) if m is best)
+        lo, hi = math.log(grid[max(k - 1, 0)]), math.log(grid[min(k + 1, grid.size - 1)])
+        if hi > lo:
+            opt = minimize_scalar(lambda u: member(math.exp(u))[0], bounds=(lo, hi),
+                                  method="bounded", options={"xatol": 0.02, "maxiter": 8})
+            refined = member(math.exp(float(opt.x)))
+            best = refined if refined[0] < best[0] else best
+    if best is None or best[0] > _bic(plain) - policy.separation_bic - math.log(plain.n):
+        return None
+    cands = []
+    for st, f in ((stack, plain), (best[1], best[2])):
+        h, lm, nh, resid = _heldout(st, ("thermal_expansion",), folds, f)
+        cands.append(Candidate(("thermal_expansion",), f, h, lm, nh, "leave-one-condition-out",
+                               delta_bic=_bic(f), heldout_resid=resid))
+    return best[1] if separated(stack, cands[1], cands[0], policy) else None
+
+
 def choose_family_members(stack: Stack, cond: dict[str, tuple], varied: Sequence[str],
                           why_not: dict[str, str], folds: list[list[int]],
                           policy: DecisionPolicy = POLICY) -> Stack:
@@ -189,6 +235,12 @@ def choose_family_members(stack: Stack, cond: dict[str, tuple], varied: Sequence
     if (not why_not.get("thermal_expansion") and len(levels) >= policy.thermal_levels
             and earns("thermal_expansion", "thermal_quadratic")):
         changes["thermal_quadratic"] = True
+    if not why_not.get("thermal_expansion") and levels:
+        # the lag must earn its place beyond the sensor's play law chosen so far (a curved
+        # play is the quadratic's, not a lag's)
+        lagged = lagged_thermal_member(replace(stack, cache={}, **changes), folds, policy)
+        if lagged is not None:
+            stack = lagged
     if not why_not.get("bearing_clearance"):
         first = fit_profile(stack, ("backlash", "bearing_clearance"))
         second = fit_profile(replace(stack, bearing_smooth=True, cache={}),

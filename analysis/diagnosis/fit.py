@@ -68,6 +68,9 @@ class Stack:
     thermal_quadratic: bool = False
     #: The bearing's soft stage closes smoothly (``T_b tanh(|G| / T_b)``) instead of at a kink.
     bearing_smooth: bool = False
+    #: The runs' temperatures are the mesh's, lagging the housing sensor by this time constant
+    #: (s; analysis.diagnosis.thermal_lag); 0: the sensor's own.
+    thermal_lag_s: float = 0.0
     #: Nonlinear parameters every fit carries as the measuring system's nuisance (the null
     #: included) unless the candidate fits its own: the ordinary friction allowance.
     nuisance_nl: dict = field(default_factory=dict)

@@ -114,6 +114,10 @@ class DecisionPolicy:
     order2_positions: int = _p(7, "distinct positions before the runout's twice-per-turn "
                                "harmonic is fitted (play + six coefficients)")
     thermal_levels: int = _p(3, "temperature levels before a quadratic thermal term is fitted")
+    thermal_lag_runs: int = _p(4, "runs before the mesh temperature's lag behind the housing "
+                               "sensor is fitted: a play linear in temperature with a lag has "
+                               "three parameters, which three runs' plays always fit (set B's "
+                               "three-run thermal campaign took a lag it does not have)")
     temperature_span_K: float = _p(2.0, "housing temperatures spanning less than this are one "
                                    "condition: the campaign does not vary temperature")
     temperature_gap_K: float = _p(1.5, "mean run temperatures closer than this (sorted) are the "

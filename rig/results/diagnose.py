@@ -1,14 +1,15 @@
 """``rig diagnose`` service: read a campaign folder, diagnose the sim-to-real gap, write reports.
 
-Only what a campaign folder says reaches the diagnosis: each run's ``unit``, ``test`` and
-samples (:func:`run_input`). Anything else in run.json (a generator's labels, notes) is never
-read, so a campaign made by a simulator and the same campaign with those keys stripped give the
-same verdict (tests/test_diagnosis_blind.py).
+Only what a campaign folder says reaches the diagnosis: each run's ``unit``, ``test``,
+``started_at`` and samples (:func:`run_input`). Anything else in run.json (a generator's labels,
+notes) is never read, so a campaign made by a simulator and the same campaign with those keys
+stripped give the same verdict (tests/test_diagnosis_blind.py).
 """
 
 from __future__ import annotations
 
 import json
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -56,7 +57,22 @@ def run_input(run: Run) -> RunInput:
         torque_full_scale_Nm=None if full_scale is None else float(full_scale),
         zero_readings_Nm=tuple(float(z) for z in readings
                                if isinstance(z, (int, float)) and not isinstance(z, bool)),
+        started_s=started_seconds(run.meta.get("started_at")),
     )
+
+
+def started_seconds(started_at: Any) -> float | None:
+    """run.json ``started_at`` (ISO 8601, UTC) as POSIX seconds; None when absent or not a
+    time."""
+    if not isinstance(started_at, str):
+        return None
+    try:
+        when = datetime.fromisoformat(started_at.replace("Z", "+00:00"))
+    except ValueError:
+        return None
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=UTC)
+    return when.timestamp()
 
 
 def diagnose_campaign(campaign: Campaign, alpha: float = ALPHA) -> Diagnosis:

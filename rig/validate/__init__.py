@@ -50,6 +50,7 @@ import time
 from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -107,6 +108,10 @@ DURATION_S = 10.0
 RATED_NM = 10.0
 #: The torque sensor's full scale (N*m, bipolar) written to run.json ``sensors``.
 FULL_SCALE_NM = 20.0
+#: When a generated campaign's first run starts, and the time between run starts (s): the
+#: thermal lag of the ``lagged`` form is in units of it.
+CAMPAIGN_START = datetime(2026, 1, 5, 8, 0, tzinfo=UTC)
+RUN_SPACING_S = 300.0
 #: The third seed of a case's artefact stream ``default_rng([seed, index, ARTIFACT_STREAM])``.
 ARTIFACT_STREAM = 20
 
@@ -366,10 +371,11 @@ def widen(case: Case, rng: np.random.Generator) -> Case:
         play = [amp * math.cos(math.radians(2.0 * p + phase)) for p in case.positions_deg]
     elif kind == "thermal_expansion" and form == "lagged":
         # the play follows the mesh temperature, which lags the housing sensor by the unit's
-        # thermal time constant (0.5-2 times the time between runs); heated then cooled
-        # half the time, so the lag shows as a hysteresis in the sensor's temperature
+        # thermal time constant (0.5-5 times the time between runs, RUN_SPACING_S); heated
+        # then cooled half the time, so the lag shows as a hysteresis in the sensor's
+        # temperature
         coeff = float(rng.choice([-1, 1]) * rng.uniform(0.2, 0.6))
-        ratio = float(rng.uniform(0.5, 2.0))
+        ratio = float(rng.uniform(0.5, 5.0))
         if rng.random() < 0.5:
             temps = [12.0, 24.0, 36.0, 48.0, 48.0, 36.0, 24.0, 12.0]
         mesh = thermal_lag_C(temps, ratio)
@@ -527,12 +533,14 @@ def simulate_campaign(case: Case, samples: int = int(DURATION_S * RATE_HZ)) -> C
         if art is not None:
             test["cycles"] = 1 + art.precycles
             test["start_flank"] = -1
+        started = CAMPAIGN_START + timedelta(seconds=k * RUN_SPACING_S)
         runs.append(Run.from_arrays(
             run_id, cols["t_s"], cols["torque_Nm"], cols["output_angle_deg"],
             input_angle_deg=cols["input_angle_deg"], temperature_C=cols["temperature_C"],
             unit=case.config.unit, test=test,
             sensors={"encoder_counts_per_rev": counts, "torque_full_scale_Nm": FULL_SCALE_NM},
-            extra_meta={"generator": generator},
+            extra_meta={"generator": generator,
+                        "started_at": started.strftime("%Y-%m-%dT%H:%M:%SZ")},
         ))
     meta = {"format": "rig-campaign/1", "name": f"validation-case{case.index:03d}",
             "runs": [r.run_id for r in runs]}

@@ -41,6 +41,7 @@ from analysis.diagnosis.candidates import (
 )
 from analysis.diagnosis.fit import effect_size_arcmin, fit
 from analysis.diagnosis.flanks import FlankAsymmetry
+from analysis.diagnosis.play_slope import PlayTilt, play_slope_of
 from analysis.diagnosis.policy import POLICY, DecisionPolicy
 from analysis.effects import CANDIDATES
 
@@ -324,6 +325,7 @@ class Evidence:
     series_larger: bool = False  # the series compliance is the larger term
     size_main: float = 0.0
     stiff_rel_se: float = 0.0  # relative standard error of the calibrated stiffness
+    play: PlayTilt | None = None  # torque on twist inside the free play (play_slope)
 
 
 def _calibrated_gap(trials: Trials, models: dict[str, Candidate], fap: dict[str, float],
@@ -368,7 +370,7 @@ def gather(trials: Trials, models: dict[str, Candidate], cal: dict[str, Calibrat
     stiff_dev = (k_fit / k_nom - 1.0) if math.isfinite(k_nom) and math.isfinite(k_fit) else 0.0
     ev = Evidence(trials, models, cal, omni, fap, systematic, material, gap, flanks,
                   flank_finding, h0, k_nom, k_fit, stiff_dev, share,
-                  stiff_rel_se=compliance_rel_se(trials.base))
+                  stiff_rel_se=compliance_rel_se(trials.base), play=play_slope_of(prepared))
     if not gap:
         return ev
     sys0 = _sys(h0, trials.noise)
@@ -468,12 +470,53 @@ def _flanks_why(ev: Evidence) -> str:
             "contact)")
 
 
+def play_slope_share(ev: Evidence) -> float:
+    """The slope of torque on twist inside the play (the weaker half of the crossings) as a
+    share of seed 004 eq. (8)'s stiffness (0 when not read)."""
+    weak = ev.play.weaker() if ev.play is not None else None
+    if weak is None or not (math.isfinite(ev.k_nom) and ev.k_nom > 0):
+        return 0.0
+    return weak.slope_Nm_per_arcmin / ev.k_nom
+
+
+def _torque_inside_play(ev: Evidence) -> bool:
+    policy = ev.trials.policy
+    if ev.play is None or ev.play.behind is None or ev.play.ahead is None:
+        return False
+    b, a = ev.play.behind.slope_Nm_per_arcmin, ev.play.ahead.slope_Nm_per_arcmin
+    return (play_slope_share(ev) >= policy.play_slope_share
+            and min(ev.play.behind.z, ev.play.ahead.z) >= policy.play_slope_z
+            and min(a, b) >= policy.play_slope_agreement * max(a, b))
+
+
+def _play_why(ev: Evidence) -> str:
+    assert ev.play is not None and ev.play.behind is not None and ev.play.ahead is not None
+    b, a = ev.play.behind, ev.play.ahead
+    return (f"torque rises with twist inside the free play on both halves of the crossings: "
+            f"{b.slope_Nm_per_arcmin:.3g} and {a.slope_Nm_per_arcmin:.3g} N*m/arcmin "
+            f"(at least {play_slope_share(ev):.1%} of seed 004 eq. (8)'s {ev.k_nom:.3g}, "
+            f"{min(a.z, b.z):.0f} standard errors or more, {a.samples + b.samples} samples in "
+            f"{max(a.runs, b.runs)} runs); off both flanks no gear effect carries torque: a "
+            "load path in parallel with the gear (a seal, a cable carrier, the fixture)")
+
+
 def _series_takes_gap(ev: Evidence) -> bool:
     return (_outcome(ev, "none_closes") and not ev.material and not ev.systematic
             and _below_model(ev) and ev.share >= ev.trials.policy.series_share)
 
 
 RULES: tuple[Rule, ...] = (
+    Rule("torque_inside_the_play",
+         "the torque read inside the free play rises with the twist, on both halves of the "
+         "crossings alike (play_slope_agreement), by at least play_slope_share of seed 004 "
+         "eq. (8)'s stiffness and play_slope_z standard errors (a crossing's dynamics or a "
+         "friction's rise after a start tilt one half far more): off both flanks no effect "
+         "of the vocabulary carries torque (friction reads one level per direction), so a "
+         "load path in parallel with the gear is outside the vocabulary, whatever a "
+         "candidate absorbs of it (issue 31 item 4)",
+         "unexplained",
+         _torque_inside_play, _play_why,
+         next_experiment=lambda ev: NEXT_EXPERIMENT_STIFFER),
     Rule("flank_slopes_differ",
          "no gap beyond chance by the candidates or the lack of fit, but the two flanks' loaded "
          "slopes differ beyond chance and beyond stiffness_tolerance: no effect of the "

@@ -87,6 +87,23 @@ class DecisionPolicy:
                               "sets' null campaigns stay within 1 %; 5 of 5 series springs "
                               "3-8 % softer and 3 of 5 parallel springs 1-4 % of the mesh "
                               "came out 'none' at the 10 % of stiffness_tolerance")
+    play_slope_share: float = _p(0.01, "a slope of torque on twist inside the free play "
+                                 "(analysis.diagnosis.play_slope) of at least this share of "
+                                 "seed 004 eq. (8)'s stiffness is a load path in parallel with "
+                                 "the gear: no gear effect carries torque off both flanks; our "
+                                 "generator's 118 campaigns of every other kind (38 nulls) read "
+                                 "at most 0.9 % on the weaker half of the crossings where "
+                                 "both halves stand play_slope_z from zero, and 0.3 % where "
+                                 "they also agree; its parallel springs (1-4 %) 1.1-4 %")
+    play_slope_z: float = _p(5.0, "standard errors the slope inside the play must also stand "
+                             "from zero on each half of the crossings (a few samples in the "
+                             "play give no finding)")
+    play_slope_agreement: float = _p(0.6, "the two halves' slopes inside the play agree when "
+                                     "the weaker is at least this share of the stronger: a "
+                                     "spring tilts both alike (our generator's springs: "
+                                     "0.85-1.0), a friction's rise or the crossing's dynamics "
+                                     "tilt one far more (a Stribeck friction under a sine: "
+                                     "0.03)")
     stiffness_se_factor: float = _p(2.0, "standard errors of the fitted compliance that widen "
                                     "the stiffness tolerance (about 95 %)")
     series_share: float = _p(0.5, "a loaded slope below eq. (8) names the verdict when no "

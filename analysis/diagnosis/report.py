@@ -14,7 +14,7 @@ import numpy as np
 
 from analysis.diagnosis.calibration import floored, resolution
 from analysis.diagnosis.candidates import ARCSEC, Candidate, Trials, _sys
-from analysis.diagnosis.decide import TAKE_UP_PAIR, Decision, Evidence
+from analysis.diagnosis.decide import TAKE_UP_PAIR, Decision, Evidence, play_slope_share
 from analysis.diagnosis.fit import LinearFit, Stack
 from analysis.diagnosis.where import gap_map, lack_of_fit, per_run_play, play_fourier
 
@@ -161,6 +161,8 @@ def build_report(trials: Trials, ev: Evidence, decision: Decision, gaps: Gaps, d
                            "lost_motion_error_arcsec": _nn(gaps.base_lm * ARCSEC),
                            "in_sample": True, "heldout_rms_arcsec": gaps.h0 * ARCSEC},
         "parameter_error": _clean(gaps.param_error),
+        "play_slope": None if ev.play is None else {
+            **ev.play.to_dict(), "share_of_mesh_stiffness": play_slope_share(ev)},
         "design": {"runs": stack.n_runs, "varied": design.varied,
                    "conditions": len(set(design.cond.values())),
                    "folds_condition": len(design.cfolds), "folds_repeat": len(design.rfolds),
@@ -189,6 +191,8 @@ def build_report(trials: Trials, ev: Evidence, decision: Decision, gaps: Gaps, d
                                "lost_motion_error_arcsec": _nn(gaps.base_lm * ARCSEC)}
     if verdict == "unexplained":
         report["candidates"] = decision.candidates
+        if decision.next_experiment:  # a rule that knows what the gap is likely to be
+            report["next_experiment"] = decision.next_experiment
     report.update(_where(trials, ev, design))
     report.update(measurement)
     return report

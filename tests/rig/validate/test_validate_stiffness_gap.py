@@ -90,8 +90,29 @@ def test_a_parallel_spring_is_not_none_and_a_null_stays_none() -> None:
     stiffness within the tolerance."""
     spring = validate_one((12, 3, "parallel_spring", True))
     assert spring.verdict == "unexplained", spring.report["reason"]
-    assert "stiffer than the model" in spring.report["reason"]
+    reason = spring.report["reason"]
+    # by the torque it carries inside the play, or by the loaded slope it raises
+    assert "inside the free play" in reason or "stiffer than the model" in reason, reason
     null = validate_one((12, 1000, "none", True))
     assert null.verdict == "none", null.report["reason"]
     k = null.report["parameter_error"]["stiffness_Nm_per_arcmin"]
     assert abs(k["ratio"] - 1.0) < k["gap_tolerance"]
+
+
+@pytest.mark.timeout(240)
+@pytest.mark.parametrize("index", [1, 4])
+def test_a_parallel_spring_is_told_by_the_torque_inside_the_play(index: int) -> None:
+    """A spring beside the gear carries torque inside the free play, where no gear effect
+    does: the rule ``torque_inside_the_play`` makes it ``unexplained`` and the report reads
+    the spring's stiffness there (within 25 % of the truth: the encoder's and the torque
+    channel's dynamics stay in the samples). Before this rule 3 of 4 such campaigns (seed 21)
+    came out ``none``, ``bearing_clearance`` or ``shaft_compliance``."""
+    res = validate_one((42, index, "parallel_spring", True))
+    report = res.report
+    assert res.verdict == "unexplained", report["reason"]
+    assert "torque rises with twist inside the free play" in report["reason"]
+    assert "decoupled" in report["next_experiment"]
+    slope = report["play_slope"]
+    assert slope["slope_Nm_per_arcmin"] == pytest.approx(
+        res.case.truth["stiffness_Nm_per_arcmin"], rel=0.25)
+    assert slope["share_of_mesh_stiffness"] >= report["decision_policy"]["play_slope_share"]

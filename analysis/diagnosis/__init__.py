@@ -46,6 +46,7 @@ from analysis.diagnosis.candidates import (
     heldout_separation,
     kind_runout_swing_arcmin,
     quantisation_floor_arcmin,
+    quantisation_share,
     screen,
     separated,
     series_compliance,
@@ -240,9 +241,10 @@ def _gaps(stack: Any, prepared: list[PreparedRun], design: Design, policy: Decis
     if math.isfinite(k_nom) and k_nom > 0 and math.isfinite(k_fit):
         # the departure is a finding in itself (issue 31 item 2): its ratio and standard error
         rel_se = compliance_rel_se(base)
+        quant = quantisation_share(prepared, k_nom)
         param_error["stiffness_Nm_per_arcmin"].update(
-            ratio=k_fit / k_nom, relative_se=rel_se,
-            gap_tolerance=stiffness_gap_tolerance(policy, rel_se))
+            ratio=k_fit / k_nom, relative_se=rel_se, quantisation_share=quant,
+            gap_tolerance=stiffness_gap_tolerance(policy, rel_se, quant))
     if pred_rms > 0:
         param_error["share_of_predictive_gap"] = max(0.0, 1.0 - (base_rms / pred_rms) ** 2)
     return trials, Gaps(pred_rms, pred_lm, base_rms, base_lm, h0, k_nom, k_fit, param_error)

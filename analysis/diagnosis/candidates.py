@@ -366,12 +366,30 @@ def compliance_rel_se(f: LinearFit) -> float:
     return math.sqrt(max(f.cov[j, j], 0.0)) * scale / comp
 
 
-def stiffness_gap_tolerance(policy: DecisionPolicy, rel_se: float) -> float:
+def stiffness_gap_tolerance(policy: DecisionPolicy, rel_se: float, quant: float = 0.0
+                            ) -> float:
     """The relative departure of the calibrated stiffness from seed 004 eq. (8) that is a gap
     when nothing else is wrong: ``stiffness_gap``, or ``stiffness_se_factor`` standard errors
     (``rel_se``, relative) of the calibrated compliance when the loops measure it less
-    well."""
-    return max(policy.stiffness_gap, policy.stiffness_se_factor * rel_se)
+    well, or ``quant`` (:func:`quantisation_share`) when the encoder's count is coarse
+    against the loaded twist."""
+    return max(policy.stiffness_gap, policy.stiffness_se_factor * rel_se, quant)
+
+
+def quantisation_share(runs: Sequence[PreparedRun], k_nom: float) -> float:
+    """Half an output-encoder count over the loaded twist (the amplitude over seed 004
+    eq. (8)'s stiffness), the largest over the runs: the quantisation's error lines up with
+    the loading, so the slope of a loaded branch a few counts long is off by up to about
+    this share, and no standard error shows it (relative; 0 when no grid is found)."""
+    if not (math.isfinite(k_nom) and k_nom > 0):
+        return 0.0
+    out = 0.0
+    for r in runs:
+        q = r.measurement.get("twist_resolution_arcsec")
+        if q is None or not (math.isfinite(q) and q > 0) or r.amplitude_Nm <= 0:
+            continue
+        out = max(out, 0.5 * (q / ARCSEC) / (r.amplitude_Nm / k_nom))
+    return out
 
 
 def series_compliance(f: LinearFit, k_nom: float, policy: DecisionPolicy = POLICY

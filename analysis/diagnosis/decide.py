@@ -34,6 +34,7 @@ from analysis.diagnosis.candidates import (
     compliance_rel_se,
     curvature_effect,
     quantisation_floor_arcmin,
+    quantisation_share,
     separated,
     series_compliance,
     series_size_arcmin,
@@ -325,6 +326,7 @@ class Evidence:
     series_larger: bool = False  # the series compliance is the larger term
     size_main: float = 0.0
     stiff_rel_se: float = 0.0  # relative standard error of the calibrated stiffness
+    stiff_quant: float = 0.0  # half an encoder count over the loaded twist (relative)
     play: PlayTilt | None = None  # torque on twist inside the free play (play_slope)
 
 
@@ -370,7 +372,8 @@ def gather(trials: Trials, models: dict[str, Candidate], cal: dict[str, Calibrat
     stiff_dev = (k_fit / k_nom - 1.0) if math.isfinite(k_nom) and math.isfinite(k_fit) else 0.0
     ev = Evidence(trials, models, cal, omni, fap, systematic, material, gap, flanks,
                   flank_finding, h0, k_nom, k_fit, stiff_dev, share,
-                  stiff_rel_se=compliance_rel_se(trials.base), play=play_slope_of(prepared))
+                  stiff_rel_se=compliance_rel_se(trials.base), play=play_slope_of(prepared),
+                  stiff_quant=quantisation_share(prepared, k_nom))
     if not gap:
         return ev
     sys0 = _sys(h0, trials.noise)
@@ -439,7 +442,7 @@ def _below_model(ev: Evidence) -> bool:
 
 
 def _gap_tolerance(ev: Evidence) -> float:
-    return stiffness_gap_tolerance(ev.trials.policy, ev.stiff_rel_se)
+    return stiffness_gap_tolerance(ev.trials.policy, ev.stiff_rel_se, ev.stiff_quant)
 
 
 def _softer_than_model(ev: Evidence) -> bool:

@@ -18,8 +18,11 @@ from simulators.offline_forms import drifting_zero_Nm, parallel_spring_torque_Nm
 from simulators.plant.geometry import reference_nominal
 
 
-def _first(seed: int, kind: str, form: str, skip: int = 0) -> int:
-    hits = (i for i in range(200) if draw_case(seed, i, kind, True).form == form)
+def _first(seed: int, kind: str, form: str, skip: int = 0, min_counts: int = 0) -> int:
+    """Index of the ``skip``-th case of ``kind`` drawn in ``form`` (with an output encoder of
+    at least ``min_counts`` counts per turn)."""
+    hits = (i for i in range(200) if (c := draw_case(seed, i, kind, True)).form == form
+            and c.truth["measuring_system"]["encoder_counts_per_rev"] >= min_counts)
     for _ in range(skip):
         next(hits)
     return next(hits)
@@ -70,8 +73,9 @@ def test_a_stiffness_a_few_percent_below_the_model_is_named(skip: int) -> None:
     """A loaded stiffness 3-8 % below seed 004 eq. (8) with nothing else wrong: before this
     round 5 of 5 such campaigns came out ``none`` (the 10 % stiffness tolerance). Now the
     verdict is ``shaft_compliance`` with the softer mesh beside it, the experiment that
-    separates them, and the ratio in the report."""
-    index = _first(12, "shaft_compliance", "mild", skip)
+    separates them, and the ratio in the report. (Encoders of 2^21 counts per turn or more:
+    a coarser one cannot resolve a few percent, the next test.)"""
+    index = _first(12, "shaft_compliance", "mild", skip, min_counts=2 ** 21)
     res = validate_one((12, index, "shaft_compliance", True))
     report = res.report
     assert res.verdict == "shaft_compliance", report["reason"]
@@ -81,6 +85,24 @@ def test_a_stiffness_a_few_percent_below_the_model_is_named(skip: int) -> None:
     assert k["ratio"] == pytest.approx(1.0 - res.case.truth["stiffness_deficit"], abs=0.015)
     assert k["ratio"] < 1.0 - k["gap_tolerance"]
     assert f"{k['ratio']:.3f} times seed 004 eq. (8)" in report["reason"]
+
+
+@pytest.mark.timeout(240)
+def test_a_coarse_encoder_cannot_resolve_a_mild_compliance() -> None:
+    """Case 7 of seed 12: a loaded stiffness 4.3 % below seed 004 eq. (8) read by an output
+    encoder of 2^19 counts per turn, whose half count is a larger share of the loaded twist:
+    the quantisation (lined up with the loading) could make that much on a null (7 of 14
+    such nulls recorded over the wire read 2.2-4.4 % off), so it is no finding: ``none``,
+    the tolerance the encoder's."""
+    case = draw_case(12, 7, "shaft_compliance", True)
+    assert case.form == "mild"
+    assert case.truth["measuring_system"]["encoder_counts_per_rev"] == 2 ** 19
+    res = validate_one((12, 7, "shaft_compliance", True))
+    k = res.report["parameter_error"]["stiffness_Nm_per_arcmin"]
+    assert k["quantisation_share"] > case.truth["stiffness_deficit"]
+    assert k["gap_tolerance"] == k["quantisation_share"]
+    assert abs(k["ratio"] - 1.0) < k["gap_tolerance"]
+    assert res.verdict == "none", res.report["reason"]
 
 
 @pytest.mark.timeout(240)

@@ -15,7 +15,11 @@ kept (a queue, no sample dropped unless the queue overflows, counted) and conver
 Faults, each raised as a :mod:`drivers.errors` error that names the encoder:
 
 - heartbeat missing for ``heartbeat_timeout_periods`` (default 2.5) producer periods, or
-  the serial/TCP link gone: :class:`DeviceDisconnected`;
+  the serial/TCP link gone: :class:`DeviceDisconnected`. While position PDOs still come,
+  the heartbeat's absence is judged on the node's own time they span (PDOs since the last
+  heartbeat x period): heartbeats and PDOs reach the program through one queue, and a PC
+  that reads it late (a loaded CI machine, 0.5-2 s behind) delays both alike, which spread
+  the heartbeats' arrivals 1.5 s apart from a healthy node;
 - no position PDO for ``missed_periods`` SYNC/event periods: :class:`DeviceTimeout`;
 - a garbled frame or a TPDO of the wrong length: :class:`DeviceProtocolError` (once);
 - an EMCY, a node that left OPERATIONAL, an SDO abort: :class:`DeviceFault`;
@@ -267,8 +271,8 @@ class EncoderNetwork:
         self.syncs_sent = 0
         # (SYNC number, host time.monotonic() s just before it was sent): the moments the
         # encoders sampled, for stamping their PDOs (rig.engine.steady_clock.SyncClock)
-        # (1024: 4 s at the simulated rig's 4 ms, 1 s at 1 ms; the engine copies it each poll)
-        self.sync_log: collections.deque[tuple[int, float]] = collections.deque(maxlen=1024)
+        # (2048: 8 s at the simulated rig's 4 ms, 2 s at 1 ms; the engine copies it each poll)
+        self.sync_log: collections.deque[tuple[int, float]] = collections.deque(maxlen=2048)
         self.protocol_error_count = 0
         self.last_protocol_error = ""
         self._sync_task: SyncProducer | None = None
@@ -372,6 +376,7 @@ class CanopenEncoder(StartedOnEnter):
         self._changed_mono: float | None = None
         self._heartbeat_mono: float | None = None
         self._heartbeat_state: int | None = None
+        self._pdos_since_heartbeat = 0
         self._started_mono: float | None = None
         self._protocol_errors = 0
         self._protocol_reported = 0
@@ -570,7 +575,12 @@ class CanopenEncoder(StartedOnEnter):
         if cfg.heartbeat_ms > 0:
             since = self._heartbeat_mono or self._started_mono or now
             limit = cfg.heartbeat_timeout_periods * cfg.heartbeat_ms / 1000.0
-            if now - since > limit:
+            late = now - since > limit
+            period = self.period_s
+            if late and period is not None and self._sample_mono is not None \
+                    and now - self._sample_mono <= limit:
+                late = self._pdos_since_heartbeat * period > limit  # PDOs still come
+            if late:
                 return DeviceDisconnected(
                     self.device,
                     f"a heartbeat every {cfg.heartbeat_ms} ms",
@@ -674,6 +684,7 @@ class CanopenEncoder(StartedOnEnter):
 
     def _on_heartbeat(self, state: int) -> None:
         self._heartbeat_mono = time.monotonic()
+        self._pdos_since_heartbeat = 0
         if self._started:
             self._heartbeat_state = state
 
@@ -704,6 +715,7 @@ class CanopenEncoder(StartedOnEnter):
                 self._changed_mono = now
         self._last_counts = counts
         self._seq += 1
+        self._pdos_since_heartbeat += 1
         angle = (self._unwrapped - self._zero_counts) / self._cpr * 360.0
         reading = EncoderReading(float(pdo_map.timestamp), angle, counts, self._seq)
         if len(self._queue) == self._queue.maxlen:

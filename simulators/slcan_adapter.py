@@ -248,6 +248,7 @@ class SlcanBackdoor:
         self.garble_left = 0
         self.garble_kind: GarbleKind = "bad_hex"
         self.unplugged = False
+        self.frames_per_s: float | None = None
 
     def garble(self, n_frames: int = 1, kind: GarbleKind = "bad_hex") -> None:
         """Corrupt the next ``n_frames`` frame lines sent to the client.
@@ -268,6 +269,14 @@ class SlcanBackdoor:
         """Send ``raw`` bytes to the client as they are (line noise); False if no client."""
         conn = self._adapter._client
         return conn is not None and self._adapter._send(conn, raw)
+
+    def throttle(self, frames_per_s: float | None) -> None:
+        """Pass at most ``frames_per_s`` frames a second to the client (None: no limit): a
+        PC that reads the bus slower than it fills, so that the frames wait in a growing
+        queue and reach the program late, in order (a starved receive thread)."""
+        if frames_per_s is not None and not frames_per_s > 0:
+            raise ValueError(f"frames_per_s must be > 0 or None, got {frames_per_s}")
+        self.frames_per_s = frames_per_s
 
     def unplug(self, on: bool = True) -> None:
         """Disconnect the CAN side: no frames pass in either direction."""
@@ -426,6 +435,9 @@ class SlcanAdapter(RunsWhileEntered):
             line = self.backdoor.apply(format_frame(msg, stamp))
             if self._send(conn, line):
                 self.frames_to_client += 1
+            rate = self.backdoor.frames_per_s
+            if rate is not None:
+                self._stop.wait(1.0 / rate)
 
 
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux's value

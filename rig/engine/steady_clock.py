@@ -28,7 +28,13 @@ sample number x period is late-blind there. :class:`SyncClock` stamps each posit
 the recorded send time of the SYNC it answers: PDO ``n`` answers SYNC ``c + n * every``, where
 ``c`` is the smallest (number of the last SYNC sent before the PDO arrived - ``n * every``)
 over the last ``window`` PDOs (a PDO comes after its SYNC, and later SYNCs may have gone out
-while it waited to be read, never fewer).
+while it waited to be read, never fewer). The window (2,000 PDOs: 8 s at the simulated rig's
+4 ms SYNC) must outlast a backlog: on a loaded CI machine the PDOs of a rig simulated in the
+test's own process reached the engine 0.2-1.5 s late for over a second at a time, and a
+window of 250 PDOs (1 s) then took the backlog for the offset, stamped the positions up to
+1 s late against the torque and tripped the frozen-encoder watch on a healthy unit. The price
+is a lost PDO: the stamps stay one SYNC period early until the offsets from before the loss
+have left the window.
 """
 
 from __future__ import annotations
@@ -96,7 +102,7 @@ class SyncClock:
     """Host times (s) of an encoder's PDOs from the send times of the SYNCs they answer; see
     the module doc. ``every``: the encoder answers every n-th SYNC."""
 
-    def __init__(self, every: int = 1, window: int = 250) -> None:
+    def __init__(self, every: int = 1, window: int = 2000) -> None:
         self.every = int(every)
         self.window = int(window)
         self._offsets: deque[tuple[int, int]] = deque()  # (PDO number, SYNC offset)

@@ -15,6 +15,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import canopen
+import numpy as np
 import pytest
 
 from drivers.encoder_canopen import (
@@ -264,6 +265,38 @@ def test_heartbeat_loss_is_a_disconnect_within_three_periods(
     assert waited < 3 * 0.100 + 0.25  # 2.5 periods by design; slack for a loaded machine
     node.backdoor.lose_heartbeat(False)
     wait_for(lambda: encoder.health().ok, what="recovery after the heartbeat returns")
+
+
+def test_a_pc_reading_the_bus_late_is_no_heartbeat_loss(node: EncoderNode,
+                                                         channel: str) -> None:
+    """A PC that reads the bus slower than it fills (40 frames/s against 100 PDOs and 10
+    heartbeats a second) gets every frame late and in order, heartbeats 0.28 s apart by its
+    clock: more than 2.5 periods of 100 ms, and a loaded CI machine tripped healthy runs on
+    that. While PDOs come, the heartbeat is judged on the node's time they span; a heartbeat
+    really lost is still found."""
+    with SlcanAdapter(channel=channel) as adapter:
+        bus = CanBusConfig(interface="slcan", channel=adapter.address, sync_period_s=0.01,
+                           bus_options={"sleep_after_open": 0})
+        with CanopenEncoder(make_config(channel, bus=bus, heartbeat_ms=100,
+                                        missed_periods=20)) as enc:
+            enc.read()
+            adapter.backdoor.throttle(40.0)
+            arrivals: list[float] = []
+            t_end = time.monotonic() + 2.0
+            last = enc.health().heartbeat_age_s
+            while time.monotonic() < t_end:
+                enc.read()  # raises a heartbeat fault if one is judged lost
+                age = enc.health().heartbeat_age_s
+                if age is not None and last is not None and age < last:
+                    arrivals.append(time.monotonic())
+                last = age
+                time.sleep(0.005)
+            gaps = np.diff(arrivals)
+            assert gaps.size >= 3 and np.median(gaps) > 0.25, gaps  # late by the PC's clock
+            node.backdoor.lose_heartbeat()
+            exc, _ = wait_for_error(enc, DeviceDisconnected, timeout_s=10.0)
+            assert "heartbeat every 100 ms" in str(exc)
+            adapter.backdoor.throttle(None)
 
 
 def test_silence_is_a_timeout(encoder: CanopenEncoder, node: EncoderNode) -> None:

@@ -100,6 +100,30 @@ def test_sync_clock_stamps_each_pdo_with_the_send_time_of_its_sync():
     assert (arrival - answered).max() > 0.035  # the arrivals were that late
 
 
+
+def test_sync_clock_outlasts_a_backlog_of_a_second_and_more():
+    """A loaded CI machine (the simulated rig in the test's own process) delivered the PDOs
+    0.2-1.5 s late for seconds: 2.5 s of 0.3-1.2 s delivery delays after 1 s of prompt ones.
+    A window of 250 PDOs took the backlog for the offset and stamped positions up to 1 s late
+    (the frozen-encoder watch tripped on a healthy unit); every stamp must stay exact."""
+    rng = np.random.default_rng(11)
+    period, n = 0.004, 2000
+    sent = 10.0 + period * np.arange(n)  # SYNC k + 1 went out at sent[k]
+    answered = sent[5:]  # PDO 0 answers SYNC 6
+    delay = 0.0003 + rng.exponential(0.001, answered.size)
+    backlog = (answered >= 11.0) & (answered < 13.5)
+    delay[backlog] += 0.3 + 0.9 * np.abs(np.sin(np.linspace(0.0, 3.0, backlog.sum())))
+    arrival = np.maximum.accumulate(answered + delay)
+    clock, log, next_sync, stamps = SyncClock(every=1), [], 0, []
+    for k, a in enumerate(arrival):
+        while next_sync < n and sent[next_sync] <= a:
+            log.append((next_sync + 1, float(sent[next_sync])))
+            next_sync += 1
+        stamps.append(clock.stamp(k, float(a), log[-2048:]))
+    stamps_arr = np.array(stamps, dtype=float)
+    assert (arrival - answered).max() > 1.0  # the backlog was that long
+    assert np.array_equal(stamps_arr, answered)
+
 def test_a_stall_of_seconds_is_removed_too():
     """Issue 21 item 11: a loaded CI machine read no transducer line in time for seconds (the
     receive thread, or the transport behind it, stalled 0.3 s for 2.5 s). A floor over the

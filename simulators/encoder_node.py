@@ -34,6 +34,7 @@ import can
 import canopen
 
 from drivers.lifecycle import RunsWhileEntered
+from simulators.canbus.virtual import virtual_bus
 from simulators.clock import Clock, MonotonicClock
 from simulators.plant.api import Plant, PlantSnapshot
 
@@ -158,6 +159,8 @@ class EncoderNode(RunsWhileEntered):
         local.add_read_callback(self._on_sdo_read)
         local.add_write_callback(self._on_sdo_write)
         network.subscribe(SYNC_COB_ID, self._on_sync)
+        if self.interface == "virtual":  # python-can's, with a cheaper copy per receiver
+            network.bus = virtual_bus(self.channel)
         network.connect(interface=self.interface, channel=self.channel)
         self.network, self.local = network, local
         self._stop.clear()

@@ -33,6 +33,7 @@ from typing import Literal
 import can
 
 from drivers.lifecycle import RunsWhileEntered
+from simulators.canbus.virtual import virtual_bus
 
 OK = b"\r"
 ERROR = b"\a"
@@ -329,7 +330,7 @@ class SlcanAdapter(RunsWhileEntered):
 
     def start(self) -> str:
         # the frames keep the kernel's receive time (a node samples on SYNC at that time)
-        self._bus = can.Bus(interface="virtual", channel=self.channel, preserve_timestamps=True)
+        self._bus = virtual_bus(self.channel, preserve_timestamps=True)
         server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         server.bind((self.host, self.port))

@@ -72,6 +72,9 @@ JUMP_GAP_TOLERANCE_DEG = 0.5
 """Two rows of a transmission error run further apart than ``JUMP_GAP_S`` (s: rows left out
 unpaired, or a stalled PC) are a count jump only beyond this much more TE change (output
 deg): the unit's own TE may have moved meanwhile, by far less."""
+ZERO_WAIT_MAX_S = 5.0
+"""How long (s) after its window the torque zero waits for the window's rows while rows still
+come, however late (a PC that reads the devices behind; the stale-sample trip covers none)."""
 STORE_RETRY_PERIOD_S = 1.0
 """While the store's database is away, the engine (paused, drive disabled) tries it this
 often (s)."""
@@ -707,14 +710,19 @@ class Engine:
         t_end = t0 + step.window_s
         self._sleep_until(t_end)
         # The window's rows may reach us late when the PC is busy (the receiving thread
-        # waits for the CPU): wait for them, up to the tolerance of the stale-sample trip.
-        deadline = t_end + self.options.stale_timeout_s
+        # waits for the CPU; a loaded CI machine had them 0.5-2 s behind): wait for them
+        # while rows still come (the stale-sample trip's tolerance since the last one), at
+        # most ZERO_WAIT_MAX_S.
+        stale_s = self.options.stale_timeout_s
+        deadline = t_end + max(stale_s, ZERO_WAIT_MAX_S)
         while True:
             rows = [r for r in self._recent_rows(step.window_s + deadline - t0)
                     if r.t_mono_s >= t0]
-            if (rows and rows[-1].t_mono_s >= t_end) or time.monotonic() >= deadline:
+            now = time.monotonic()
+            if (rows and rows[-1].t_mono_s >= t_end) or now >= deadline or (
+                    now >= t_end + stale_s and now - self._last_row_mono > stale_s):
                 break
-            self._sleep_until(min(deadline, time.monotonic() + 0.01))
+            self._sleep_until(min(deadline, now + 0.01))
         # at zero command the torque is steady: rows stamped just after the window (late
         # delivery) are as good as the window's own
         rows = [r for r in rows if r.t_mono_s <= t_end] or rows

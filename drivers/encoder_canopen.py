@@ -46,6 +46,7 @@ from canopen.nmt import NMT_STATES
 from canopen.sdo import SdoAbortedError, SdoCommunicationError
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from drivers.canbus.slcan_port import read_in_chunks
 from drivers.errors import (
     DeviceDisconnected,
     DeviceError,
@@ -296,6 +297,8 @@ class EncoderNetwork:
             raise DeviceDisconnected(
                 f"CAN bus {self.description}", "the bus to open", f"{type(exc).__name__}: {exc}"
             ) from exc
+        if cfg.interface == "slcan":
+            read_in_chunks(self.canopen.bus)
         self._connected = True
 
     def start_sync(self) -> None:

@@ -101,7 +101,7 @@ FAULTS: dict[str, tuple[Inject, tuple[str, ...], str]] = {
     "transducer silence": (lambda s: s.backdoors["transducer"].silence(),
                            ("torque transducer", "acquisition"), ""),
     "Modbus silence (all units)": (lambda s: s.backdoors["modbus"].silence(),
-                                   ("drive", "torque sensor", "input motor"), ""),
+                                   ("drive", "torque sensor", "climate", "input motor"), ""),
 }
 
 

@@ -188,7 +188,9 @@ def test_operator_page(tmp_path: Path):
         # (two positions, no temperature) can and cannot test, and why
         page.click("#preview")
         design = page.locator("#preview-design")
-        expect(design).to_contain_text("diagnosis of this design: can test friction")
+        # (the preview computes the plan and the design's tests: seconds on a loaded machine)
+        expect(design).to_contain_text("diagnosis of this design: can test friction",
+                                       timeout=30_000)
         expect(design).to_contain_text("runout (only 2 locking position(s): runout needs 3")
         expect(design).to_contain_text("thermal_expansion (temperature does not vary")
 

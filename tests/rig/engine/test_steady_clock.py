@@ -66,6 +66,18 @@ def test_device_clock_wrap_restart_and_drift():
     assert abs(stamps[-1] - (t[-1] + 0.0005)) < 2e-4
 
 
+
+def _stamp_all(sent: np.ndarray, arrival: np.ndarray, keep: int) -> np.ndarray:
+    """SyncClock's stamps of PDOs 0, 1, ... arriving at ``arrival`` (s), SYNC k + 1 sent at
+    ``sent[k]`` (s), the engine's SYNC log keeping the last ``keep`` SYNCs sent."""
+    clock, log, next_sync, stamps = SyncClock(every=1), [], 0, []
+    for n, a in enumerate(arrival):
+        while next_sync < sent.size and sent[next_sync] <= a:
+            log.append((next_sync + 1, float(sent[next_sync])))
+            next_sync += 1
+        stamps.append(clock.stamp(n, float(a), log[-keep:]))
+    return np.array(stamps, dtype=float)
+
 def test_sync_clock_stamps_each_pdo_with_the_send_time_of_its_sync():
     """A SYNC producer that a busy PC makes late (sent in catch-up bursts), an encoder that
     answers each SYNC 0.2 ms after it went out, and a receive thread that reads the PDOs late
@@ -84,16 +96,7 @@ def test_sync_clock_stamps_each_pdo_with_the_send_time_of_its_sync():
     for start in rng.integers(0, answered.size - 20, 15):
         arrival[start:start + 10] += 0.040
     arrival = np.maximum.accumulate(arrival)
-    log: list[tuple[int, float]] = []
-    clock = SyncClock(every=1)
-    stamps = []
-    next_sync = 0
-    for n, a in enumerate(arrival):
-        while next_sync < n_sync and sent[next_sync] <= a:
-            log.append((next_sync + 1, float(sent[next_sync])))
-            next_sync += 1
-        stamps.append(clock.stamp(n, float(a), log[-4096:]))
-    stamps_arr = np.array(stamps, dtype=float)
+    stamps_arr = _stamp_all(sent, arrival, keep=4096)
     assert not np.isnan(stamps_arr).any()
     assert np.array_equal(stamps_arr[250:], answered[250:])  # exact after the first window
     assert np.abs(stamps_arr - answered).max() < 0.05
@@ -114,13 +117,7 @@ def test_sync_clock_outlasts_a_backlog_of_a_second_and_more():
     backlog = (answered >= 11.0) & (answered < 13.5)
     delay[backlog] += 0.3 + 0.9 * np.abs(np.sin(np.linspace(0.0, 3.0, backlog.sum())))
     arrival = np.maximum.accumulate(answered + delay)
-    clock, log, next_sync, stamps = SyncClock(every=1), [], 0, []
-    for k, a in enumerate(arrival):
-        while next_sync < n and sent[next_sync] <= a:
-            log.append((next_sync + 1, float(sent[next_sync])))
-            next_sync += 1
-        stamps.append(clock.stamp(k, float(a), log[-2048:]))
-    stamps_arr = np.array(stamps, dtype=float)
+    stamps_arr = _stamp_all(sent, arrival, keep=2048)
     assert (arrival - answered).max() > 1.0  # the backlog was that long
     assert np.array_equal(stamps_arr, answered)
 

@@ -287,9 +287,11 @@ def _figures(evaluated: dict[int, Evaluated], teeth: int | None, u_q: float, u_e
     for c, ev in evaluated.items():
         unseen[c] = excess(ev, teeth)  # what a stall may hide: one-sided, into the budget
         # the noise's bias on an extreme is taken away (parametric bootstrap), its spread kept
-        b_fine, u_fine = noise_bias(ev.values, ev.noise_at, teeth)
-        b_coarse, _ = noise_bias(ev.coarse, ev.noise_at_coarse, teeth, draws=NOISE_DRAWS // 2)
-        raw, raw_coarse = figures(ev.values, teeth), figures(ev.coarse, teeth)
+        b_fine, u_fine = noise_bias(ev.values, ev.noise_at, teeth, periodic=ev.periodic)
+        b_coarse, _ = noise_bias(ev.coarse, ev.noise_at_coarse, teeth, draws=NOISE_DRAWS // 2,
+                                 periodic=ev.periodic)
+        raw = figures(ev.values, teeth, ev.periodic)
+        raw_coarse = figures(ev.coarse, teeth, ev.periodic)
         fig[c] = {k: (None if v is None else v - b_fine.get(k, 0.0)) for k, v in raw.items()}
         fig_coarse[c] = {k: (None if v is None else v - b_coarse.get(k, 0.0))
                          for k, v in raw_coarse.items()}

@@ -78,17 +78,19 @@ def excess(ev: Evaluated, output_teeth: int | None) -> dict[str, float]:
     if at is None:
         return {}
     widened = at.reshape(values.shape)
-    base = figures(values, output_teeth)
+    base = figures(values, output_teeth, ev.periodic)
     up, down = values + widened, values - widened
     out = {"pp": float(up.max() - down.min()) - float(base["pp"] or 0.0),
            "Fi": float(np.max(up.max(axis=1) - down.min(axis=1))) - float(base["Fi"] or 0.0)}
     if output_teeth:
         revs, n = values.shape
         width = int(round(n / float(output_teeth))) + 1
-        out["fi"] = _window_range(up.reshape(-1), down.reshape(-1), width) - float(base["fi"])
+        out["fi"] = (_window_range(up.reshape(-1), down.reshape(-1), width, ev.periodic)
+                     - float(base["fi"]))
         hp = high_pass(values.reshape(-1), revs, output_teeth / 2.0)
         flat = widened.reshape(-1)
-        out["fis"] = (_window_range(hp + flat, hp - flat, width) - float(base["fis"]))
+        out["fis"] = (_window_range(hp + flat, hp - flat, width, ev.periodic)
+                      - float(base["fis"]))
     return {key: max(0.0, v) for key, v in out.items()}
 
 
@@ -97,7 +99,8 @@ def u_of_excess(value: float) -> float:
     return value / math.sqrt(3.0)
 
 
-def _window_range(up: np.ndarray, down: np.ndarray, width: int) -> float:
+def _window_range(up: np.ndarray, down: np.ndarray, width: int, periodic: bool) -> float:
     width = max(2, min(int(width), up.size))
-    return float(np.max(maximum_filter1d(up, width, mode="nearest")
-                        - minimum_filter1d(down, width, mode="nearest")))
+    mode = "wrap" if periodic else "nearest"  # as evaluate.sliding_range
+    return float(np.max(maximum_filter1d(up, width, mode=mode)
+                        - minimum_filter1d(down, width, mode=mode)))

@@ -136,20 +136,21 @@ def test_a_run_without_a_full_revolution_each_way_is_refused():
 
 
 def test_tooth_windows_wrap_where_the_te_repeats_every_output_revolution() -> None:
-    """f'_i on one revolution: a tooth whose rise straddles the record's cut (the worst pitch
-    half before 360 deg, half after 0 deg) is read whole when the windows wrap, and only in
-    part when they do not (the 7-12 % low f'_i of 2026-11-29)."""
+    """f'_i on one revolution: a tooth whose rise straddles the record's cut (0 -> 50 arcsec
+    over the last 4.5 deg, 50 -> 100 over the first 4.5 deg, then slowly back) is read whole
+    (100) when the windows wrap, and by halves (50) when they do not: the 7-12 % low f'_i of
+    2026-11-29."""
     from analysis.transmission.evaluate import figures
 
     n, teeth = 3600, 40
     theta = np.arange(n) * 360.0 / n
-    te = 10.0 * np.sin(np.radians(theta) * 9.0)
-    te += np.where(theta >= 360.0 - 4.5, 100.0, 0.0)  # a step that ends the revolution
-    te += np.where(theta < 4.5, 100.0 - 100.0 * theta / 4.5, 0.0)  # and falls back after 0
+    te = np.zeros(n)
+    start, fall, end = theta < 4.5, (theta >= 4.5) & (theta < 90.0), theta >= 355.5
+    te[start] = 50.0 + 50.0 * theta[start] / 4.5
+    te[fall] = 100.0 - 100.0 * (theta[fall] - 4.5) / 85.5
+    te[end] = 50.0 * (theta[end] - 355.5) / 4.5
     values = te.reshape(1, n)
     wrapped = figures(values, teeth, periodic=True)["fi"]
     cut = figures(values, teeth, periodic=False)["fi"]
-    assert wrapped is not None and cut is not None
-    window = np.concatenate([te[-n // teeth // 2:], te[: n // teeth // 2 + 1]])
-    assert wrapped >= float(np.ptp(window)) - 1e-9  # the window across the cut is read
-    assert wrapped > cut + 5.0  # the teeth across the cut were missed without the wrap
+    assert wrapped == pytest.approx(100.0, abs=0.2)
+    assert cut == pytest.approx(50.0, abs=0.5)  # one half of the rise either side of the cut

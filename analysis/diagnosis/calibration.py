@@ -7,7 +7,7 @@ wanders, vibration after impacts, quantisation held over many samples. So the ch
 distribution is not a textbook one; it is made from the campaign itself:
 
 1. **Null residuals.** The null model (free play and stiffness, run offsets, the measuring
-   system's nuisance: :mod:`analysis.diagnosis.measurement`) is fitted by weighted least
+   system's nuisance: :mod:`analysis.channels.artefacts`) is fitted by weighted least
    squares. What any candidate or the lack-of-fit test could hold is projected out of its
    standardised residuals (:func:`pure_error`): the rest is the measuring errors alone.
    Residuals are winsorised at HUBER_C robust sigmas of those errors (an impact sample that

@@ -16,10 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from analysis.diagnosis.measurement import (
+from analysis.channels.artefacts import (
     CrossingZero,
     after_restamped,
-    best_torque_shift,
     crossing_events,
     crossing_zero,
     gap_breaks,
@@ -28,6 +27,7 @@ from analysis.diagnosis.measurement import (
     time_base,
     torque_lag_s,
 )
+from analysis.channels.lag import LAG_EVIDENCE, direction_and_reversal
 from analysis.errors import AnalysisError
 from analysis.loop import analyse_loop
 from analysis.loop.branches import white_noise_std
@@ -93,43 +93,16 @@ class PreparedRun:
     nominal: LoopModel | None
     lost_motion_arcmin: float  # measured, analysis.loop (NaN: unavailable)
     raw: RunInput = field(repr=False)
-    #: What the measuring system adds (analysis.diagnosis.measurement), for the report.
+    #: What the measuring system adds (analysis.channels.artefacts), for the report.
     measurement: dict[str, Any] = field(default_factory=dict, repr=False)
     #: Torque zero, friction and drift read at the play crossings (None: not readable).
     crossing: CrossingZero | None = field(default=None, repr=False)
-    #: Blocks just after a burst of restamped rows (analysis.diagnosis.measurement.
+    #: Blocks just after a burst of restamped rows (analysis.channels.artefacts.
     #: after_restamped) or the first block after a play crossing (:func:`landed_blocks`):
     #: where the unit switched flank is not known to the torque noise.
     time_unsure: np.ndarray | None = field(default=None, repr=False)
     #: The torque zero taken out of ``torque_Nm`` (N*m per block; zeros when none).
     zero_removed_Nm: np.ndarray | None = field(default=None, repr=False)
-
-
-#: Largest lag between the channels searched (samples).
-MAX_LAG_SAMPLES = 10
-#: In-sample evidence (chi2 units, like a BIC difference) a lag needs to be corrected.
-LAG_EVIDENCE = 10.0
-
-
-def channel_lag_samples(t: np.ndarray, torque: np.ndarray, twist: np.ndarray,
-                        sigma: float) -> int:
-    """Lag (samples) of the twist behind the torque channel (negative: ahead): the integer
-    shift that best explains the loaded flanks (:func:`analysis.diagnosis.measurement
-    .best_torque_shift`), kept only when it improves them by LAG_EVIDENCE noise-units over no
-    shift (a filter or transport delay of one channel; with constant-rate ramps only it looks
-    like friction and is not found). ``rig analyse`` reports it per run; the diagnosis
-    estimates the lag to a quarter sample (:func:`analysis.diagnosis.measurement
-    .torque_lag_s`)."""
-    n = torque.size
-    amplitude = float(np.percentile(np.abs(torque), 99.5))
-    if n < 200 or amplitude <= 0:
-        return 0
-    dt = float(np.median(np.diff(t)))
-    lmax = min(MAX_LAG_SAMPLES, n // 100)
-    direction, _ = direction_and_reversal(t, torque, 0.02 * amplitude)
-    tau = best_torque_shift(t, torque, twist, direction, sigma,
-                            np.arange(-lmax, lmax + 1) * dt, LAG_EVIDENCE, friction_aware=False)
-    return int(round(tau / dt)) if dt > 0 else 0
 
 
 def resolution_of(values: np.ndarray) -> float:
@@ -149,44 +122,6 @@ def resolution_of(values: np.ndarray) -> float:
     if np.median(np.abs(ratio - np.round(ratio))) > 0.05:
         return 0.0
     return q
-
-
-#: Samples the reversal tracker (:func:`direction_and_reversal`) reads at a time as Python
-#: floats: a long run is never held as one list.
-DIRECTION_CHUNK = 1 << 16
-
-
-def direction_and_reversal(t_s: np.ndarray, torque_Nm: np.ndarray, threshold_Nm: float
-                           ) -> tuple[np.ndarray, np.ndarray]:
-    """Torque direction (+1 rising, -1 falling) with hysteresis ``threshold_Nm`` and the time
-    (s) since the last reversal (the running extreme) for every sample."""
-    n = int(torque_Nm.size)
-    direction = np.empty(n)
-    since = np.empty(n)
-    d = 1.0
-    extreme = float(torque_Nm[0]) if n else 0.0
-    t_ext = float(t_s[0]) if n else 0.0
-    for a in range(0, n, DIRECTION_CHUNK):
-        values = torque_Nm[a:a + DIRECTION_CHUNK].tolist()
-        times = t_s[a:a + DIRECTION_CHUNK].tolist()
-        dirs = [0.0] * len(values)
-        ages = [0.0] * len(values)
-        for k, v in enumerate(values):
-            if d > 0:
-                if v >= extreme:
-                    extreme, t_ext = v, times[k]
-                elif v < extreme - threshold_Nm:
-                    d, extreme, t_ext = -1.0, v, times[k]
-            else:
-                if v <= extreme:
-                    extreme, t_ext = v, times[k]
-                elif v > extreme + threshold_Nm:
-                    d, extreme, t_ext = 1.0, v, times[k]
-            dirs[k] = d
-            ages[k] = times[k] - t_ext
-        direction[a:a + len(values)] = dirs
-        since[a:a + len(values)] = ages
-    return direction, since
 
 
 def transit_mask(twist_arcmin: np.ndarray, torque_Nm: np.ndarray, sigma_arcmin: float,
@@ -297,7 +232,7 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
     q_torque = resolution_of(torque)
     sigma = math.hypot(white_noise_std(twist), q_twist / math.sqrt(12.0))
     sigma_t = math.hypot(white_noise_std(torque), q_torque / math.sqrt(12.0))
-    # the measuring system's own share (analysis.diagnosis.measurement): time base, the
+    # the measuring system's own share (analysis.channels.artefacts): time base, the
     # torque channel's lag (a filter or delay: taken out by reading the torque channel at the
     # shifted time), transients after impacts, the torque zero at the play crossings
     tbase = time_base(t)
@@ -386,7 +321,6 @@ def prepare_run(run: RunInput, target_points: int = TARGET_POINTS, *, correct_la
     )
 
 
-
 def _block_noise(tb: np.ndarray, yb: np.ndarray, seg: np.ndarray, block: int, sigma: float,
                  sigma_tb: float, amplitude: float, nominal: LoopModel | None,
                  twist: np.ndarray, q_twist: float) -> float:
@@ -462,7 +396,7 @@ def smallest_zero_reading(runs: Sequence[PreparedRun]) -> tuple[float, str] | No
 def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float, allowance_Nm: float = 0.0
                        ) -> tuple[list[PreparedRun], dict[str, Any]]:
     """Take each run's torque zero, read at its play crossings
-    (:func:`analysis.diagnosis.measurement.crossing_zero`), out of its torque.
+    (:func:`analysis.channels.artefacts.crossing_zero`), out of its torque.
 
     A torque zero re-tared before every run leaves a small residual that differs from run to
     run and may wander during the run: the measuring system's, not the unit's. A sensor

@@ -302,9 +302,9 @@ def analyse_run(
 def channel_lag_s(t_s: np.ndarray, torque_Nm: np.ndarray, twist: np.ndarray) -> float:
     """Lag (s) of the torque channel behind the twist (negative: ahead), 0 when the channels
     are in step: the shift that best explains the loaded flanks
-    (:func:`analysis.diagnosis.data.channel_lag_samples`, searched up to 10 samples; a lag
+    (:func:`analysis.channels.lag.channel_lag_samples`, searched up to 10 samples; a lag
     at that bound is at least that large)."""
-    from analysis.diagnosis.data import channel_lag_samples
+    from analysis.channels.lag import channel_lag_samples
     from analysis.loop.branches import white_noise_std
 
     t = np.asarray(t_s, dtype=float)

@@ -15,7 +15,7 @@ them blind:
   robust second differences (:func:`analysis.loop.branches.white_noise_std`), the encoder
   and ADC resolution from the data's grid (:func:`analysis.diagnosis.data.resolution_of`),
   the torque channel's lag behind the twist from the loaded flanks
-  (:func:`analysis.diagnosis.data.channel_lag_samples`);
+  (:func:`analysis.channels.lag.channel_lag_samples`);
 - each in-vocabulary effect this design can show is withheld in turn at a size of a few
   (2-8, log-uniform) times the measured twist noise in twist terms (:func:`effect_params`;
   an effect the design cannot show, such as thermal expansion at one temperature, is left
@@ -107,7 +107,8 @@ def _campaign(campaign: Campaign | str | Path) -> Campaign:
 
 def design_of(campaign: Campaign | str | Path) -> Design:
     """The campaign's design and measuring system, estimated from its data alone."""
-    from analysis.diagnosis.data import channel_lag_samples, resolution_of
+    from analysis.channels.lag import channel_lag_samples
+    from analysis.diagnosis.data import resolution_of
     from analysis.loop.branches import white_noise_std
     from rig.results.diagnose import run_input
 

@@ -22,10 +22,7 @@ import pytest
 from scipy.signal import lfilter
 from scipy.stats import chi2
 
-from analysis.diagnosis import diagnose
-from analysis.diagnosis.calibration import block_length, calibrate, orthonormal
-from analysis.diagnosis.data import RunInput, direction_and_reversal, transit_mask
-from analysis.diagnosis.measurement import (
+from analysis.channels.artefacts import (
     after_restamped,
     crossing_events,
     crossing_zero,
@@ -34,6 +31,10 @@ from analysis.diagnosis.measurement import (
     time_base,
     torque_lag_s,
 )
+from analysis.channels.lag import direction_and_reversal
+from analysis.diagnosis import diagnose
+from analysis.diagnosis.calibration import block_length, calibrate, orthonormal
+from analysis.diagnosis.data import RunInput, transit_mask
 from analysis.effects import LoopParams, predict_twist_arcmin
 from analysis.models.nominal import reference_nominal_model
 from simulators.plant.config import load_plant_config

@@ -110,7 +110,7 @@ def test_lag_between_channels_is_found() -> None:
     """Sinusoidal loading of the nominal loop (play + linear flanks, injected): a torque
     channel 3 samples late is found (the rate-proportional branch split), and no lag is found
     without it."""
-    from analysis.diagnosis.data import channel_lag_samples
+    from analysis.channels.lag import channel_lag_samples
     from analysis.effects import LoopParams, predict_twist_arcmin
 
     n = 3000
@@ -126,12 +126,12 @@ def test_lag_between_channels_is_found() -> None:
 
 
 def test_flank_residual_folded_in_chunks_is_one_least_squares_fit(monkeypatch) -> None:
-    """The lag search's flank residual (analysis.diagnosis.measurement._flank_rss) is folded
+    """The lag search's flank residual (analysis.channels.artefacts._flank_rss) is folded
     chunk by chunk (issue 21 item 8: no design matrix of a 5.5 M-sample run in memory): it
     equals one least-squares fit of every row at once, with and without friction's order,
     for a twist far from its zero (an encoder's 6730')."""
-    from analysis.diagnosis import measurement
-    from analysis.diagnosis.data import direction_and_reversal
+    from analysis.channels import artefacts as measurement
+    from analysis.channels.lag import direction_and_reversal
     from analysis.effects import LoopParams, predict_twist_arcmin
 
     rng = np.random.default_rng(7)
@@ -169,7 +169,8 @@ def test_no_lag_is_read_from_a_coarse_encoders_staircase() -> None:
     """A constant-rate ramp read by a 2^19-count encoder (2.47 arcsec counts, 0.1 arcsec of
     noise: no dither): the quantisation error holds for many samples, so a shift that fits
     the staircase a little better is no evidence of a lag."""
-    from analysis.diagnosis.data import channel_lag_samples, resolution_of
+    from analysis.channels.lag import channel_lag_samples
+    from analysis.diagnosis.data import resolution_of
     from analysis.effects import LoopParams, predict_twist_arcmin
 
     n = 2500

@@ -59,6 +59,27 @@ def test_standard_m_values_match_the_paper():
     assert round(m_ext, 3) == pytest.approx(42.436, abs=1e-9)
 
 
+@settings(max_examples=200, deadline=None)
+@example(angle=math.radians(20.0))
+@example(angle=math.radians(14.5))
+@example(angle=1e-3)
+@example(angle=1.49)
+@given(angle=st.floats(min_value=1e-3, max_value=1.49))
+def test_inverse_involute_returns_the_angle(angle):
+    """inv^-1(inv(a)) = a to the last bits over (0, 1.5) rad, as the closed form inv(a) =
+    tan(a) - a defines it (eqs. 12-14 read the pressure angle at the pin centre with it)."""
+    back = geo.inverse_involute(geo.involute(angle))
+    # tan(a) - a loses digits to cancellation at small angles (about a^2 / 3 of them): the
+    # inverse is as good as inv itself there: about ulp(a) / a^2 (2e-13 rad at 1e-3 rad)
+    assert abs(back - angle) <= 4.0 * math.ulp(angle) * (1.0 + 1.0 / angle**2)
+
+
+@pytest.mark.parametrize("value", [0.0, -1e-3, geo.involute(1.5), math.nan])
+def test_inverse_involute_refuses_a_value_with_no_pressure_angle(value):
+    with pytest.raises(AnalysisError, match="no pressure angle"):
+        geo.inverse_involute(value)
+
+
 @settings(max_examples=60, deadline=None)
 @example(z=20, x=-0.25, internal=True)  # pin does not fit: error
 @example(z=45, x=0.0, internal=True)

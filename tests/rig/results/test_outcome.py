@@ -142,7 +142,7 @@ def test_an_estopped_run_is_incomplete_and_a_locked_input_names_the_run(tmp_path
 def test_a_late_torque_channel_is_found_from_the_loop_alone():
     """Fault-matrix row 7 without a cross-check sensor: the shipped example run with its
     torque column delayed (the transducer's stream late) gives a channel lag from the loaded
-    flanks (analysis.diagnosis.data.channel_lag_samples), and the run has no verdict."""
+    flanks (analysis.channels.lag.channel_lag_samples), and the run has no verdict."""
     import numpy as np
 
     from rig.results.analyse import analyse_run

@@ -1,0 +1,1 @@
+"""What the measuring channels add to a run: time base, lag, transients, torque zero."""

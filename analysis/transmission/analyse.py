@@ -58,6 +58,7 @@ from analysis.transmission.orders import (
     OrderFit,
     OrderModel,
     fit_order_model,
+    is_whole,
     nuisance_orders,
     order_number,
     standard_orders,
@@ -86,10 +87,6 @@ class Kinematics:
     notes: tuple[str, ...] = ()
 
 
-def _whole(frequency: float) -> bool:
-    return abs(frequency - round(frequency)) < 1e-9
-
-
 def _fit_all_orders(th: np.ndarray, ip: np.ndarray, y: np.ndarray, whole_revs: np.ndarray,
                     orders: list[Order], ratio: float, crank_per_input: float | None,
                     mesh_per_input: float | None) -> tuple[list[OrderFit], OrderModel]:
@@ -103,8 +100,8 @@ def _fit_all_orders(th: np.ndarray, ip: np.ndarray, y: np.ndarray, whole_revs: n
     Returns the fits in the order of ``orders`` and the model of their sum (with the constant)
     that the curve evaluates."""
     kw = {"ratio": ratio, "crank_per_input": crank_per_input, "mesh_per_input": mesh_per_input}
-    whole = [o for o in orders if _whole(o.frequency)]
-    other = [o for o in orders if not _whole(o.frequency)]
+    whole = [o for o in orders if is_whole(o.frequency)]
+    other = [o for o in orders if not is_whole(o.frequency)]
     if not other:
         fits, _, model = fit_order_model(th[whole_revs], ip[whole_revs], y[whole_revs],
                                          orders, **kw)

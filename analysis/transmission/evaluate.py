@@ -31,7 +31,7 @@ import numpy as np
 from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
 from analysis.errors import AnalysisError
-from analysis.transmission.orders import OrderModel
+from analysis.transmission.orders import OrderModel, is_whole
 
 POINTS_PER_PERIOD = 32
 """Evaluation points per period of the highest kept order (the issue asks for 8 at least):
@@ -275,8 +275,7 @@ def evaluate(theta: np.ndarray, inp: np.ndarray, te: np.ndarray, model: OrderMod
                      samples_per_bin=spb, n_samples=int(th.size), empty_bins=n_empty,
                      longest_empty_deg=longest_deg, noise_at=noise[0],
                      noise_at_coarse=noise[1], residual_at=(th, r),
-                     periodic=all(abs(o.frequency - round(o.frequency)) < 1e-9
-                                  for o in model.orders))
+                     periodic=all(is_whole(o.frequency) for o in model.orders))
 
 
 def sliding_range(seq: np.ndarray, width: int, periodic: bool = False) -> float:
@@ -286,10 +285,17 @@ def sliding_range(seq: np.ndarray, width: int, periodic: bool = False) -> float:
     the windows inside the record. On a record of one revolution the unwrapped windows never
     read the teeth across the revolution's cut: f'_i read 7-12 % low on the simulated rig
     (258-279 arcsec against 299) when the worst tooth lay there."""
-    width = max(2, min(int(width), seq.size))
+    return window_range(seq, seq, width, periodic)
+
+
+def window_range(upper: np.ndarray, lower: np.ndarray, width: int,
+                 periodic: bool = False) -> float:
+    """Largest ``max(upper) - min(lower)`` over any ``width`` consecutive points, the windows
+    wrapping or not as in :func:`sliding_range` (which is ``upper = lower``)."""
+    width = max(2, min(int(width), upper.size))
     mode = "wrap" if periodic else "nearest"
-    hi = maximum_filter1d(seq, size=width, mode=mode)
-    lo = minimum_filter1d(seq, size=width, mode=mode)
+    hi = maximum_filter1d(upper, size=width, mode=mode)
+    lo = minimum_filter1d(lower, size=width, mode=mode)
     return float(np.max(hi - lo))
 
 

@@ -62,6 +62,12 @@ class OrderFit:
         return self.amplitude_arcsec * np.exp(1j * np.radians(self.phase_deg))
 
 
+def is_whole(frequency: float) -> bool:
+    """Whether an order of ``frequency`` cycles per output revolution repeats every output
+    revolution (a whole number of cycles, to 1e-9)."""
+    return abs(frequency - round(frequency)) < 1e-9
+
+
 def standard_orders(ratio: float, *, crank_per_input: float | None,
                     mesh_per_input: float | None, harmonics: int = 2,
                     extra: tuple[Order, ...] = ()) -> list[Order]:
@@ -237,7 +243,7 @@ def nuisance_orders(named: list[Order], span_revolutions: float) -> list[Order]:
     out: list[Order] = []
     for o in named:
         f = abs(o.frequency)
-        if abs(f - round(f)) < 1e-9:
+        if is_whole(f):
             continue
         for k in range(max(1, int(np.floor(f)) - 2), int(np.ceil(f)) + 3):
             if round(float(k), 9) in taken:

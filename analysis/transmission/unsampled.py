@@ -19,7 +19,7 @@ import math
 import numpy as np
 from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
-from analysis.transmission.evaluate import Evaluated, figures, high_pass
+from analysis.transmission.evaluate import Evaluated, figures, high_pass, window_range
 
 STALL_SPACINGS = 4.0
 """A step between neighbouring samples longer than this many median steps is a stretch
@@ -85,11 +85,11 @@ def excess(ev: Evaluated, output_teeth: int | None) -> dict[str, float]:
     if output_teeth:
         revs, n = values.shape
         width = int(round(n / float(output_teeth))) + 1
-        out["fi"] = (_window_range(up.reshape(-1), down.reshape(-1), width, ev.periodic)
+        out["fi"] = (window_range(up.reshape(-1), down.reshape(-1), width, ev.periodic)
                      - float(base["fi"]))
         hp = high_pass(values.reshape(-1), revs, output_teeth / 2.0)
         flat = widened.reshape(-1)
-        out["fis"] = (_window_range(hp + flat, hp - flat, width, ev.periodic)
+        out["fis"] = (window_range(hp + flat, hp - flat, width, ev.periodic)
                       - float(base["fis"]))
     return {key: max(0.0, v) for key, v in out.items()}
 
@@ -97,10 +97,3 @@ def excess(ev: Evaluated, output_teeth: int | None) -> dict[str, float]:
 def u_of_excess(value: float) -> float:
     """The budget's term of a one-sided ``excess`` left uncorrected (module doc)."""
     return value / math.sqrt(3.0)
-
-
-def _window_range(up: np.ndarray, down: np.ndarray, width: int, periodic: bool) -> float:
-    width = max(2, min(int(width), up.size))
-    mode = "wrap" if periodic else "nearest"  # as evaluate.sliding_range
-    return float(np.max(maximum_filter1d(up, width, mode=mode)
-                        - minimum_filter1d(down, width, mode=mode)))

@@ -27,10 +27,10 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
 import pyarrow.csv as pacsv
 
 from rig.core.errors import RunFormatError
+from rig.runformat.arrow_arrays import float64_from_arrow
 from rig.runformat.base import (
     KNOWN_NUMERIC_COLUMNS,
     REQUIRED_COLUMNS,
@@ -181,7 +181,7 @@ def _arrow_columns(source: Callable[[], Any], names: list[str], max_rows: int) -
                         if isinstance(target, list):
                             target.extend(col.to_pylist())
                         else:
-                            target[n : n + m] = _to_numpy(col)
+                            target[n : n + m] = float64_from_arrow(col)
                     n += m
                     del batch
             return [c if isinstance(c, list) else c[:n] for c in out]
@@ -193,13 +193,6 @@ def _arrow_columns(source: Callable[[], Any], names: list[str], max_rows: int) -
             if j in text or j >= len(names) or names[j] in KNOWN_NUMERIC_COLUMNS:
                 return None
             text.add(j)
-
-
-def _to_numpy(col: pa.Array) -> np.ndarray:
-    """A float64 Arrow array as numpy (read-only view), nulls (empty fields) as NaN."""
-    if col.null_count:
-        col = pc.fill_null(col, math.nan)
-    return col.to_numpy(zero_copy_only=False)
 
 
 def _numbers_or_none(texts: list[str]) -> np.ndarray | None:

@@ -16,6 +16,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from rig.core.errors import RunFormatError
+from rig.runformat.arrow_arrays import float64_from_arrow, float64_to_arrow
 from rig.runformat.base import (
     KNOWN_NUMERIC_COLUMNS,
     REQUIRED_COLUMNS,
@@ -28,7 +29,7 @@ from rig.runformat.base import (
 def write_samples_parquet(path: Path, columns: list[str], data: dict[str, Column]) -> None:
     """Write the columns to ``path`` atomically: temporary file, fsync, rename."""
     arrays = [
-        pa.array(v, type=pa.float64()) if isinstance(v, np.ndarray)
+        float64_to_arrow(v) if isinstance(v, np.ndarray)
         else pa.array(v, type=pa.string())
         for v in (data[c] for c in columns)
     ]
@@ -74,9 +75,7 @@ def _column(path: Path, j: int, name: str, col: pa.ChunkedArray) -> Column:
                              "or text", column=j + 1)
     if not pa.types.is_float64(kind):
         col = col.cast(pa.float64())
-    if col.null_count:
-        col = col.fill_null(np.nan)
-    arr = col.to_numpy()
+    arr = float64_from_arrow(col)
     return arr if arr.flags.writeable else arr.copy()
 
 

@@ -191,7 +191,43 @@ def _turning_points(x: np.ndarray, h: float, plateau_tol: float = 0.0) -> tuple[
             break
         turns.append(t)
         direction, start = -direction, t
-    return np.asarray(turns, dtype=np.int64), first
+    return _drop_transients(x, np.asarray(turns, dtype=np.int64), origin, h), first
+
+
+#: A reversal pair nested inside a longer movement is a transient (not a cycle) when the
+#: reversed stretch between its two turns lasts at most this fraction of the enclosing
+#: movement's samples ...
+TRANSIENT_DURATION_FRACTION = 0.05
+#: ... and its torque range is at most this fraction of the enclosing movement's range.
+TRANSIENT_RANGE_FRACTION = 0.25
+
+
+def _drop_transients(x: np.ndarray, turns: np.ndarray, origin: int, h: float) -> np.ndarray:
+    """The turning points without the transient pairs: two turns ``a, b`` whose movement
+    ``prev -> a`` continues past ``a`` after ``b`` (``b -> next`` beyond ``a`` and ``b`` short
+    of ``prev``, each by more than ``h``), with the reversed stretch ``a -> b`` short and small
+    against the enclosing ``prev -> next`` (:data:`TRANSIENT_DURATION_FRACTION`,
+    :data:`TRANSIENT_RANGE_FRACTION`). The flank impact at the play crossing spikes the
+    measured torque by up to several % of the amplitude for a few samples; without a
+    recorded torque command that spike split a branch and cost the cycle its lost motion.
+    A deliberate minor loop lasts longer than a spike and stays a cycle."""
+    kept = [int(t) for t in turns]
+    n = x.size
+    i = 0
+    while i + 1 < len(kept):
+        a, b = kept[i], kept[i + 1]
+        prev = kept[i - 1] if i > 0 else origin
+        nxt = kept[i + 2] if i + 2 < len(kept) else n - 1
+        d = 1.0 if x[a] > x[b] else -1.0  # a is a maximum: the movement prev -> a rises
+        past = d * (x[nxt] - x[a]) > h and d * (x[prev] - x[b]) < -h
+        short = (b - a) <= TRANSIENT_DURATION_FRACTION * (nxt - prev)
+        small = d * (x[a] - x[b]) <= TRANSIENT_RANGE_FRACTION * d * (x[nxt] - x[prev])
+        if past and short and small:
+            del kept[i : i + 2]
+            i = max(i - 1, 0)
+        else:
+            i += 1
+    return np.asarray(kept, dtype=np.int64)
 
 
 def _passes(

@@ -128,11 +128,11 @@ def test_dead_zone_linear_closed_form(profile):
     assert m["torque_offset_Nm"].value == pytest.approx(0.0, abs=0.01)
 
 
-def test_impact_dip_is_no_reversal_when_the_command_is_recorded():
+def test_impact_dip_is_no_reversal_with_or_without_the_command():
     """A part-amplitude run (50 % of rated) whose measured torque dips by 6 % of its amplitude
     for a few samples on the loading branch (the flank impact at the play crossing): split on
-    the measured torque the dip starts a new branch and the loading branch loses its +3 %
-    window; split on the recorded command the closed-form lost motion is recovered."""
+    the recorded command, and split on the measured torque alone (an imported record has no
+    command), the dip is no reversal and the closed-form lost motion is recovered."""
     command = 0.5 * triangle_profile(RATED, 2000, phase=0.5)
     torque = command.copy()
     rising = np.flatnonzero((np.diff(command, prepend=command[0]) > 0) & (command > 0.06 * RATED))
@@ -140,11 +140,45 @@ def test_impact_dip_is_no_reversal_when_the_command_is_recorded():
     torque[dip] -= 0.03 * RATED  # 6 % of the 0.5 * RATED amplitude, for 6 samples
     twist = dead_zone_twist(torque, PLAY, K)
     t = np.arange(torque.size) * 1e-3
-    plain = analyse_loop(t, torque, twist, rated_torque_Nm=RATED)
-    assert plain.branches.turning_points.size > command_turns(command)
-    r = analyse_loop(t, torque, twist, rated_torque_Nm=RATED, command_Nm=command)
-    assert r.errors.get("lost_motion_arcmin") is None
-    assert r.metrics["lost_motion_arcmin"].value == pytest.approx(lost_motion_truth(3.0), abs=1e-6)
+    for cmd in (command, None):
+        r = analyse_loop(t, torque, twist, rated_torque_Nm=RATED, command_Nm=cmd)
+        assert r.branches.turning_points.size == command_turns(command)
+        assert r.errors.get("lost_motion_arcmin") is None
+        assert r.metrics["lost_motion_arcmin"].value == pytest.approx(
+            lost_motion_truth(3.0), abs=1e-6)
+
+
+@pytest.mark.parametrize("spike_pct", [-12.0, 12.0])
+def test_one_sample_impact_spike_at_the_play_crossing_splits_no_branch(spike_pct):
+    """The flank impact as the measured torque shows it on a rig (a one-sample spike at the
+    play crossing, along or against the ramp, here 12 % of the amplitude: beyond the 5 %
+    reversal threshold) at the three crossings inside two cycles: the branches are the ramps', and
+    the lost motion is the spike-free record's."""
+    T = triangle_profile(RATED, 600, cycles=2, phase=0.5)
+    rising = np.diff(T, prepend=T[0]) > 0
+    crossings = np.flatnonzero(np.diff(np.sign(T[:-1])) != 0) + 1  # the run ends at 0
+    spiked = T.copy()
+    for i in crossings:
+        spiked[i] += (1.0 if rising[i] else -1.0) * spike_pct / 100.0 * RATED
+    twist = dead_zone_twist(T, PLAY, K)
+    clean, r = run(T, twist), run(spiked, twist)
+    assert crossings.size == 3
+    assert list(r.branches.turning_points) == list(clean.branches.turning_points)
+    assert r.n_cycles == clean.n_cycles == 2
+    assert r.metrics["lost_motion_arcmin"].value == pytest.approx(
+        clean.metrics["lost_motion_arcmin"].value, abs=1e-9)
+
+
+def test_a_deliberate_minor_loop_stays_a_cycle():
+    """A minor loop inside the loading ramp (back by 30 % of the amplitude over a fifth of the
+    ramp's samples, then on up) is a reversal pair of its own: two more turning points."""
+    up = np.linspace(-RATED, RATED, 2001)
+    minor = np.concatenate((np.linspace(2.0, -1.0, 400)[1:], np.linspace(-1.0, 2.0, 400)[1:]))
+    at = int(np.searchsorted(up, 2.0))
+    T = np.concatenate((up[: at + 1], minor, up[at + 1 :], up[::-1][1:]))
+    br = split_branches(T)
+    assert br.turning_points.size == 3  # +T end of the minor loop's top, its bottom, +T
+    assert T[br.turning_points[0]] == pytest.approx(2.0, abs=0.02)
 
 
 def command_turns(command: np.ndarray) -> int:

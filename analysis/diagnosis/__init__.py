@@ -161,7 +161,7 @@ def diagnose(runs: Sequence[RunInput], *, target_points: int | None = None,
     assert nom is not None
     ev = gather(trials, models, cal, omni, flanks, gaps.h0, gaps.k_nom, gaps.k_fit,
                 gaps.param_error.get("share_of_predictive_gap", 0.0), nom.play_arcmin,
-                prepared)
+                prepared, zero_report)
     decision = decide_verdict(ev)
     # 6. the report, built once from the decision
     measurement = _measurement(runs, prepared, trials, zero_report, tp)

@@ -393,6 +393,32 @@ def smallest_zero_reading(runs: Sequence[PreparedRun]) -> tuple[float, str] | No
     return best
 
 
+def beyond_allowance_probability(zeros: Sequence[CrossingZero], allowance_Nm: float) -> float:
+    """Probability (one-sided Student's t over the runs) of crossings as far beyond the zero
+    allowance as these, were the torque zero within it: the larger of the rising and the
+    falling crossings' own tests, each on the side of the runs' common zero. A sensor offset
+    moves both by itself; a friction, and a channel lag under unequal crossing rates (a
+    sine's), move them apart, and their mean may then sit beyond the allowance while the
+    two directions disagree. 1.0 with fewer than 3 runs."""
+    from scipy.stats import t as student_t
+
+    if len(zeros) < 3:
+        return 1.0
+    zero = np.array([c.zero_Nm for c in zeros])
+    fric = np.array([c.friction_Nm for c in zeros])
+    side = 1.0 if float(np.mean(zero)) >= 0.0 else -1.0
+    worst = 0.0
+    for torque in (zero + fric, zero - fric):  # rising, falling crossings
+        mean = side * float(np.mean(torque))
+        se = float(np.std(torque, ddof=1)) / math.sqrt(torque.size)
+        if se > 0:
+            p = float(student_t.sf((mean - allowance_Nm) / se, torque.size - 1))
+        else:
+            p = 0.0 if mean > allowance_Nm else 1.0
+        worst = max(worst, p)
+    return worst
+
+
 def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float, allowance_Nm: float = 0.0
                        ) -> tuple[list[PreparedRun], dict[str, Any]]:
     """Take each run's torque zero, read at its play crossings
@@ -421,6 +447,7 @@ def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float, allowance_Nm: 
     zeros = np.array([c.zero_Nm for _, c in est])
     common = float(np.mean(zeros))
     p_common: float | None = None
+    p_beyond: float | None = None
     keep_common = True
     if len(est) >= 3:
         se = float(np.std(zeros, ddof=1)) / math.sqrt(len(est))
@@ -428,6 +455,7 @@ def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float, allowance_Nm: 
             p_common = float(2.0 * student_t.sf(abs(common) / se, len(est) - 1))
         else:
             p_common = 0.0 if common != 0.0 else 1.0
+        p_beyond = beyond_allowance_probability([c for _, c in est], allowance_Nm)
         keep_common = p_common <= alpha and abs(common) > allowance_Nm
     read = smallest_zero_reading(runs)
     # the readings overrule the crossings only where the crossings alone would leave a common
@@ -459,6 +487,7 @@ def remove_torque_zero(runs: Sequence[PreparedRun], alpha: float, allowance_Nm: 
         "scatter_Nm": float(np.std(zeros, ddof=1)) if len(est) > 1 else None,
         "common_false_alarm_probability": p_common,
         "allowance_Nm": allowance_Nm,
+        "beyond_allowance_false_alarm_probability": p_beyond,
         "read_at_zero_command_Nm": None if read is None else read[0],
         "from_zero_readings": from_readings,
         "treated_as": ("common offset left for the diagnosis; run-to-run departures removed"

@@ -328,6 +328,7 @@ class Evidence:
     stiff_rel_se: float = 0.0  # relative standard error of the calibrated stiffness
     stiff_quant: float = 0.0  # half an encoder count over the loaded twist (relative)
     play: PlayTilt | None = None  # torque on twist inside the free play (play_slope)
+    zero: dict[str, Any] = field(default_factory=dict)  # torque zero at the play crossings
 
 
 def _calibrated_gap(trials: Trials, models: dict[str, Candidate], fap: dict[str, float],
@@ -354,11 +355,12 @@ def _calibrated_gap(trials: Trials, models: dict[str, Candidate], fap: dict[str,
 
 def gather(trials: Trials, models: dict[str, Candidate], cal: dict[str, Calibrated],
            omni: Calibrated | None, flanks: FlankAsymmetry | None, h0: float, k_nom: float,
-           k_fit: float, share: float, nominal_play: float, prepared: Sequence[Any]
-           ) -> Evidence:
+           k_fit: float, share: float, nominal_play: float, prepared: Sequence[Any],
+           zero: dict[str, Any] | None = None) -> Evidence:
     """Everything the verdict rests on, before any verdict: the calibrated evidence, whether
     there is a gap, and (when there is) its attribution with the series compliance beside
-    it. A candidate whose evidence is within chance is noted as such."""
+    it. A candidate whose evidence is within chance is noted as such. ``zero``: the torque
+    zero read at the runs' play crossings (:func:`analysis.diagnosis.data.remove_torque_zero`)."""
     policy, alpha = trials.policy, trials.policy.alpha
     fap = {n: c.false_alarm_probability for n, c in cal.items()}
     gap_fap = omni.false_alarm_probability if omni is not None else 1.0
@@ -373,7 +375,7 @@ def gather(trials: Trials, models: dict[str, Candidate], cal: dict[str, Calibrat
     ev = Evidence(trials, models, cal, omni, fap, systematic, material, gap, flanks,
                   flank_finding, h0, k_nom, k_fit, stiff_dev, share,
                   stiff_rel_se=compliance_rel_se(trials.base), play=play_slope_of(prepared),
-                  stiff_quant=quantisation_share(prepared, k_nom))
+                  stiff_quant=quantisation_share(prepared, k_nom), zero=dict(zero or {}))
     if not gap:
         return ev
     sys0 = _sys(h0, trials.noise)
@@ -503,6 +505,26 @@ def _play_why(ev: Evidence) -> str:
             "load path in parallel with the gear (a seal, a cable carrier, the fixture)")
 
 
+def _offset_at_crossings(ev: Evidence) -> bool:
+    """The play crossings of zero_veto_runs runs or more put the torque zero beyond the
+    re-tare allowance, beyond chance (one-sided t-test against the allowance at level alpha),
+    and nothing vetoes a sensor offset (a zero reading at zero command within the allowance)."""
+    policy, z = ev.trials.policy, ev.zero
+    p = z.get("beyond_allowance_false_alarm_probability")
+    return (not ev.gap and not ev.trials.stack.offset_veto and p is not None
+            and z.get("runs_read", 0) >= policy.zero_veto_runs and p <= policy.alpha)
+
+
+def _offset_why(ev: Evidence) -> str:
+    z = ev.zero
+    return (f"the play crossings of {z['runs_read']} runs put the torque zero at "
+            f"{z['common_Nm']:+.4f} N*m (run-to-run scatter {z['scatter_Nm']:.4f} N*m), beyond "
+            f"the {z['allowance_Nm']:.4f} N*m a re-tare leaves (one-sided t-test over the runs, "
+            f"p = {z['beyond_allowance_false_alarm_probability']:.2g}); the loop fit's block means "
+            "do not show it: the offset puts only a few samples of each crossing on the "
+            "other side of the reading's zero")
+
+
 def _series_takes_gap(ev: Evidence) -> bool:
     return (_outcome(ev, "none_closes") and not ev.material and not ev.systematic
             and _below_model(ev) and ev.share >= ev.trials.policy.series_share)
@@ -551,6 +573,19 @@ RULES: tuple[Rule, ...] = (
                      "vocabulary gives (a load path in parallel with the gear, or a mesh "
                      "stiffer than seed 004 eq. 8)"),
          next_experiment=lambda ev: NEXT_EXPERIMENT_STIFFER),
+    Rule("torque_zero_at_the_crossings",
+         "no structural gap, but the torque read at the moment the twist jumps across the free "
+         "play (the unit's true torque is zero there) is the same non-zero value in every run, "
+         "beyond the zero allowance by more than the runs' scatter (zero_veto_runs runs or "
+         "more, one-sided at alpha): a constant torque-sensor offset moves every play crossing "
+         "by itself, while a friction splits the loading and unloading crossings and cancels "
+         "in their mean, and a re-tare residual differs from run to run. The loop fit misses "
+         "it when the offset puts only a few samples of a crossing on the other side of the "
+         "reading's zero, which a block mean averages away",
+         "torque_sensor_offset",
+         _offset_at_crossings, _offset_why,
+         next_experiment=lambda ev: NEXT_EXPERIMENT[
+             frozenset({"friction", "torque_sensor_offset"})]),
     Rule("within_noise",
          "the held-out structural gap is within the noise (or the encoder's quantisation) "
          "and neither a candidate nor the lack of fit has calibrated evidence that closes a "

@@ -303,6 +303,7 @@ def _probe(measured: dict, name: str, **changes) -> tuple[Path, dict]:
     """The measured run's folder copied and its run.json changed; its certificate as PDF."""
     tmp, run = measured["tmp"], measured["run"]
     folder = tmp / name
+    shutil.rmtree(folder, ignore_errors=True)  # a rerun of the test finds its first try's copy
     shutil.copytree(run["path"], folder)
     meta = json.loads((folder / "run.json").read_text())
     for key, value in changes.items():

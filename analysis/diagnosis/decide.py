@@ -507,8 +507,9 @@ def _play_why(ev: Evidence) -> str:
 
 def _offset_at_crossings(ev: Evidence) -> bool:
     """The play crossings of zero_veto_runs runs or more put the torque zero beyond the
-    re-tare allowance, beyond chance (one-sided t-test against the allowance at level alpha),
-    and nothing vetoes a sensor offset (a zero reading at zero command within the allowance)."""
+    re-tare allowance on the rising and the falling crossings alike, beyond chance (one-sided
+    t-tests against the allowance at level alpha: data.beyond_allowance_probability), and
+    nothing vetoes a sensor offset (a zero reading at zero command within the allowance)."""
     policy, z = ev.trials.policy, ev.zero
     p = z.get("beyond_allowance_false_alarm_probability")
     return (not ev.gap and not ev.trials.stack.offset_veto and p is not None
@@ -576,8 +577,9 @@ RULES: tuple[Rule, ...] = (
     Rule("torque_zero_at_the_crossings",
          "no structural gap, but the torque read at the moment the twist jumps across the free "
          "play (the unit's true torque is zero there) is the same non-zero value in every run, "
-         "beyond the zero allowance by more than the runs' scatter (zero_veto_runs runs or "
-         "more, one-sided at alpha): a constant torque-sensor offset moves every play crossing "
+         "beyond the zero allowance by more than the runs' scatter on the rising and on the "
+         "falling crossings alike (zero_veto_runs runs or more, one-sided at alpha each): a "
+         "constant torque-sensor offset moves every play crossing "
          "by itself, while a friction splits the loading and unloading crossings and cancels "
          "in their mean, and a re-tare residual differs from run to run. The loop fit misses "
          "it when the offset puts only a few samples of a crossing on the other side of the "

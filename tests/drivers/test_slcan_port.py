@@ -52,6 +52,15 @@ def test_python_can_slcan_reads_frames_through_it() -> None:
             read_in_chunks(bus)  # once only
             assert isinstance(bus.serialPortOrig, ChunkedPort)
             assert not isinstance(bus.serialPortOrig._port, ChunkedPort)
+            # the adapter forwards frames once it has executed the bus's "O" (open), which
+            # python-can sends without waiting (sleep_after_open=0): probe until one arrives
+            deadline = time.monotonic() + 10.0
+            while bus.recv(0.0) is None and time.monotonic() < deadline:
+                peer.send(can.Message(arbitration_id=0x700, is_extended_id=False, data=b""))
+                if bus.recv(0.2) is not None:
+                    break
+            while bus.recv(0.3) is not None:  # a late probe
+                pass
             for i in range(50):
                 peer.send(can.Message(arbitration_id=0x181, is_extended_id=False,
                                       data=i.to_bytes(4, "little")))
